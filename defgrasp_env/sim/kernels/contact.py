@@ -1,0 +1,196 @@
+"""Penalty contact with the ground plane y = 0 and kinematic oriented boxes, with smoothed Coulomb friction.
+
+Normal: energy k/2 d^2 for penetration depth d, so the normal force is k d and its Hessian k n n^T.
+Friction (normal force f_n and normal lagged at the substep start, IPC-style smoothing): for a tangential slip u_T over the step,
+force = -mu f_n f1(|u_T|) u_T / |u_T| with f1(s) = 2 s/eps - s^2/eps^2 for s < eps and 1 beyond,
+eps = stick_velocity * dt. Its Hessian is approximated by mu f_n f1(s)/s times the tangent projector
+(positive semi-definite). Below eps the force grows linearly with slip: the contact sticks.
+"""
+
+import warp as wp
+
+
+@wp.func
+def friction_coefficient(s: float, eps: float):
+    """f1(s) / s of the smoothed Coulomb law (1/m)."""
+    if s < eps:
+        return 2.0 / eps - s / (eps * eps)
+    return 1.0 / s
+
+
+@wp.func
+def tangent_projector(n: wp.vec3):
+    return wp.identity(n=3, dtype=float) - wp.outer(n, n)
+
+
+@wp.func
+def box_penetration(local: wp.vec3, half: wp.vec3):
+    """Penetration depth (m, > 0 inside) of a point given in box coordinates, and the outward
+    normal (box frame) of the nearest face."""
+    d0 = half[0] - wp.abs(local[0])
+    d1 = half[1] - wp.abs(local[1])
+    d2 = half[2] - wp.abs(local[2])
+    depth = d0
+    n = wp.vec3(wp.sign(local[0]), 0.0, 0.0)
+    if d1 < depth:
+        depth = d1
+        n = wp.vec3(0.0, wp.sign(local[1]), 0.0)
+    if d2 < depth:
+        depth = d2
+        n = wp.vec3(0.0, 0.0, wp.sign(local[2]))
+    return depth, n
+
+
+@wp.kernel
+def interpolate_pads(
+    start_pos: wp.array(dtype=wp.vec3),
+    start_rot: wp.array(dtype=wp.quat),
+    end_pos: wp.array(dtype=wp.vec3),
+    end_rot: wp.array(dtype=wp.quat),
+    s0: float,
+    s1: float,
+    pos0: wp.array(dtype=wp.vec3),
+    rot0: wp.array(dtype=wp.quat),
+    pos1: wp.array(dtype=wp.vec3),
+    rot1: wp.array(dtype=wp.quat),
+):
+    """Pad poses at fractions s0 and s1 of the step (linear position, slerp orientation)."""
+    i = wp.tid()
+    qa = wp.normalize(start_rot[i])
+    qb = wp.normalize(end_rot[i])
+    pos0[i] = wp.lerp(start_pos[i], end_pos[i], s0)
+    pos1[i] = wp.lerp(start_pos[i], end_pos[i], s1)
+    rot0[i] = wp.quat_slerp(qa, qb, s0)
+    rot1[i] = wp.quat_slerp(qa, qb, s1)
+
+
+@wp.kernel
+def lag_contacts(
+    x_start: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    stiffness: float,
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+):
+    """Normal force (N) and normal of every node's contacts at the substep start, which the friction
+    law holds fixed during the substep's Newton solve (slot 0: ground; slot 1 + k: pad k, normal in
+    the pad's frame)."""
+    i = wp.tid()
+    w = node_world[i]
+    slots = pads_per_world + 1
+    xi = x_start[i]
+    lag_normal_force[i * slots] = stiffness * wp.max(-xi[1], 0.0)
+    lag_normal[i * slots] = wp.vec3(0.0, 1.0, 0.0)
+    for k in range(pads_per_world):
+        pad = w * pads_per_world + k
+        local = wp.quat_rotate_inv(pad_rot0[pad], xi - pad_pos0[pad])
+        depth, n_local = box_penetration(local, pad_half[pad])
+        lag_normal_force[i * slots + 1 + k] = stiffness * wp.max(depth, 0.0)
+        lag_normal[i * slots + 1 + k] = n_local
+
+
+@wp.func
+def friction_force(mu: float, normal_force: float, slip: wp.vec3, n: wp.vec3, eps: float):
+    """Smoothed Coulomb force (N) for a slip (m) and normal n, and its Hessian (N/m)."""
+    slip_t = slip - wp.dot(slip, n) * n
+    c = mu * normal_force * friction_coefficient(wp.length(slip_t), eps)
+    return -c * slip_t, c * tangent_projector(n)
+
+
+@wp.kernel
+def evaluate_nodes(
+    x: wp.array(dtype=wp.vec3),
+    x_start: wp.array(dtype=wp.vec3),
+    v_start: wp.array(dtype=wp.vec3),
+    mass: wp.array(dtype=float),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    external_force: wp.array(dtype=wp.vec3),
+    gravity: wp.vec3,
+    dt: float,
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+    stiffness: float,
+    ground_mu: float,
+    pad_mu: float,
+    stick_velocity: float,
+    record_pads: int,
+    # outputs (written, not accumulated, except the pad totals)
+    residual: wp.array(dtype=wp.vec3),
+    diag_block: wp.array(dtype=wp.mat33),
+    contact_hessian: wp.array(dtype=wp.mat33),
+    contact_force: wp.array(dtype=wp.vec3),
+    elastic_force: wp.array(dtype=wp.vec3),
+    pad_normal_force: wp.array(dtype=float),
+    pad_force: wp.array(dtype=wp.vec3),
+    penetration: wp.array(dtype=float),
+):
+    """Inertia, gravity, external and contact terms of the backward-Euler residual of each node.
+
+    residual = m/dt^2 (x_hat - x) + m g + f_ext + f_contact, x_hat = x_start + dt v_start;
+    diag_block = m/dt^2 I + contact Hessian. The elastic terms are added afterwards by the tets.
+    """
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    m = mass[i]
+    xi = x[i]
+    inertia = m / (dt * dt)
+    eps = stick_velocity * dt
+    force = wp.vec3(0.0)
+    hess = wp.mat33(0.0)
+    slots = pads_per_world + 1
+    # ground plane y = 0, normal +y
+    n = wp.vec3(0.0, 1.0, 0.0)
+    depth = -xi[1]
+    if depth > 0.0:
+        force += stiffness * depth * n
+        hess += stiffness * wp.outer(n, n)
+        wp.atomic_max(penetration, w, depth)
+    lag_fn = lag_normal_force[i * slots]
+    if lag_fn > 0.0:
+        f_fric, h_fric = friction_force(ground_mu, lag_fn, xi - x_start[i], n, eps)
+        force += f_fric
+        hess += h_fric
+    for k in range(pads_per_world):
+        pad = w * pads_per_world + k
+        rot1 = pad_rot1[pad]
+        local = wp.quat_rotate_inv(rot1, xi - pad_pos1[pad])
+        depth, n_local = box_penetration(local, pad_half[pad])
+        f_pad = wp.vec3(0.0)
+        if depth > 0.0:
+            n = wp.quat_rotate(rot1, n_local)
+            f_pad = stiffness * depth * n
+            hess += stiffness * wp.outer(n, n)
+            wp.atomic_max(penetration, w, depth)
+            if record_pads != 0:
+                wp.atomic_add(pad_normal_force, pad, stiffness * depth)
+        lag_fn = lag_normal_force[i * slots + 1 + k]
+        if lag_fn > 0.0:
+            # slip relative to the pad's material point that held the node at the substep start
+            anchor_local = wp.quat_rotate_inv(pad_rot0[pad], x_start[i] - pad_pos0[pad])
+            slip = xi - (pad_pos1[pad] + wp.quat_rotate(rot1, anchor_local))
+            n_lag = wp.quat_rotate(rot1, lag_normal[i * slots + 1 + k])
+            f_fric, h_fric = friction_force(pad_mu, lag_fn, slip, n_lag, eps)
+            f_pad += f_fric
+            hess += h_fric
+        force += f_pad
+        if record_pads != 0:
+            wp.atomic_add(pad_force, pad, -f_pad)
+    x_hat = x_start[i] + dt * v_start[i]
+    residual[i] = inertia * (x_hat - xi) + m * gravity + external_force[i] + force
+    diag_block[i] = inertia * wp.identity(n=3, dtype=float) + hess
+    contact_hessian[i] = hess
+    contact_force[i] = force
+    elastic_force[i] = wp.vec3(0.0)

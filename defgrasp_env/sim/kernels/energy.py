@@ -1,0 +1,156 @@
+"""Incremental potential of a backward-Euler substep and the per-world backtracking line search.
+
+E(x) = sum_nodes [ m/(2 dt^2) |x - x_hat|^2 - (m g + f_ext) . (x - x_start) + k/2 d^2 (ground, pads)
+                   + mu f_n f0(|slip_t|) ]  +  sum_tets V0 psi(F),
+the function whose stationary point the Newton solve seeks; f0 is the integral of the smoothed
+Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums go to float64.
+"""
+
+import warp as wp
+
+from .contact import box_penetration
+from .elastic import cofactor, deformation_gradient
+
+
+@wp.func
+def friction_potential(mu: float, normal_force: float, slip: wp.vec3, n: wp.vec3, eps: float):
+    slip_t = slip - wp.dot(slip, n) * n
+    s = wp.length(slip_t)
+    f0 = s
+    if s < eps:
+        f0 = s * s / eps - s * s * s / (3.0 * eps * eps) + eps / 3.0
+    return mu * normal_force * f0
+
+
+@wp.func
+def strain_energy_density(f: wp.mat33, mu: float, lam: float):
+    u, sigma, v = wp.svd3(f)
+    d = f - u * wp.transpose(v)
+    j = wp.determinant(f)
+    return mu * wp.ddot(d, d) + 0.5 * lam * (j - 1.0) * (j - 1.0)
+
+
+@wp.kernel
+def trial_positions(
+    x: wp.array(dtype=wp.vec3),
+    dx: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    step_length: wp.array(dtype=float),
+    x_trial: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    x_trial[i] = x[i] + step_length[node_world[i]] * dx[i]
+
+
+@wp.kernel
+def node_energy(
+    x: wp.array(dtype=wp.vec3),
+    x_start: wp.array(dtype=wp.vec3),
+    v_start: wp.array(dtype=wp.vec3),
+    mass: wp.array(dtype=float),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    external_force: wp.array(dtype=wp.vec3),
+    gravity: wp.vec3,
+    dt: float,
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+    stiffness: float,
+    ground_mu: float,
+    pad_mu: float,
+    stick_velocity: float,
+    energy: wp.array(dtype=wp.float64),
+):
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    xi = x[i]
+    m = mass[i]
+    eps = stick_velocity * dt
+    slots = pads_per_world + 1
+    d = xi - (x_start[i] + dt * v_start[i])
+    e = 0.5 * m / (dt * dt) * wp.dot(d, d) - wp.dot(m * gravity + external_force[i], xi - x_start[i])
+    depth = wp.max(-xi[1], 0.0)
+    e += 0.5 * stiffness * depth * depth
+    lag_fn = lag_normal_force[i * slots]
+    if lag_fn > 0.0:
+        e += friction_potential(ground_mu, lag_fn, xi - x_start[i], wp.vec3(0.0, 1.0, 0.0), eps)
+    for k in range(pads_per_world):
+        pad = w * pads_per_world + k
+        rot1 = pad_rot1[pad]
+        local = wp.quat_rotate_inv(rot1, xi - pad_pos1[pad])
+        depth, n_local = box_penetration(local, pad_half[pad])
+        if depth > 0.0:
+            e += 0.5 * stiffness * depth * depth
+        lag_fn = lag_normal_force[i * slots + 1 + k]
+        if lag_fn > 0.0:
+            anchor_local = wp.quat_rotate_inv(pad_rot0[pad], x_start[i] - pad_pos0[pad])
+            slip = xi - (pad_pos1[pad] + wp.quat_rotate(rot1, anchor_local))
+            n_lag = wp.quat_rotate(rot1, lag_normal[i * slots + 1 + k])
+            e += friction_potential(pad_mu, lag_fn, slip, n_lag, eps)
+    wp.atomic_add(energy, w, wp.float64(e))
+
+
+@wp.kernel
+def tet_energy(
+    x: wp.array(dtype=wp.vec3),
+    tets: wp.array(dtype=wp.vec4i),
+    rest_inv: wp.array(dtype=wp.mat33),
+    rest_volume: wp.array(dtype=float),
+    tet_mu: wp.array(dtype=float),
+    tet_lambda: wp.array(dtype=float),
+    tet_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    energy: wp.array(dtype=wp.float64),
+):
+    t = wp.tid()
+    w = tet_world[t]
+    if world_active[w] == 0:
+        return
+    idx = tets[t]
+    f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t])
+    e = rest_volume[t] * strain_energy_density(f, tet_mu[t], tet_lambda[t])
+    wp.atomic_add(energy, w, wp.float64(e))
+
+
+@wp.kernel
+def begin_line_search(
+    newton_active: wp.array(dtype=int),
+    step_length: wp.array(dtype=float),
+    searching: wp.array(dtype=int),
+    trial_energy: wp.array(dtype=wp.float64),
+):
+    w = wp.tid()
+    step_length[w] = 1.0
+    searching[w] = newton_active[w]
+    trial_energy[w] = wp.float64(0.0)
+
+
+@wp.kernel
+def end_line_search_trial(
+    start_energy: wp.array(dtype=wp.float64),
+    rel_tol: float,
+    min_step: float,
+    trial_energy: wp.array(dtype=wp.float64),
+    step_length: wp.array(dtype=float),
+    searching: wp.array(dtype=int),
+):
+    """Accept the trial if it does not raise the energy (within float32 rounding of its terms),
+    else halve the step; stop halving at ``min_step``."""
+    w = wp.tid()
+    if searching[w] == 0:
+        return
+    e0 = start_energy[w]
+    tol = wp.float64(rel_tol) * wp.abs(e0) + wp.float64(1.0e-12)
+    if trial_energy[w] <= e0 + tol or step_length[w] <= min_step:
+        searching[w] = 0
+    else:
+        step_length[w] = 0.5 * step_length[w]
+    trial_energy[w] = wp.float64(0.0)

@@ -1,0 +1,269 @@
+"""Per-world Newton iterations with block-Jacobi preconditioned conjugate gradients.
+
+Every world runs its own CG (its own alpha, beta and stopping test) inside one set of flat arrays,
+so a world's result never depends on the other worlds. Per-world flags switch finished worlds off.
+"""
+
+import warp as wp
+
+
+@wp.func
+def masked_block(block: wp.mat33, free: wp.vec3):
+    """Block with fixed rows/columns replaced by identity rows/columns."""
+    m = wp.diag(free)
+    return m * block * m + wp.diag(wp.vec3(1.0) - free)
+
+
+@wp.kernel
+def begin_substep(
+    x: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+    step_start: wp.array(dtype=wp.vec3),
+    prescribed: wp.array(dtype=wp.vec3),
+    free: wp.array(dtype=wp.vec3),
+    s1: float,
+    dt: float,
+    x_start: wp.array(dtype=wp.vec3),
+):
+    """Save the substep's start positions and move x to the initial guess x + dt v; prescribed axes
+    go to their target interpolated at fraction s1 of the step."""
+    i = wp.tid()
+    xi = x[i]
+    x_start[i] = xi
+    target = wp.lerp(step_start[i], prescribed[i], s1)
+    fr = free[i]
+    guess = xi + dt * v[i]
+    x[i] = wp.cw_mul(fr, guess) + wp.cw_mul(wp.vec3(1.0) - fr, target)
+
+
+@wp.kernel
+def begin_linear_solve(
+    residual: wp.array(dtype=wp.vec3),
+    diag_block: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    precond: wp.array(dtype=wp.mat33),
+    z: wp.array(dtype=wp.vec3),
+    p: wp.array(dtype=wp.vec3),
+    dx: wp.array(dtype=wp.vec3),
+    ap: wp.array(dtype=wp.vec3),
+    rz: wp.array(dtype=float),
+    residual_norm: wp.array(dtype=float),
+):
+    """Mask the residual, build the block-Jacobi preconditioner, start CG from dx = 0."""
+    i = wp.tid()
+    w = node_world[i]
+    dx[i] = wp.vec3(0.0)
+    ap[i] = wp.vec3(0.0)
+    if world_active[w] == 0:
+        p[i] = wp.vec3(0.0)
+        return
+    fr = free[i]
+    r = wp.cw_mul(residual[i], fr)
+    residual[i] = r
+    pc = wp.inverse(masked_block(diag_block[i], fr))
+    precond[i] = pc
+    zi = wp.cw_mul(pc * r, fr)
+    z[i] = zi
+    p[i] = zi
+    wp.atomic_add(rz, w, wp.dot(r, zi))
+    wp.atomic_max(residual_norm, w, wp.max(wp.abs(r)))
+
+
+@wp.kernel
+def start_cg_worlds(
+    newton_active: wp.array(dtype=int),
+    rz: wp.array(dtype=float),
+    rz_initial: wp.array(dtype=float),
+    cg_active: wp.array(dtype=int),
+):
+    w = wp.tid()
+    rz_initial[w] = rz[w]
+    active = 0
+    if newton_active[w] != 0 and rz[w] > 0.0:
+        active = 1
+    cg_active[w] = active
+
+
+@wp.kernel
+def cg_node_product(
+    p: wp.array(dtype=wp.vec3),
+    mass: wp.array(dtype=float),
+    contact_hessian: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    cg_active: wp.array(dtype=int),
+    inv_dt2: float,
+    ap: wp.array(dtype=wp.vec3),
+    p_ap: wp.array(dtype=float),
+):
+    """ap += (m/dt^2 I + contact Hessian) p (the tets added their part); accumulate p . ap per world."""
+    i = wp.tid()
+    w = node_world[i]
+    if cg_active[w] == 0:
+        return
+    pi = p[i]
+    api = wp.cw_mul(ap[i] + mass[i] * inv_dt2 * pi + contact_hessian[i] * pi, free[i])
+    ap[i] = api
+    wp.atomic_add(p_ap, w, wp.dot(pi, api))
+
+
+@wp.kernel
+def cg_update_solution(
+    p: wp.array(dtype=wp.vec3),
+    ap: wp.array(dtype=wp.vec3),
+    precond: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    cg_active: wp.array(dtype=int),
+    rz: wp.array(dtype=float),
+    p_ap: wp.array(dtype=float),
+    dx: wp.array(dtype=wp.vec3),
+    r: wp.array(dtype=wp.vec3),
+    z: wp.array(dtype=wp.vec3),
+    rz_new: wp.array(dtype=float),
+):
+    i = wp.tid()
+    w = node_world[i]
+    if cg_active[w] == 0:
+        return
+    alpha = 0.0
+    if p_ap[w] > 0.0:
+        alpha = rz[w] / p_ap[w]
+    dx[i] = dx[i] + alpha * p[i]
+    ri = r[i] - alpha * ap[i]
+    r[i] = ri
+    zi = wp.cw_mul(precond[i] * ri, free[i])
+    z[i] = zi
+    wp.atomic_add(rz_new, w, wp.dot(ri, zi))
+
+
+@wp.kernel
+def cg_update_direction(
+    z: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    cg_active: wp.array(dtype=int),
+    rz: wp.array(dtype=float),
+    rz_new: wp.array(dtype=float),
+    p: wp.array(dtype=wp.vec3),
+    ap: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    w = node_world[i]
+    if cg_active[w] == 0:
+        return
+    beta = 0.0
+    if rz[w] > 0.0:
+        beta = rz_new[w] / rz[w]
+    p[i] = z[i] + beta * p[i]
+    ap[i] = wp.vec3(0.0)
+
+
+@wp.kernel
+def cg_end_iteration(
+    rz: wp.array(dtype=float),
+    rz_new: wp.array(dtype=float),
+    rz_initial: wp.array(dtype=float),
+    p_ap: wp.array(dtype=float),
+    rel_tol_sq: float,
+    max_iterations: int,
+    cg_iterations: wp.array(dtype=int),
+    cg_iterations_total: wp.array(dtype=int),
+    cg_active: wp.array(dtype=int),
+):
+    w = wp.tid()
+    if cg_active[w] == 0:
+        return
+    it = cg_iterations[w] + 1
+    cg_iterations[w] = it
+    cg_iterations_total[w] = cg_iterations_total[w] + 1
+    if rz_new[w] <= rel_tol_sq * rz_initial[w] or it >= max_iterations or p_ap[w] <= 0.0:
+        cg_active[w] = 0
+    rz[w] = rz_new[w]
+    rz_new[w] = 0.0
+    p_ap[w] = 0.0
+
+
+@wp.kernel
+def apply_newton_step(
+    dx: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    newton_active: wp.array(dtype=int),
+    step_length: wp.array(dtype=float),
+    max_step: float,
+    x: wp.array(dtype=wp.vec3),
+    dx_norm: wp.array(dtype=float),
+    diverged: wp.array(dtype=int),
+):
+    """x += step_length * dx; record the largest update per world; flag NaN/inf or an update longer
+    than ``max_step`` (m)."""
+    i = wp.tid()
+    w = node_world[i]
+    if newton_active[w] == 0:
+        return
+    d = step_length[w] * dx[i]
+    size = wp.max(wp.abs(d))
+    if not wp.isfinite(size) or size > max_step:
+        diverged[w] = 1
+        return
+    x[i] = x[i] + d
+    wp.atomic_max(dx_norm, w, size)
+
+
+@wp.kernel
+def end_newton_iteration(
+    dx_norm: wp.array(dtype=float),
+    tol: float,
+    max_iterations: int,
+    diverged: wp.array(dtype=int),
+    newton_iterations: wp.array(dtype=int),
+    newton_active: wp.array(dtype=int),
+    rz: wp.array(dtype=float),
+    residual_norm: wp.array(dtype=float),
+    cg_iterations: wp.array(dtype=int),
+    last_dx_norm: wp.array(dtype=float),
+):
+    w = wp.tid()
+    if newton_active[w] == 0:
+        return
+    it = newton_iterations[w] + 1
+    newton_iterations[w] = it
+    last_dx_norm[w] = dx_norm[w]
+    if dx_norm[w] <= tol or it >= max_iterations or diverged[w] != 0:
+        newton_active[w] = 0
+    dx_norm[w] = 0.0
+    rz[w] = 0.0
+    residual_norm[w] = 0.0
+    cg_iterations[w] = 0
+
+
+@wp.kernel
+def end_substep(
+    x_start: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    diverged: wp.array(dtype=int),
+    inv_dt: float,
+    x: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+):
+    """v = (x - x_start) / dt; a diverged world is put back to its start positions at rest."""
+    i = wp.tid()
+    if diverged[node_world[i]] != 0:
+        x[i] = x_start[i]
+        v[i] = wp.vec3(0.0)
+        return
+    v[i] = (x[i] - x_start[i]) * inv_dt
+
+
+@wp.kernel
+def mean_stress(
+    von_mises: wp.array(dtype=float),
+    rest_volume: wp.array(dtype=float),
+    tet_world: wp.array(dtype=int),
+    world_volume: wp.array(dtype=float),
+    mean: wp.array(dtype=float),
+):
+    t = wp.tid()
+    w = tet_world[t]
+    wp.atomic_add(mean, w, von_mises[t] * rest_volume[t] / world_volume[w])

@@ -1,0 +1,230 @@
+"""Model: the static data of a batched FEM simulation of W worlds (Newton's Model/State/Control split).
+
+Every world holds one soft object (its own tetrahedral mesh and material) and ``pads_per_world``
+kinematic boxes (the gripper pads). Nodes and tets of all worlds live in flat arrays; world ``w``
+owns nodes ``node_start[w]:node_start[w+1]`` and tets ``tet_start[w]:tet_start[w+1]``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .materials import Material, check_range
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Penalty contact and Coulomb friction parameters shared by all worlds.
+
+    Attributes:
+        stiffness: normal penalty stiffness per node, N/m. Penetration is force / stiffness, so the
+            default 1e6 N/m keeps a node pushed with 100 N within 0.1 mm.
+        ground_friction: Coulomb coefficient between object and ground, [0, inf).
+        pad_friction: Coulomb coefficient between object and pads, [0, inf).
+        stick_velocity: slip speed below which friction is treated as sticking, m/s (the smoothing
+            width of the friction law: an object held with a margin creeps at most at this speed).
+    """
+
+    stiffness: float = 1e6
+    ground_friction: float = 0.5
+    pad_friction: float = 1.0
+    stick_velocity: float = 1e-4
+
+    def __post_init__(self) -> None:
+        check_range("contact stiffness", self.stiffness, 0.0, math.inf, "N/m")
+        check_range("ground_friction", self.ground_friction, 0.0, math.inf, low_open=False)
+        check_range("pad_friction", self.pad_friction, 0.0, math.inf, low_open=False)
+        check_range("stick_velocity", self.stick_velocity, 0.0, math.inf, "m/s")
+
+
+@dataclass
+class Model:
+    """Static arrays of the simulation (device arrays unless noted).
+
+    Shapes: N nodes, T tets, W worlds, P pads per world. Frames: world, y up, metres.
+    """
+
+    device: str
+    num_worlds: int
+    pads_per_world: int
+    node_start: np.ndarray        # [W+1] int64 host: first node of each world
+    tet_start: np.ndarray         # [W+1] int64 host: first tet of each world
+    surfaces: list[np.ndarray]    # W x [S_w,3] int32 host: boundary triangles, world-local node ids
+    rest_positions: wp.array      # [N] vec3, m: node positions at the initial pose
+    tets: wp.array                # [T] vec4i: global node indices, positively oriented
+    tet_rest_inv: wp.array        # [T] mat33: inverse of the rest edge matrix D_m, 1/m
+    tet_rest_volume: wp.array     # [T] float, m^3
+    tet_mu: wp.array              # [T] float, Pa: Lamé mu (shear modulus)
+    tet_lambda: wp.array          # [T] float, Pa: Lamé lambda
+    tet_world: wp.array           # [T] int32
+    node_mass: wp.array           # [N] float, kg (lumped)
+    node_world: wp.array          # [N] int32
+    free_axes: wp.array           # [N] vec3: 1 = axis free, 0 = axis prescribed (Dirichlet)
+    world_volume: wp.array        # [W] float, m^3: rest volume of each object
+    pad_half_extents: wp.array    # [W*P] vec3, m: half sizes of the pad boxes in their own frame
+    gravity: wp.vec3              # m/s^2
+    contact: ContactParams
+
+    @property
+    def num_nodes(self) -> int:
+        return int(self.node_start[-1])
+
+    @property
+    def num_tets(self) -> int:
+        return int(self.tet_start[-1])
+
+    def world_nodes(self, w: int) -> slice:
+        return slice(int(self.node_start[w]), int(self.node_start[w + 1]))
+
+    def world_tets(self, w: int) -> slice:
+        return slice(int(self.tet_start[w]), int(self.tet_start[w + 1]))
+
+
+def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _check_mesh(w: int, nodes: np.ndarray, tets: np.ndarray) -> None:
+    if nodes.ndim != 2 or nodes.shape[1] != 3 or len(nodes) < 4:
+        raise ValueError(f"world {w}: mesh nodes must have shape (N>=4, 3), got {nodes.shape}")
+    if not np.all(np.isfinite(nodes)):
+        raise ValueError(f"world {w}: mesh nodes contain NaN or inf")
+    if tets.ndim != 2 or tets.shape[1] != 4 or len(tets) < 1:
+        raise ValueError(f"world {w}: mesh tets must have shape (T>=1, 4), got {tets.shape}")
+    if tets.min() < 0 or tets.max() >= len(nodes):
+        raise ValueError(f"world {w}: tet node indices must be in [0, {len(nodes) - 1}], "
+                         f"got [{tets.min()}, {tets.max()}]")
+
+
+def build_model(
+    meshes: Sequence,
+    materials: Sequence[Material],
+    poses: Sequence[tuple[Sequence[float], Sequence[float]]] | None = None,
+    pad_half_extents: Sequence[Sequence[float]] = (),
+    contact: ContactParams = ContactParams(),
+    gravity: Sequence[float] = (0.0, -9.81, 0.0),
+    fixed_axes: Sequence[np.ndarray] | None = None,
+    device: str | None = None,
+) -> Model:
+    """Build a batched model with one object per world.
+
+    Args:
+        meshes: W meshes with ``nodes`` [N_w,3] (m, object frame), ``tets`` [T_w,4], ``surface`` [S_w,3].
+        materials: W materials (one per world).
+        poses: W initial poses (position [3] m, quaternion xyzw [4]) of the object frame in the world;
+            default identity (object resting on the ground at the origin).
+        pad_half_extents: P half extents [3] (m) of the kinematic pad boxes, the same in every world.
+        contact: contact and friction parameters.
+        gravity: gravity vector, m/s^2 (default -9.81 along y).
+        fixed_axes: optional W boolean arrays [N_w,3]: True where a node coordinate is prescribed.
+        device: Warp device ("cpu", "cuda:0"); default Warp's default device.
+    """
+    if len(meshes) == 0:
+        raise ValueError("build_model needs at least one world, got 0 meshes")
+    if len(materials) != len(meshes):
+        raise ValueError(f"need one material per mesh: {len(meshes)} meshes, {len(materials)} materials")
+    poses = poses if poses is not None else [((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))] * len(meshes)
+    if len(poses) != len(meshes):
+        raise ValueError(f"need one pose per mesh: {len(meshes)} meshes, {len(poses)} poses")
+    device = str(wp.get_device(device))
+
+    positions, tets, rest_inv, volumes, mus, lams, tet_world = [], [], [], [], [], [], []
+    masses, node_world, free, world_volume = [], [], [], []
+    node_start, tet_start = [0], [0]
+    for w, (mesh, material, (pos, quat)) in enumerate(zip(meshes, materials, poses)):
+        nodes = np.asarray(mesh.nodes, dtype=np.float64)
+        t = np.asarray(mesh.tets, dtype=np.int64)
+        _check_mesh(w, nodes, t)
+        x = nodes @ _quat_to_matrix(np.asarray(quat, dtype=np.float64)).T + np.asarray(pos, dtype=np.float64)
+        dm = np.stack([x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]], x[t[:, 3]] - x[t[:, 0]]], axis=2)
+        det = np.linalg.det(dm)
+        scale = np.max(np.ptp(x, axis=0)) ** 3
+        if np.any(det <= 1e-12 * scale):
+            bad = int(np.argmin(det))
+            raise ValueError(f"world {w}: tet {bad} is inverted or degenerate (6*volume = {det[bad]:.3e} m^3); "
+                             "tets must be positively oriented with non-zero volume")
+        vol = det / 6.0
+        mu, lam = material.lame
+        m = np.zeros(len(x))
+        np.add.at(m, t.ravel(), np.repeat(material.density * vol / 4.0, 4))
+        positions.append(x)
+        tets.append(t + node_start[-1])
+        rest_inv.append(np.linalg.inv(dm))
+        volumes.append(vol)
+        mus.append(np.full(len(t), mu))
+        lams.append(np.full(len(t), lam))
+        tet_world.append(np.full(len(t), w))
+        masses.append(m)
+        node_world.append(np.full(len(x), w))
+        fa = np.zeros((len(x), 3), bool) if fixed_axes is None else np.asarray(fixed_axes[w], bool)
+        if fa.shape != (len(x), 3):
+            raise ValueError(f"world {w}: fixed_axes must have shape {(len(x), 3)}, got {fa.shape}")
+        free.append(1.0 - fa)
+        world_volume.append(vol.sum())
+        node_start.append(node_start[-1] + len(x))
+        tet_start.append(tet_start[-1] + len(t))
+
+    half = np.asarray(pad_half_extents, dtype=np.float64).reshape(-1, 3)
+    if np.any(half <= 0) or not np.all(np.isfinite(half)):
+        raise ValueError(f"pad_half_extents must be finite and > 0 m, got {half.tolist()}")
+    pads = len(half)
+    half_all = np.tile(half, (len(meshes), 1)) if pads else np.zeros((0, 3))
+    g = np.asarray(gravity, dtype=np.float64)
+    if g.shape != (3,) or not np.all(np.isfinite(g)):
+        raise ValueError(f"gravity must be a finite 3-vector in m/s^2, got {gravity!r}")
+
+    def arr(a, dtype):
+        return wp.array(np.ascontiguousarray(a), dtype=dtype, device=device)
+
+    cat = np.concatenate
+    return Model(
+        device=device,
+        num_worlds=len(meshes),
+        pads_per_world=pads,
+        node_start=np.asarray(node_start, dtype=np.int64),
+        tet_start=np.asarray(tet_start, dtype=np.int64),
+        surfaces=[np.asarray(mesh.surface, dtype=np.int32) for mesh in meshes],
+        rest_positions=arr(cat(positions).astype(np.float32), wp.vec3),
+        tets=arr(cat(tets).astype(np.int32), wp.vec4i),
+        tet_rest_inv=arr(cat(rest_inv).astype(np.float32), wp.mat33),
+        tet_rest_volume=arr(cat(volumes).astype(np.float32), wp.float32),
+        tet_mu=arr(cat(mus).astype(np.float32), wp.float32),
+        tet_lambda=arr(cat(lams).astype(np.float32), wp.float32),
+        tet_world=arr(cat(tet_world).astype(np.int32), wp.int32),
+        node_mass=arr(cat(masses).astype(np.float32), wp.float32),
+        node_world=arr(cat(node_world).astype(np.int32), wp.int32),
+        free_axes=arr(cat(free).astype(np.float32), wp.vec3),
+        world_volume=arr(np.asarray(world_volume, dtype=np.float32), wp.float32),
+        pad_half_extents=arr(half_all.astype(np.float32), wp.vec3),
+        gravity=wp.vec3(*g.astype(np.float32)),
+        contact=contact,
+    )
+
+
+def set_world_material(model: Model, world: int, material: Material) -> None:
+    """Replace the material of one world in place (mass and stiffness), e.g. on an env reset."""
+    if not 0 <= world < model.num_worlds:
+        raise ValueError(f"world must be in [0, {model.num_worlds - 1}], got {world}")
+    sl, nl = model.world_tets(world), model.world_nodes(world)
+    mu, lam = material.lame
+    for array, value in ((model.tet_mu, mu), (model.tet_lambda, lam)):
+        host = array.numpy()
+        host[sl] = value
+        array.assign(host)
+    vol = model.tet_rest_volume.numpy()[sl].astype(np.float64)
+    tets = model.tets.numpy()[sl] - nl.start
+    m = np.zeros(nl.stop - nl.start)
+    np.add.at(m, tets.ravel(), np.repeat(material.density * vol / 4.0, 4))
+    host = model.node_mass.numpy()
+    host[nl] = m
+    model.node_mass.assign(host)

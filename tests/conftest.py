@@ -1,0 +1,29 @@
+"""Test configuration: caches go to the repo's ignored .cache folder, never to ~."""
+
+import os
+import pathlib
+
+_CACHE = pathlib.Path(__file__).resolve().parents[1] / ".cache"
+os.environ.setdefault("WARP_CACHE_PATH", str(_CACHE / "warp"))
+os.environ.setdefault("HF_HOME", str(_CACHE / "hf"))
+os.environ.setdefault("HF_LEROBOT_HOME", str(_CACHE / "lerobot"))
+os.environ.setdefault("MPLCONFIGDIR", str(_CACHE / "mpl"))
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import pytest  # noqa: E402
+
+
+def _cuda_available() -> bool:
+    import warp as wp
+
+    wp.init()
+    return wp.get_cuda_device_count() > 0
+
+
+def pytest_collection_modifyitems(config, items):
+    if _cuda_available():
+        return
+    skip = pytest.mark.skip(reason="needs a CUDA GPU (run on the device machine)")
+    for item in items:
+        if "cuda" in item.keywords:
+            item.add_marker(skip)
