@@ -1,0 +1,106 @@
+"""Validated configuration of the DeformablePickup task (frozen dataclass: no mutable defaults)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from ..gripper import GripperConfig
+from ..render.camera import Camera
+from ..sim.materials import PAPER_YOUNGS_MODULI, Material, check_range
+from ..sim.meshing import OBJECT_SHAPES
+from ..sim.model import ContactParams
+from ..sim.solver import SolverConfig
+
+OBS_TYPES = ("state", "pixels_agent_pos", "pixels")
+ACTION_MODES = ("delta", "absolute")
+RANDOM_OBJECT = "random"
+
+
+def _check_choice(name: str, value, choices: Sequence[str]) -> str:
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class PickupConfig:
+    """Everything that defines a DeformablePickup task; see ``DeformablePickupEnv`` for the meaning.
+
+    ``object`` is a name of ``OBJECT_SHAPES``, ``"random"`` (sampled per episode among the five), or
+    a path to a watertight surface mesh. ``youngs_modulus`` is a value in Pa or a tuple of values
+    to sample from per episode (e.g. the paper's (1e4, 1e5, 1e6, 1e7)).
+    """
+
+    object: str = "cuboid"
+    object_resolution: float | None = None
+    youngs_modulus: float | tuple[float, ...] = 1e5
+    poisson_ratio: float = 0.3
+    density: float = 500.0
+    ground_friction: float = 0.5
+    pad_friction: float = 1.0
+    contact_stiffness: float = 1e6
+    init_position_noise: float = 0.02
+    init_yaw_noise: float = math.pi
+    control_hz: float = 20.0
+    episode_seconds: float = 15.0
+    goal: tuple[float, float, float] = (0.0, 0.6, 0.0)
+    success_tolerance: float = 0.05
+    success_hold_seconds: float = 0.5
+    max_linear_speed: float = 0.3
+    max_angular_speed: float = 1.5
+    obs_type: str = "state"
+    action_mode: str = "delta"
+    gripper: GripperConfig = field(default_factory=GripperConfig)
+    solver: SolverConfig = field(default_factory=lambda: SolverConfig(substeps=4))
+    camera: Camera = field(default_factory=Camera)
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.object, str):
+            raise TypeError(f"object must be a str (one of {sorted(OBJECT_SHAPES)}, 'random' or a mesh path), "
+                            f"got {type(self.object).__name__}")
+        if self.object_resolution is not None:
+            check_range("object_resolution", self.object_resolution, 0.0, 0.1, "m", high_open=False)
+        moduli = self.youngs_modulus if isinstance(self.youngs_modulus, tuple) else (self.youngs_modulus,)
+        if len(moduli) == 0:
+            raise ValueError("youngs_modulus must be a value or a non-empty tuple of values in Pa, got ()")
+        for e in moduli:
+            Material(self.density, e, self.poisson_ratio)  # validates all three
+        ContactParams(self.contact_stiffness, self.ground_friction, self.pad_friction)
+        check_range("init_position_noise", self.init_position_noise, 0.0, 0.1, "m", low_open=False, high_open=False)
+        check_range("init_yaw_noise", self.init_yaw_noise, 0.0, math.pi, "rad", low_open=False, high_open=False)
+        check_range("control_hz", self.control_hz, 1.0, 200.0, "Hz", low_open=False, high_open=False)
+        check_range("episode_seconds", self.episode_seconds, 0.0, 3600.0, "s")
+        check_range("success_tolerance", self.success_tolerance, 0.0, 1.0, "m")
+        check_range("success_hold_seconds", self.success_hold_seconds, 0.0, 60.0, "s", low_open=False)
+        check_range("max_linear_speed", self.max_linear_speed, 0.0, 2.0, "m/s", high_open=False)
+        check_range("max_angular_speed", self.max_angular_speed, 0.0, 2 * math.pi, "rad/s", high_open=False)
+        if len(self.goal) != 3 or not all(math.isfinite(float(g)) for g in self.goal):
+            raise ValueError(f"goal must be 3 finite numbers in m, got {self.goal!r}")
+        _check_choice("obs_type", self.obs_type, OBS_TYPES)
+        _check_choice("action_mode", self.action_mode, ACTION_MODES)
+        for name, cls in (("gripper", GripperConfig), ("solver", SolverConfig), ("camera", Camera)):
+            if not isinstance(getattr(self, name), cls):
+                raise TypeError(f"{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
+
+    @property
+    def dt(self) -> float:
+        """Control period, s."""
+        return 1.0 / self.control_hz
+
+    @property
+    def max_episode_steps(self) -> int:
+        return int(round(self.episode_seconds * self.control_hz))
+
+    @property
+    def moduli(self) -> tuple[float, ...]:
+        return self.youngs_modulus if isinstance(self.youngs_modulus, tuple) else (float(self.youngs_modulus),)
+
+    @property
+    def object_names(self) -> tuple[str, ...]:
+        return tuple(OBJECT_SHAPES) if self.object == RANDOM_OBJECT else (self.object,)
+
+
+PAPER_MODULI = PAPER_YOUNGS_MODULI

@@ -1,0 +1,140 @@
+"""``DeformablePickup-v0``: pick a soft FEM object off the ground and hold it at a goal."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from ..render.renderer import SceneRenderer
+from .common import check_actions, draw_setup, observations, step_infos, targets
+from .config import PickupConfig
+from .scene import PickupScene
+from .task import PickupTask, action_space, observation_spaces
+
+
+def make_config(config: PickupConfig | None, kwargs: dict[str, Any]) -> PickupConfig:
+    """A ``PickupConfig`` from keyword options (``object=``, ``youngs_modulus=``, ...)."""
+    base = config if config is not None else PickupConfig()
+    names = {f.name for f in dataclasses.fields(PickupConfig)}
+    unknown = sorted(set(kwargs) - names)
+    if unknown:
+        raise TypeError(f"unknown option(s) {unknown}; accepted: {sorted(names)}")
+    if isinstance(kwargs.get("youngs_modulus"), list):
+        kwargs = {**kwargs, "youngs_modulus": tuple(kwargs["youngs_modulus"])}
+    return dataclasses.replace(base, **kwargs)
+
+
+class DeformablePickupEnv(gym.Env):
+    """Pick up a deformable object with a Robotiq 2F-85-like gripper and lift it to a goal.
+
+    The object is a tetrahedral FEM body (fixed-corotated hyperelasticity, Warp) resting on the
+    ground (y = 0, world y up) at the paper's initial pose [0, 0, 0] (plus seeded noise); the goal
+    is [0, 0.6, 0] m. The gripper hangs on an invisible 6-DOF wrist (3 prismatic + 3 revolute
+    joints, ``defgrasp_env/assets/wrist_6dof.urdf``); its pads are kinematic boxes with Coulomb
+    friction. One step is one control period (default 1/20 s).
+
+    **Action space** (``action_mode``):
+      * ``"delta"`` (default): Box [-1, 1]^7 = flange linear velocity (3) x ``max_linear_speed``
+        (m/s, world frame), flange angular velocity (3, axis-angle rate) x ``max_angular_speed``
+        (rad/s, world frame), jaw command (1): -1 fully open (86 mm) ... +1 fully closed; the jaw
+        moves toward it at the gripper's closing speed and stops closing at its force limit.
+      * ``"absolute"``: Box [8] = target flange position (3, m), orientation quaternion xyzw (4),
+        jaw gap (1, m); reached at most at the speed limits (used by teleoperation).
+      Out-of-range values are clipped to the box; NaN/inf or a wrong shape raise ``ValueError``.
+
+    **Observation space** (Dict, float32 unless noted; LeRobot's sim-env keys):
+      * ``agent_pos`` [10]: flange position (3, m, world), flange quaternion xyzw (4), jaw gap
+        (1, m), left and right tip normal force (2, N).
+      * ``environment_state`` [33] (``obs_type="state"``): object feature point = mean node position
+        (3, m), its velocity (3, m/s), goal (3, m), 8 fixed surface keypoints (24, m, world).
+      * ``pixels`` [H, W, 3] uint8 (``obs_type`` "pixels" or "pixels_agent_pos"): camera image.
+
+    **Reward**: ``reach + grasp + lift + success`` (each also in ``info["reward_<term>"]``):
+    reach = 0.5 (1 - tanh(10 |tcp - feature|)); grasp = 0.5 when both tip forces exceed 0.5 N;
+    lift = 2 grasp (1 - tanh(5 |feature - goal|)); success = 10 on the success step.
+
+    **Episode end**: terminated on success = feature point within ``success_tolerance`` (0.05 m) of
+    the goal, grasped and not pierced (penetration < 5 mm), for ``success_hold_seconds`` (0.5 s);
+    truncated after ``episode_seconds`` (15 s, via ``max_episode_steps``) or when the simulation
+    diverges (``info["sim_diverged"]``: the state is then kept at its last finite value).
+
+    **Info**: ``is_success``, reward terms, tip forces (N), jaw gap (m), mean von Mises stress (Pa),
+    solver iterations/residual/penetration, ``sim_diverged``.
+
+    **Arguments**: every field of ``PickupConfig`` as a keyword (``object``, ``youngs_modulus``
+    (value or tuple to sample), ``poisson_ratio``, ``density``, ``ground_friction``,
+    ``pad_friction``, ``init_position_noise``, ``init_yaw_noise``, ``control_hz``, ``camera``,
+    ``gripper``, ``solver``, ``obs_type``, ``action_mode``, ``device``), plus ``render_mode``
+    ("rgb_array").
+
+    **Full state** beyond observations: ``env.unwrapped.scene`` (node positions, forces, stresses).
+
+    **Version history**: v0: first release.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(self, render_mode: str | None = None, config: PickupConfig | None = None, **kwargs):
+        self.config = make_config(config, kwargs)
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": self.config.control_hz}
+        self.observation_space = observation_spaces(self.config)
+        self.action_space = action_space(self.config)
+        self.scene: PickupScene | None = None
+        self.task = PickupTask(self.config, 1)
+        self._renderer: SceneRenderer | None = None
+        self._renderer_object: str | None = None
+
+    # -- gym API ---------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        setup = draw_setup(self.config, self.np_random)
+        if self.scene is None or self.scene.object_names[0] != setup.object_name:
+            self.scene = PickupScene(self.config, [setup])
+        else:
+            self.scene.reset_worlds(np.ones(1, bool), [setup])
+        self.task.reset(np.ones(1, bool))
+        return self._obs(), {"is_success": False, "object": setup.object_name,
+                             "youngs_modulus": setup.material.youngs_modulus}
+
+    def step(self, action):
+        if self.scene is None:
+            raise RuntimeError("call reset() before step()")
+        a = check_actions(action, self.action_space.shape, self.action_space.low, self.action_space.high)[None]
+        stats = self.scene.step(*targets(self.scene, a, self.config.action_mode))
+        diverged = stats.diverged | ~self.scene.finite()
+        result = self.task.evaluate(self.scene, stats, ~diverged)
+        info = {k: v[0].item() for k, v in step_infos(self.scene, result, stats, diverged).items()}
+        terminated = bool(result["is_success"][0])
+        truncated = bool(diverged[0])
+        return self._obs(), float(result["reward"][0]), terminated, truncated, info
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        return self._render_world(0)
+
+    def close(self):
+        self._renderer = None
+        self.scene = None
+
+    # -- internals -------------------------------------------------------------------------
+    def _obs(self):
+        pixels = self._render_world(0)[None] if "pixels" in self.observation_space.spaces else None
+        return {k: v[0] for k, v in observations(self.config, self.scene, self.task, pixels).items()}
+
+    def _render_world(self, w: int) -> np.ndarray:
+        scene = self.scene
+        if self._renderer is None or self._renderer_object != scene.object_names[w]:
+            mesh = scene.meshes[w]
+            self._renderer = SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2)
+            self._renderer_object = scene.object_names[w]
+        centers, quats = scene.pad_poses()
+        half = scene.model.pad_half_extents.numpy()[:2]
+        return self._renderer.render(scene.node_positions(w), centers[w], quats[w], half,
+                                     goal=np.asarray(self.config.goal, np.float32))
