@@ -13,7 +13,8 @@ from .task import REWARD_TERMS, PickupTask
 
 def draw_setup(config: PickupConfig, rng: np.random.Generator, object_name: str | None = None) -> WorldSetup:
     """Random episode start of one world: object (if not given), E, position and yaw noise."""
-    name = object_name if object_name is not None else config.object_names[rng.integers(len(config.object_names))]
+    drawn = config.object_names[rng.integers(len(config.object_names))]  # always drawn: same stream either way
+    name = object_name if object_name is not None else drawn
     e = config.moduli[rng.integers(len(config.moduli))]
     xz = rng.uniform(-config.init_position_noise, config.init_position_noise, size=2)
     yaw = rng.uniform(-config.init_yaw_noise, config.init_yaw_noise)

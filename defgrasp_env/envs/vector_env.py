@@ -1,0 +1,158 @@
+"""Native vector env of DeformablePickup-v0: N worlds in ONE FEM simulation (not N envs)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from .common import check_actions, draw_setup, observations, step_infos, targets
+from .config import PickupConfig
+from .pickup_env import make_config
+from .scene import PickupScene
+from .task import PickupTask, action_space, observation_spaces
+
+
+class DeformablePickupVectorEnv(VectorEnv):
+    """``gym.make_vec("DeformablePickup-v0", num_envs=N, ...)``: N worlds stepped together.
+
+    Spaces, reward, observations and options are those of ``DeformablePickupEnv`` (batched on a
+    leading axis of N). World ``i`` reset with seed ``s + i`` draws exactly what a single env reset
+    with seed ``s + i`` draws, so the vector env equals N single envs on those seeds.
+    Each world keeps the object it was built with (``object="random"`` draws it per world once, at
+    construction); Young's modulus, pose noise and the rest are drawn per episode.
+
+    Autoreset (``autoreset_mode``): ``NEXT_STEP`` (default: a world that ended is reset by the
+    following ``step``, which returns its first observation with zero reward), ``SAME_STEP`` (reset
+    inside the ending step; its last observation and info go to ``info["final_obs"]`` and
+    ``info["final_info"]``), ``DISABLED`` (reset with ``reset(options={"reset_mask": mask})``; other
+    worlds stay bit-identical). ``info`` holds arrays [N] with ``_key`` masks.
+    ``torch_outputs=True`` returns observations as torch tensors (zero-copy from the numpy arrays).
+    """
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, torch_outputs: bool = False,
+                 config: PickupConfig | None = None, **kwargs: Any):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        self.config = make_config(config, kwargs)
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
+                             f"got {autoreset_mode!r}") from None
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.num_envs = num_envs
+        self.render_mode = render_mode
+        self.max_episode_steps = max_episode_steps if max_episode_steps is not None else self.config.max_episode_steps
+        self.metadata = {"render_modes": ["rgb_array"], "render_fps": self.config.control_hz,
+                         "autoreset_mode": self.autoreset_mode}
+        self.single_observation_space = observation_spaces(self.config)
+        self.single_action_space = action_space(self.config)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.torch_outputs = bool(torch_outputs)
+        self._rngs = [seeding.np_random(None)[0] for _ in range(num_envs)]
+        self.scene: PickupScene | None = None
+        self.task = PickupTask(self.config, num_envs)
+        self._needs_reset = np.zeros(num_envs, bool)
+        self._renderers: dict[int, Any] = {}
+
+    # -- gym API ---------------------------------------------------------------------------
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
+        mask = np.ones(self.num_envs, bool)
+        if options is not None and "reset_mask" in options:
+            mask = np.asarray(options["reset_mask"])
+            if mask.shape != (self.num_envs,) or mask.dtype != bool:
+                raise ValueError(f"reset_mask must be a bool array of shape ({self.num_envs},), "
+                                 f"got {mask.dtype} {mask.shape}")
+        seeds = seed if isinstance(seed, (list, tuple)) else [None if seed is None else seed + i
+                                                               for i in range(self.num_envs)]
+        if len(seeds) != self.num_envs:
+            raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seeds)}")
+        for i in np.flatnonzero(mask):
+            if seeds[i] is not None or self.scene is None:
+                self._rngs[i] = seeding.np_random(seeds[i])[0]
+        self._reset_worlds(mask)
+        info = {"is_success": np.zeros(self.num_envs, bool), "_is_success": mask.copy()}
+        return self._obs(), info
+
+    def step(self, actions):
+        if self.scene is None:
+            raise RuntimeError("call reset() before step()")
+        n = self.num_envs
+        a = check_actions(actions, (n,) + self.single_action_space.shape, self.single_action_space.low,
+                          self.single_action_space.high)
+        resetting = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
+        if resetting.any():
+            self._reset_worlds(resetting)
+        stats = self.scene.step(*targets(self.scene, a, self.config.action_mode), active=~resetting)
+        diverged = (stats.diverged | ~self.scene.finite()) & ~resetting
+        result = self.task.evaluate(self.scene, stats, ~diverged & ~resetting)
+        terminated = result["is_success"] & ~resetting
+        truncated = (diverged | (self.task.elapsed >= self.max_episode_steps)) & ~resetting
+        reward = np.where(resetting, 0.0, result["reward"])
+        info = step_infos(self.scene, result, stats, diverged)
+        live = ~resetting
+        info = {**info, **{f"_{k}": live.copy() for k in list(info)}}
+        done = terminated | truncated
+        obs = self._obs()
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._needs_reset = done
+        elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            info["final_obs"] = obs
+            info["final_info"] = {k: v.copy() for k, v in info.items() if k not in ("final_obs",)}
+            info["_final_obs"] = done.copy()
+            info["_final_info"] = done.copy()
+            self._reset_worlds(done)
+            obs = self._obs()
+        return obs, reward, terminated, truncated, info
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        return np.stack([self._render_world(w) for w in range(self.num_envs)])
+
+    def close_extras(self, **kwargs):
+        self.scene = None
+        self._renderers = {}
+
+    # -- internals -------------------------------------------------------------------------
+    def _reset_worlds(self, mask: np.ndarray) -> None:
+        if self.scene is None:
+            setups = [draw_setup(self.config, rng) for rng in self._rngs]
+            self.scene = PickupScene(self.config, setups)
+        else:
+            setups = [draw_setup(self.config, self._rngs[w], self.scene.object_names[w]) if mask[w] else None
+                      for w in range(self.num_envs)]
+            self.scene.reset_worlds(mask, setups)
+        self.task.reset(mask)
+        self._needs_reset[mask] = False
+
+    def _obs(self):
+        pixels = None
+        if "pixels" in self.single_observation_space.spaces:
+            pixels = np.stack([self._render_world(w) for w in range(self.num_envs)])
+        obs = observations(self.config, self.scene, self.task, pixels)
+        if self.torch_outputs:
+            import torch
+
+            obs = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in obs.items()}
+        return obs
+
+    def _render_world(self, w: int) -> np.ndarray:
+        from ..render.renderer import SceneRenderer
+
+        scene = self.scene
+        if w not in self._renderers:
+            mesh = scene.meshes[w]
+            self._renderers[w] = SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2)
+        centers, quats = scene.pad_poses()
+        half = scene.model.pad_half_extents.numpy()[:2]
+        return self._renderers[w].render(scene.node_positions(w), centers[w], quats[w], half,
+                                         goal=np.asarray(self.config.goal, np.float32))
