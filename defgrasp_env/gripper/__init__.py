@@ -1,0 +1,33 @@
+"""Robotiq 2F-85-like parallel-jaw gripper: closed-form linkage, pad geometry and actuation.
+
+Frame G (the wrist flange): origin at the gripper mounting face, fingers along -y_G (approach),
+closing axis x_G (left pad at +x_G, right pad at -x_G), z_G = x_G x y_G. See ``linkage`` for the
+model and ``driver`` for the speed/force-limited actuation. All lengths in m, angles in rad.
+"""
+
+from .driver import CLOSING_SPEED_RANGE_MM_S, GRIP_FORCE_RANGE, GripperConfig, GripperDriver, driver_step
+from .linkage import (
+    ARC_PHASE,
+    ARC_RADIUS,
+    GAP_MAX,
+    GAP_MIN,
+    GAP_OFFSET,
+    PAD_HALF_EXTENTS,
+    PAD_INWARD_NORMALS,
+    PAD_NAMES,
+    THETA_MAX,
+    THETA_MIN,
+    gap_from_theta,
+    pad_arc_centers,
+    pad_boxes,
+    pad_centers,
+    tcp_offset,
+    theta_from_gap,
+)
+
+__all__ = [
+    "ARC_PHASE", "ARC_RADIUS", "CLOSING_SPEED_RANGE_MM_S", "GAP_MAX", "GAP_MIN", "GAP_OFFSET",
+    "GRIP_FORCE_RANGE", "GripperConfig", "GripperDriver", "PAD_HALF_EXTENTS", "PAD_INWARD_NORMALS",
+    "PAD_NAMES", "THETA_MAX", "THETA_MIN", "driver_step", "gap_from_theta", "pad_arc_centers",
+    "pad_boxes", "pad_centers", "tcp_offset", "theta_from_gap",
+]

@@ -1,0 +1,179 @@
+"""DeformablePickup-v0: Gymnasium API checks, determinism, vector == single, resets, validation."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode
+
+import defgrasp_env  # noqa: F401  (registers the env)
+from defgrasp_env.envs.task import REWARD_TERMS
+from defgrasp_env.sim.meshing import OBJECT_SHAPES
+
+ENV_ID = "DeformablePickup-v0"
+
+
+@pytest.mark.parametrize("name", sorted(OBJECT_SHAPES))
+def test_check_env_every_object(name):
+    env = gym.make(ENV_ID, object=name)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+def test_render_rgb_array():
+    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env.reset(seed=0)
+    img = env.render()
+    assert img.dtype == np.uint8 and img.shape == (224, 224, 3)
+    assert img.std() > 5  # not a blank image
+    assert env.metadata["render_fps"] == 20
+
+
+def test_pixels_observation_in_space():
+    env = gym.make(ENV_ID, obs_type="pixels_agent_pos")
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+
+
+def _rollout(env, seed, actions):
+    obs, _ = env.reset(seed=seed)
+    out = [obs["environment_state"].copy()]
+    for a in actions:
+        obs, *_ = env.step(a)
+        out.append(obs["environment_state"].copy())
+    return np.array(out)
+
+
+def _actions(n, count, seed=0):
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(-1, 1, (count, n, 7)).astype(np.float32)
+    a[..., 1] = -1.0  # descend onto the object
+    a[..., 6] = 1.0   # close
+    return a
+
+
+def test_seeded_determinism():
+    acts = _actions(1, 6)[:, 0]
+    a = _rollout(gym.make(ENV_ID, object="sphere"), 3, acts)
+    b = _rollout(gym.make(ENV_ID, object="sphere"), 3, acts)
+    assert np.array_equal(a, b)
+    c = _rollout(gym.make(ENV_ID, object="sphere"), 4, acts)
+    assert not np.array_equal(a, c)  # another seed draws another initial pose
+
+
+def test_vector_env_equals_single_envs():
+    n, acts = 3, _actions(3, 6)
+    venv = gym.make_vec(ENV_ID, num_envs=n, object="cuboid", youngs_modulus=(1e4, 1e6))
+    assert venv.num_envs == n
+    obs, _ = venv.reset(seed=20)
+    traj = [obs["environment_state"].copy()]
+    for a in acts:
+        obs, *_ = venv.step(a)
+        traj.append(obs["environment_state"].copy())
+    traj = np.array(traj)
+    assert venv.unwrapped.scene.num_worlds == n  # one simulation holding all worlds
+    for i in range(n):
+        single = _rollout(gym.make(ENV_ID, object="cuboid", youngs_modulus=(1e4, 1e6)), 20 + i, acts[:, i])
+        assert np.array_equal(single, traj[:, i])
+
+
+def test_partial_reset_leaves_other_worlds_bit_identical():
+    venv = gym.make_vec(ENV_ID, num_envs=2, autoreset_mode=AutoresetMode.DISABLED)
+    venv.reset(seed=1)
+    for a in _actions(2, 3):
+        venv.step(a)
+    scene = venv.unwrapped.scene
+    before = scene.state.positions.numpy().copy()
+    q_before = scene.q.copy()
+    venv.reset(options={"reset_mask": np.array([True, False])})
+    after = scene.state.positions.numpy()
+    other = scene.model.world_nodes(1)
+    assert np.array_equal(before[other], after[other])
+    assert np.array_equal(q_before[1], scene.q[1])
+    first = scene.model.world_nodes(0)
+    assert not np.array_equal(before[first], after[first])
+
+
+def test_next_step_autoreset_after_truncation():
+    venv = gym.make_vec(ENV_ID, num_envs=2, max_episode_steps=2)
+    venv.reset(seed=0)
+    zero = np.zeros((2, 7), np.float32)
+    venv.step(zero)
+    _, _, _, trunc, _ = venv.step(zero)
+    assert trunc.all()
+    _, reward, term, trunc, info = venv.step(zero)  # the autoreset step
+    assert not trunc.any() and not term.any() and np.all(reward == 0.0)
+    assert not info["_is_success"].any()
+
+
+def test_same_step_autoreset_reports_final_obs():
+    venv = gym.make_vec(ENV_ID, num_envs=2, max_episode_steps=1,
+                        autoreset_mode=AutoresetMode.SAME_STEP)
+    venv.reset(seed=0)
+    obs, _, _, trunc, info = venv.step(np.zeros((2, 7), np.float32))
+    assert trunc.all() and info["_final_obs"].all()
+    assert "agent_pos" in info["final_obs"]
+
+
+def test_reward_terms_sum_to_reward():
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    for a in _actions(1, 5)[:, 0]:
+        _, reward, _, _, info = env.step(a)
+        assert reward == pytest.approx(sum(info[f"reward_{t}"] for t in REWARD_TERMS), abs=1e-12)
+
+
+def test_absolute_action_mode_moves_toward_target():
+    env = gym.make(ENV_ID, action_mode="absolute")
+    obs, _ = env.reset(seed=0)
+    start = obs["agent_pos"][:3].astype(float)
+    target = start + np.array([0.0, 0.0, 0.01])
+    action = np.concatenate([target, [0, 0, 0, 1], [0.05]]).astype(np.float32)
+    for _ in range(3):
+        obs, *_ = env.step(action)
+    np.testing.assert_allclose(obs["agent_pos"][:3], target, atol=1e-4)  # 1 cm at 0.3 m/s: reached
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"youngs_modulus": -3.0}, "youngs_modulus must be in (0, inf) Pa, got -3.0"),
+    ({"poisson_ratio": 0.5}, "poisson_ratio must be in [0, 0.5)"),
+    ({"density": 0.0}, "density must be in (0, inf) kg/m^3"),
+    ({"obs_type": "depth"}, "obs_type must be one of"),
+    ({"action_mode": "joint"}, "action_mode must be one of"),
+    ({"control_hz": 0.5}, "control_hz must be in [1, 200] Hz"),
+    ({"ground_friction": -1.0}, "ground_friction must be in [0, inf)"),
+    ({"colour": "red"}, "unknown option(s) ['colour']"),
+])
+def test_bad_options_rejected(kwargs, message):
+    with pytest.raises((ValueError, TypeError)) as err:
+        gym.make(ENV_ID, **kwargs)
+    assert message in str(err.value)
+
+
+def test_unknown_object_rejected():
+    env = gym.make(ENV_ID, object="banana")
+    with pytest.raises((ValueError, FileNotFoundError)) as err:
+        env.reset(seed=0)
+    assert "banana" in str(err.value)
+
+
+@pytest.mark.parametrize("action, message", [
+    (np.zeros(6, np.float32), "action must have shape (7,), got (6,)"),
+    (np.array([np.nan] + [0] * 6, np.float32), "action must be finite"),
+])
+def test_bad_actions_rejected(action, message):
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    with pytest.raises(ValueError) as err:
+        env.step(action)
+    assert message in str(err.value)
+
+
+def test_out_of_range_action_is_clipped():
+    a, b = gym.make(ENV_ID), gym.make(ENV_ID)
+    a.reset(seed=0)
+    b.reset(seed=0)
+    big = np.full(7, 5.0, np.float32)
+    oa, *_ = a.step(big)
+    ob, *_ = b.step(np.ones(7, np.float32))
+    assert np.array_equal(oa["agent_pos"], ob["agent_pos"])
