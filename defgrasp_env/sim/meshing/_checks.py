@@ -1,0 +1,33 @@
+"""Argument validation helpers shared by the meshing modules (error style of CONVENTIONS.md)."""
+
+from __future__ import annotations
+
+import math
+from numbers import Real
+
+__all__ = ["positive_length", "check_node_budget", "MAX_LATTICE_NODES"]
+
+# Guard against a resolution so fine that the meshing would exhaust memory.
+MAX_LATTICE_NODES = 30_000_000
+
+
+def positive_length(name: str, value: object, upper: float = math.inf) -> float:
+    """Return ``value`` as a float in (0, upper] metres or raise TypeError/ValueError."""
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise TypeError(f"{name} must be a real number in metres, got {value!r} ({type(value).__name__})")
+    v = float(value)
+    if not (math.isfinite(v) and v > 0.0 and v <= upper):
+        hi = "inf)" if math.isinf(upper) else f"{upper:g}]"
+        raise ValueError(f"{name} must be in (0, {hi} m, got {value!r}")
+    return v
+
+
+def check_node_budget(count: int, spacing: float) -> None:
+    """Raise ValueError if a mesher would create more than MAX_LATTICE_NODES nodes.
+
+    ``spacing`` (metres) is the lattice/grid spacing derived from the resolution."""
+    if count > MAX_LATTICE_NODES:
+        raise ValueError(
+            f"resolution is too fine for this object: a grid spacing of {spacing:.3g} m would "
+            f"need {count} nodes (at most {MAX_LATTICE_NODES})"
+        )
