@@ -19,12 +19,21 @@ SHADOW_EPS = wp.constant(1.0e-4)  # metres; shadow-ray origin offset along the n
 
 
 @wp.func
-def ray_box(o: wp.vec3, d: wp.vec3, c: wp.vec3, q: wp.quat, h: wp.vec3) -> wp.vec4:
-    """Closest entry of the ray o + t d (t > 0) into the oriented box (centre c, rotation q
-    xyzw body-to-world, normalised here, half extents h). Returns (t, n) with n the outward world
-    normal of the entered face, or t = -1 on a miss (also when o is inside the box)."""
+def ray_box(o: wp.vec3, d: wp.vec3, c: wp.vec3, q: wp.quat, h: wp.vec3, t_max: float) -> wp.vec4:
+    """Closest entry of the ray o + t d (unit d, 0 < t < t_max) into the oriented box (centre c,
+    rotation q xyzw body-to-world, normalised here, half extents h). Returns (t, n) with n the
+    outward world normal of the entered face, or t = -1 on a miss (also when o is inside)."""
+    # cheap reject with the bounding sphere (radius |h|): most rays miss every box
+    oc = o - c
+    b = wp.dot(oc, d)
+    disc = b * b - (wp.dot(oc, oc) - wp.dot(h, h))
+    if disc < 0.0:
+        return wp.vec4(-1.0, 0.0, 0.0, 0.0)
+    root = wp.sqrt(disc)
+    if -b + root <= 0.0 or -b - root >= t_max:
+        return wp.vec4(-1.0, 0.0, 0.0, 0.0)
     q = wp.normalize(q)
-    ol = wp.quat_rotate_inv(q, o - c)
+    ol = wp.quat_rotate_inv(q, oc)
     dl = wp.quat_rotate_inv(q, d)
     t_near = float(-1.0e30)
     t_far = float(1.0e30)
@@ -85,7 +94,7 @@ def occluded(mesh: wp.uint64, o: wp.vec3, d: wp.vec3, box_c: wp.array(dtype=wp.v
     if wp.mesh_query_ray_anyhit(mesh, o, d, T_FAR):
         return True
     for k in range(box_c.shape[0]):
-        if ray_box(o, d, box_c[k], box_q[k], box_h[k])[0] > 0.0:
+        if ray_box(o, d, box_c[k], box_q[k], box_h[k], T_FAR)[0] > 0.0:
             return True
     return False
 
@@ -182,7 +191,7 @@ def render_kernel(
             kind = HIT_GROUND
     # oriented boxes
     for k in range(box_c.shape[0]):
-        hb = ray_box(o, d, box_c[k], box_q[k], box_h[k])
+        hb = ray_box(o, d, box_c[k], box_q[k], box_h[k], best_t)
         if hb[0] > 0.0 and hb[0] < best_t:
             best_t = hb[0]
             kind = HIT_BOX
