@@ -8,7 +8,7 @@ from numbers import Real
 __all__ = ["positive_length", "check_node_budget", "MAX_LATTICE_NODES"]
 
 # Guard against a resolution so fine that the meshing would exhaust memory.
-MAX_LATTICE_NODES = 30_000_000
+MAX_LATTICE_NODES = 16_000_000
 
 
 def positive_length(name: str, value: object, upper: float = math.inf) -> float:

@@ -83,7 +83,7 @@ class TrimeshImplicit(Implicit):
             q = np.cross(s, e1)
             v = np.einsum("nki,nki->nk", d, q) * inv
             t = np.einsum("nki,nki->nk", e2, q) * inv
-        score = np.minimum(np.minimum(u, v), 1.0 - u - v)
+            score = np.minimum(np.minimum(u, v), 1.0 - u - v)
         good = valid & np.isfinite(t) & (det != 0.0) & (t >= -1e-9) & (t <= 1.0 + 1e-9)
         score = np.where(good & np.isfinite(score), score, -np.inf)
         best = np.argmax(score, axis=1)

@@ -24,20 +24,55 @@ __all__ = ["BCCLattice", "bcc_lattice", "kuhn_grid"]
 
 @dataclass(frozen=True)
 class BCCLattice:
-    """A BCC lattice.
+    """Nodes of a BCC lattice; :meth:`tets` lists its tetrahedra.
 
     Attributes:
-        nodes: [N,3] float64 positions, metres; the first ``num_corner`` are cube corners,
-            the rest cube centres.
-        tets: [M,4] int64 node indices (orientation not normalised).
+        nodes: [N,3] float64 positions, metres; the first ``num_corner`` are cube corners
+            (C-order over the (cells+1) corner grid), the rest cube centres (C-order).
         num_corner: number of corner nodes.
+        cells: (cx, cy, cz) number of cubes per axis.
         spacing: cube edge length h, metres.
     """
 
     nodes: np.ndarray
-    tets: np.ndarray
     num_corner: int
+    cells: tuple[int, int, int]
     spacing: float
+
+    def tets(self, keep: np.ndarray | None = None) -> np.ndarray:
+        """[M,4] int64 lattice tets (orientation not normalised), in a fixed order.
+
+        Args:
+            keep: optional [N] bool node mask; only tets with at least one kept node are
+                returned (saves memory when most of the lattice is outside the solid).
+        """
+        cells = self.cells
+        cid = _grid_index((cells[0] + 1, cells[1] + 1, cells[2] + 1))
+        zid = _grid_index(cells) + self.num_corner
+        blocks = []
+        for d in range(3):
+            a, b = [x for x in range(3) if x != d]
+            # cells c and c + e_d, both inside the grid
+            sl_lo = [slice(None)] * 3
+            sl_hi = [slice(None)] * 3
+            sl_lo[d] = slice(0, cells[d] - 1)
+            sl_hi[d] = slice(1, cells[d])
+            c0 = zid[tuple(sl_lo)].ravel()
+            c1 = zid[tuple(sl_hi)].ravel()
+            # corners of the shared face: index i_d + 1 along d, {i, i+1} along a and b
+            quad = []
+            for oa, ob in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                sl = [slice(None)] * 3
+                sl[d] = slice(1, cells[d])
+                sl[a] = slice(oa, oa + cells[a])
+                sl[b] = slice(ob, ob + cells[b])
+                quad.append(cid[tuple(sl)].ravel())
+            for e in range(4):
+                block = np.stack([c0, c1, quad[e], quad[(e + 1) % 4]], axis=1)
+                if keep is not None:
+                    block = block[np.any(keep[block], axis=1)]
+                blocks.append(block)
+        return np.concatenate(blocks, axis=0)
 
 
 def _grid_index(shape: tuple[int, int, int]) -> np.ndarray:
@@ -52,46 +87,23 @@ def bcc_lattice(lo: np.ndarray, hi: np.ndarray, spacing: float, origin: np.ndarr
         spacing: cube edge length h > 0, metres.
         origin: [3] a point that is a corner node (e.g. a sphere centre, so that the lattice
             has nodes on the sphere's axes).
+    Raises:
+        ValueError: more than MAX_LATTICE_NODES nodes would be needed.
     """
     lo, hi, origin = (np.asarray(v, dtype=np.float64) for v in (lo, hi, origin))
     i0 = np.floor((lo - origin) / spacing).astype(np.int64) - 1
     i1 = np.ceil((hi - origin) / spacing).astype(np.int64) + 1
     cells = tuple(int(c) for c in (i1 - i0))
     n_corner = math.prod(c + 1 for c in cells)
-    n_total = n_corner + math.prod(cells)
-    check_node_budget(n_total, spacing)
+    check_node_budget(n_corner + math.prod(cells), spacing)
     axes = [origin[d] + np.arange(i0[d], i1[d] + 1) * spacing for d in range(3)]
     corner = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     centre_axes = [origin[d] + (np.arange(i0[d], i1[d]) + 0.5) * spacing for d in range(3)]
     centre = np.stack(np.meshgrid(*centre_axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    cid = _grid_index((cells[0] + 1, cells[1] + 1, cells[2] + 1))
-    zid = _grid_index(cells) + n_corner
-    blocks = []
-    for d in range(3):
-        a, b = [x for x in range(3) if x != d]
-        # cells c and c + e_d, both inside the grid
-        sl_lo = [slice(None)] * 3
-        sl_hi = [slice(None)] * 3
-        sl_lo[d] = slice(0, cells[d] - 1)
-        sl_hi[d] = slice(1, cells[d])
-        c0 = zid[tuple(sl_lo)].ravel()
-        c1 = zid[tuple(sl_hi)].ravel()
-        # corners of the shared face: index i_d + 1 along d, {i, i+1} along a and b
-        quad = []
-        for oa, ob in ((0, 0), (1, 0), (1, 1), (0, 1)):
-            sl = [None] * 3
-            sl[d] = slice(1, cells[d])
-            sl[a] = slice(oa, oa + cells[a])
-            sl[b] = slice(ob, ob + cells[b])
-            quad.append(cid[tuple(sl)].ravel())
-        for e in range(4):
-            p, q = quad[e], quad[(e + 1) % 4]
-            blocks.append(np.stack([c0, c1, p, q], axis=1))
-    tets = np.concatenate(blocks, axis=0) if blocks else np.zeros((0, 4), np.int64)
     return BCCLattice(
         nodes=np.concatenate([corner, centre], axis=0),
-        tets=tets,
         num_corner=n_corner,
+        cells=cells,
         spacing=float(spacing),
     )
 

@@ -143,7 +143,8 @@ def make_object_mesh(name: str, resolution: float | None = None, **size_kwargs: 
         name: one of ``OBJECT_SHAPES`` ("cuboid", "sphere", "torus", "cylinder", "rope").
         resolution: target mean tet edge length, metres, in (0, thickness] where thickness is
             the object's smallest dimension (e.g. the rope's diameter); None uses the shape's
-            ``default_resolution``. Finer gives more tets (about volume / (0.12 res^3)).
+            ``default_resolution`` (capped at the thickness). Finer gives more tets, about
+            volume / (0.12 res^3) for bulky shapes.
         **size_kwargs: size overrides in metres, see ``OBJECT_SHAPES[name].defaults``.
     Returns:
         A verified :class:`TetMesh` (metres, y up, resting on y = 0, centred at x = z = 0).

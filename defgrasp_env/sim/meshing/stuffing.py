@@ -91,7 +91,7 @@ def stuff_implicit(solid: Implicit, spacing: float) -> tuple[np.ndarray, np.ndar
     nodes = lat.nodes.copy()
     nv = len(nodes)
     sign = solid.classify(nodes).astype(np.int8)
-    tets = lat.tets[np.any(sign[lat.tets] >= 0, axis=1)]
+    tets = lat.tets(keep=sign >= 0)
     if len(tets) == 0:
         return nodes, np.zeros((0, 4), np.int64)
     edges = unique_rows(np.sort(tets[:, _TET_EDGES].reshape(-1, 2), axis=1))[0]
