@@ -85,6 +85,7 @@ class PickupScene:
         self.gap = np.full(w, GAP_MAX)
         self.tip_force = np.zeros((w, 2))
         self.materials = [s.material for s in setups]
+        self.setups = list(setups)  # the setup each world was last reset to (initial pose, material)
         self.last_stats: SolveStats | None = None
         self.reset_worlds(np.ones(w, bool), setups)
 
@@ -103,6 +104,7 @@ class PickupScene:
             local = self.meshes[w].nodes
             x[sl] = (local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32)
             v[sl] = 0.0
+            self.setups[w] = s
             if s.material != self.materials[w]:
                 set_world_material(m, w, s.material)
                 self.materials[w] = s.material

@@ -1,0 +1,105 @@
+"""``defgrasp-dataset``: validate, convert, plot and replay recorded episodes.
+
+    defgrasp-dataset validate PATH            # file or folder; exit 1 if any file is invalid
+    defgrasp-dataset to-lerobot SRC DST       # new LeRobot v3.0 dataset at DST
+    defgrasp-dataset plot EPISODE [-o PNG]    # the paper's Fig. 5 panels
+    defgrasp-dataset replay EPISODE           # re-simulate; exit 1 unless bit-exact
+    defgrasp-dataset schema                   # the schema table (Markdown)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import sys
+
+_CACHE_VARS = {"WARP_CACHE_PATH": "warp", "HF_HOME": "hf", "HF_LEROBOT_HOME": "lerobot", "MPLCONFIGDIR": "mpl"}
+
+
+def default_caches() -> None:
+    """Send library caches to ``./.cache`` unless the user chose places (never to ``~``)."""
+    root = pathlib.Path(os.environ.get("DEFGRASP_CACHE", pathlib.Path.cwd() / ".cache"))
+    for var, sub in _CACHE_VARS.items():
+        os.environ.setdefault(var, str(root / sub))
+
+
+def _validate(args) -> int:
+    from .validate import validate_path
+
+    report = validate_path(args.path)
+    print(report.text())
+    return 0 if report.ok else 1
+
+
+def _to_lerobot(args) -> int:
+    from .lerobot_export import to_lerobot
+
+    ds = to_lerobot(args.src, args.dst, repo_id=args.repo_id, task=args.task, use_videos=args.videos,
+                    progress=True)
+    print(f"wrote LeRobot dataset {ds.repo_id} to {args.dst}: {ds.meta.total_episodes} episode(s), "
+          f"{ds.meta.total_frames} frame(s) at {ds.meta.fps} fps")
+    return 0
+
+
+def _plot(args) -> int:
+    from .plot import plot_episode
+
+    print(f"wrote {plot_episode(args.episode, args.output)}")
+    return 0
+
+
+def _replay(args) -> int:
+    from .replay import replay_episode
+
+    result = replay_episode(args.episode, device=args.device)
+    print(result.text())
+    return 0 if result.bit_exact else 1
+
+
+def _schema(args) -> int:
+    from .schema import schema_markdown
+
+    print(schema_markdown(), end="")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="defgrasp-dataset", description=__doc__.split("\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True)
+    v = sub.add_parser("validate", help="check episode files against the schema")
+    v.add_argument("path", help="episode file or folder of episode files")
+    v.set_defaults(func=_validate)
+    c = sub.add_parser("to-lerobot", help="convert episodes to a LeRobot dataset")
+    c.add_argument("src", help="episode file or folder")
+    c.add_argument("dst", help="new LeRobot dataset folder (must not exist)")
+    c.add_argument("--repo-id", default=None, help="LeRobot repo id (default defgrasp/<dst name>)")
+    c.add_argument("--task", default=None, help="task string (default: per episode, from object and E)")
+    c.add_argument("--videos", action="store_true", help="store camera frames as MP4 instead of PNG")
+    c.set_defaults(func=_to_lerobot)
+    g = sub.add_parser("plot", help="draw the paper's Fig. 5 panels of one episode")
+    g.add_argument("episode")
+    g.add_argument("-o", "--output", default=None, help="PNG path (default: episode path with .png)")
+    g.set_defaults(func=_plot)
+    r = sub.add_parser("replay", help="re-simulate an episode and compare node positions bit for bit")
+    r.add_argument("episode")
+    r.add_argument("--device", default=None, help="Warp device (default: the recorded one)")
+    r.set_defaults(func=_replay)
+    s = sub.add_parser("schema", help="print the episode schema table")
+    s.set_defaults(func=_schema)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    default_caches()
+    try:
+        return args.func(args)
+    except (OSError, ValueError, TypeError, KeyError) as exc:
+        print(f"defgrasp-dataset {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,153 @@
+"""Convert episode files to a LeRobot (v3.0) dataset through LeRobot's own ``LeRobotDataset`` API.
+
+Frame ``k`` of an episode = observation before action ``k`` (``observations/*[k]``), action ``k``,
+and what step ``k`` returned (``next.reward``, ``next.done`` = terminated or truncated,
+``next.success``). ``fps`` is the control rate. Images go in when the episodes hold camera frames.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import shutil
+from dataclasses import dataclass
+
+import numpy as np
+
+from .reader import Episode, episode_paths, load_episode
+
+ROBOT_TYPE = "robotiq_2f85_on_6dof_wrist"
+CAMERA_KEY = "observation.images.camera"
+_KEYS = ("observations/agent_pos", "observations/environment_state", "observations/pixels", "steps/action",
+         "steps/reward", "steps/terminated", "steps/truncated", "steps/is_success", "object/youngs_modulus")
+
+
+def default_task(ep: Episode) -> str:
+    """The language task of an episode, e.g. 'Pick up the cuboid (E = 1e+05 Pa) and lift it to [0, 0.6, 0] m'."""
+    import json
+
+    goal = json.loads(ep.attrs["config_json"])["goal"]
+    name = pathlib.Path(ep.attrs["object_name"]).stem
+    return (f"Pick up the {name} (E = {float(ep['object/youngs_modulus']):.0e} Pa) "
+            f"and lift it to [{', '.join(f'{g:g}' for g in goal)}] m")
+
+
+@dataclass(frozen=True)
+class _Layout:
+    fps: int
+    state_dim: int
+    env_dim: int
+    action_dim: int
+    image_shape: tuple[int, int, int] | None
+
+
+def _layout(episodes: list[Episode]) -> _Layout:
+    first = episodes[0]
+    for key in ("observations/agent_pos", "observations/environment_state"):
+        if key not in first:
+            raise ValueError(f"{first.path}: has no {key!r} (recorded with obs_type other than 'state'?); "
+                             "LeRobot export needs agent_pos and environment_state")
+    hz = float(first.attrs["control_hz"])
+    if abs(hz - round(hz)) > 1e-9:
+        raise ValueError(f"{first.path}: LeRobot needs an integer fps, the control rate is {hz} Hz")
+    pix = first.data.get("observations/pixels")
+    layout = _Layout(int(round(hz)), first["observations/agent_pos"].shape[1],
+                     first["observations/environment_state"].shape[1], first["steps/action"].shape[1],
+                     None if pix is None else tuple(pix.shape[1:]))
+    for ep in episodes[1:]:
+        pix = ep.data.get("observations/pixels")
+        other = _Layout(int(round(float(ep.attrs["control_hz"]))),
+                        ep["observations/agent_pos"].shape[1] if "observations/agent_pos" in ep else -1,
+                        ep["observations/environment_state"].shape[1] if "observations/environment_state" in ep else -1,
+                        ep["steps/action"].shape[1], None if pix is None else tuple(pix.shape[1:]))
+        if other != layout:
+            raise ValueError(f"{ep.path}: layout {other} differs from {first.path}: {layout}; "
+                             "convert episodes with equal rates, observation/action sizes and cameras together")
+    return layout
+
+
+def _features(layout: _Layout, names: dict, use_videos: bool) -> dict:
+    def vec(n, key):
+        feature_names = names.get(key)
+        return {"dtype": "float32", "shape": (n,), "names": feature_names if feature_names and len(feature_names) == n
+                else [f"{key.split('/')[-1]}_{i}" for i in range(n)]}
+
+    features = {
+        "observation.state": vec(layout.state_dim, "observations/agent_pos"),
+        "observation.environment_state": vec(layout.env_dim, "observations/environment_state"),
+        "action": vec(layout.action_dim, "steps/action"),
+        "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
+        "next.done": {"dtype": "bool", "shape": (1,), "names": None},
+        "next.success": {"dtype": "bool", "shape": (1,), "names": None},
+    }
+    if layout.image_shape is not None:
+        features[CAMERA_KEY] = {"dtype": "video" if use_videos else "image", "shape": layout.image_shape,
+                                "names": ["height", "width", "channel"]}
+    return features
+
+
+def to_lerobot(src: str | os.PathLike, dst: str | os.PathLike, repo_id: str | None = None,
+               task: str | None = None, use_videos: bool = False, progress: bool = False):
+    """Convert the episode file(s) at ``src`` (file or directory) into a new LeRobot dataset at ``dst``.
+
+    Args:
+        dst: dataset root; must not exist yet (nothing is overwritten); removed again if conversion fails.
+        repo_id: LeRobot repo id (default ``defgrasp/<dst name>``).
+        task: task string for every frame (default: :func:`default_task` per episode).
+        use_videos: store images as MP4 (needs a working video encoder); default PNG images.
+
+    Returns:
+        The finalized ``LeRobotDataset``.
+    """
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    paths = episode_paths(src)
+    if not paths:
+        raise FileNotFoundError(f"{src}: no episode files (*.h5) to convert")
+    dst = pathlib.Path(dst)
+    if dst.exists():
+        raise FileExistsError(f"{dst}: LeRobot dataset folder exists already; choose a new one (nothing was changed)")
+    episodes = [load_episode(p, _KEYS, missing_ok=True) for p in paths]
+    layout = _layout(episodes)
+    repo_id = repo_id or f"defgrasp/{dst.name}"
+    features = _features(layout, episodes[0].names, use_videos)
+    ds = LeRobotDataset.create(repo_id, layout.fps, features, root=dst, robot_type=ROBOT_TYPE,
+                               use_videos=use_videos, video_backend="pyav")
+    try:
+        for ep in _progress(episodes, progress):
+            _add_episode(ds, ep, task or default_task(ep))
+        ds.finalize()
+    except BaseException:
+        ds.finalize()
+        shutil.rmtree(dst, ignore_errors=True)
+        raise
+    return ds
+
+
+def _progress(items, enabled: bool):
+    if not enabled:
+        return items
+    from tqdm import tqdm
+
+    return tqdm(items, desc="to-lerobot", unit="episode")
+
+
+def _add_episode(ds, ep: Episode, task: str) -> None:
+    t = ep.num_steps
+    state = ep["observations/agent_pos"].astype(np.float32)
+    env_state = ep["observations/environment_state"].astype(np.float32)
+    action = ep["steps/action"].astype(np.float32)
+    reward = ep["steps/reward"].astype(np.float32)
+    done = ep["steps/terminated"] | ep["steps/truncated"]
+    success = ep["steps/is_success"]
+    pixels = ep.data.get("observations/pixels")
+    for k in range(t):
+        frame = {
+            "observation.state": state[k], "observation.environment_state": env_state[k], "action": action[k],
+            "next.reward": reward[k:k + 1], "next.done": done[k:k + 1].astype(bool),
+            "next.success": success[k:k + 1].astype(bool), "task": task,
+        }
+        if pixels is not None:
+            frame[CAMERA_KEY] = pixels[k]
+        ds.add_frame(frame)
+    ds.save_episode()

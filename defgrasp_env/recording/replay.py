@@ -1,0 +1,101 @@
+"""Re-simulate a recorded episode from its config, reset seed/RNG state and actions.
+
+On CPU the simulation is deterministic, so a replay reproduces the recorded node positions bit for
+bit. The env builds its rest shape from the setup of the reset that created its scene, so the
+recorder stores that reset too (``scene_origin``) and the replay performs it first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import numpy as np
+
+from .reader import Episode, EpisodeFileError, load_episode
+
+
+@dataclass
+class ReplayResult:
+    """Outcome of a replay; ``bit_exact``: every node position, reward and flag matches exactly."""
+
+    path: str
+    num_steps: int
+    bit_exact: bool
+    max_position_error: float                  # m, over all steps and nodes
+    first_mismatch_step: int | None
+    flags_match: bool                          # rewards, terminated and truncated all equal
+    warnings: list[str] = field(default_factory=list)
+
+    def text(self) -> str:
+        verdict = "bit-exact" if self.bit_exact else (
+            f"DIFFERS from step {self.first_mismatch_step} (max node position error {self.max_position_error:.3e} m)")
+        lines = [f"{self.path}: {self.num_steps} steps replayed, node positions {verdict}; "
+                 f"rewards/flags {'match' if self.flags_match else 'DIFFER'}"]
+        return "\n".join(lines + [f"  warning: {w}" for w in self.warnings])
+
+
+def _reset(env: gym.Env, spec: dict):
+    state = spec.get("rng_state")
+    if spec.get("seed") is None and state is not None:
+        bit_generator = getattr(np.random, state["bit_generator"])()
+        bit_generator.state = state
+        env.unwrapped.np_random = np.random.Generator(bit_generator)
+        return env.reset(options=spec.get("options"))
+    return env.reset(seed=spec.get("seed"), options=spec.get("options"))
+
+
+def make_replay_env(episode: Episode, device: str | None = None, **kwargs) -> gym.Env:
+    """A fresh env with the episode's config (and time limit), reset exactly as when recorded."""
+    cfg = episode.config
+    if device is not None:
+        cfg = dataclasses.replace(cfg, device=device)
+    replay = episode.replay
+    limit = replay.get("max_episode_steps")
+    env = gym.make(episode.attrs["env_id"], config=cfg, **({"max_episode_steps": limit} if limit else {}), **kwargs)
+    origin = replay.get("scene_origin")
+    if origin is not None and not origin.get("unknown"):
+        _reset(env, origin)
+    _reset(env, replay)
+    return env
+
+
+def replay_episode(path: str | os.PathLike | Episode, device: str | None = None) -> ReplayResult:
+    """Replay an episode file and compare the node positions of every step with the recorded ones."""
+    ep = path if isinstance(path, Episode) else load_episode(path)
+    replay = ep.replay
+    warnings = []
+    origin = replay.get("scene_origin")
+    if origin is not None and origin.get("unknown"):
+        warnings.append("the env's scene was built by a reset before recording started; "
+                        "the replay may differ in the last bits")
+    import defgrasp_env  # noqa: F401  (registers the env id)
+
+    env = make_replay_env(ep, device)
+    try:
+        setup = env.unwrapped.scene.setups[0]
+        if not np.array_equal(setup.position, ep["object/initial_position"]):
+            raise EpisodeFileError(f"{ep.path}: replayed reset gives initial position {setup.position.tolist()}, "
+                                   f"recorded {ep['object/initial_position'].tolist()}")
+        recorded = ep["steps/node_positions"]
+        actions = ep["steps/action"]
+        max_err, first, flags_ok = 0.0, None, True
+        for k, action in enumerate(actions):
+            _, reward, terminated, truncated, _ = env.step(action)
+            scene = env.unwrapped.scene
+            x = scene.state.positions.numpy()[scene.model.world_nodes(0)]
+            if not np.array_equal(x, recorded[k]):
+                first = k if first is None else first
+                max_err = max(max_err, float(np.nanmax(np.abs(x.astype(np.float64) - recorded[k]))))
+            flags_ok &= (reward == ep["steps/reward"][k] and terminated == ep["steps/terminated"][k]
+                         and truncated == ep["steps/truncated"][k])
+            if (terminated or truncated) and k < len(actions) - 1:
+                warnings.append(f"the replay ended at step {k}, the recording had {len(actions)} steps")
+                flags_ok = False
+                break
+    finally:
+        env.close()
+    return ReplayResult(str(ep.path), len(actions), bool(first is None and flags_ok), max_err, first,
+                        bool(flags_ok), warnings)
