@@ -5,6 +5,7 @@ reads back what the env observes. Shared by the single env (W = 1) and the nativ
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -75,7 +76,8 @@ class PickupScene:
         self.model = build_model(meshes, [s.material for s in setups],
                                  [(s.position, s.quat) for s in setups], pad_half_extents=[half, half],
                                  contact=contact, device=config.device)
-        self.solver = ImplicitSolver(self.model, config.solver)
+        # one solver call per physics substep (see ``step``)
+        self.solver = ImplicitSolver(self.model, dataclasses.replace(config.solver, substeps=1))
         self.state = State.from_model(self.model)
         self.control = Control.from_model(self.model)
         self.meshes = meshes
@@ -113,9 +115,22 @@ class PickupScene:
             self.tip_force[w] = 0.0
         self.state.positions.assign(x)
         self.state.velocities.assign(v)
+        self._zero_outputs(mask)
         pos, quat = self.pad_poses()
         self.state.pad_positions.assign(pos.reshape(-1, 3).astype(np.float32))
         self.state.pad_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
+
+    def _zero_outputs(self, mask: np.ndarray) -> None:
+        """Forces and stresses of freshly reset worlds: the object is at rest shape, untouched."""
+        m, st = self.model, self.state
+        node_mask = np.repeat(mask, np.diff(m.node_start))
+        tet_mask = np.repeat(mask, np.diff(m.tet_start))
+        pad_mask = np.repeat(mask, m.pads_per_world)
+        for array, rows in ((st.elastic_force, node_mask), (st.contact_force, node_mask), (st.von_mises, tet_mask),
+                            (st.mean_von_mises, mask), (st.pad_normal_force, pad_mask), (st.pad_force, pad_mask)):
+            host = array.numpy()
+            host[rows] = 0.0
+            array.assign(host)
 
     # -- kinematics ------------------------------------------------------------------------
     def flange_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -173,19 +188,35 @@ class PickupScene:
     def step(self, target_pos: np.ndarray, target_quat: np.ndarray, target_gap: np.ndarray,
              active: np.ndarray | None = None) -> SolveStats:
         """Move wrists and jaws toward the targets (limits enforced) and advance the FEM by one
-        control period. Worlds with ``active == False`` keep their wrist and jaw still."""
+        control period, in ``config.solver.substeps`` physics substeps. The jaw driver runs every
+        substep on the pad forces of the previous one, so closing stops within one substep of
+        reaching the force limit. Worlds with ``active == False`` keep their wrist and jaw still."""
         cfg = self.config
         active = np.ones(self.num_worlds, bool) if active is None else active
-        ik = ik_analytic(target_pos, target_quat)
-        new_gap = self.driver.step(target_gap, self.gap, cfg.dt, self.tip_force[:, 0], self.tip_force[:, 1])
-        new_q = self._lift_above_ground(np.clip(ik.q, JOINT_LOWER, JOINT_UPPER), new_gap)
-        self.q = np.where(active[:, None], new_q, self.q)
-        self.gap = np.where(active, new_gap, self.gap)
-        pos, quat = self.pad_poses()
-        self.control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
-        self.control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
-        stats = self.solver.step(self.state, self.state, self.control, cfg.dt)
-        self.tip_force = self.state.pad_normal_force.numpy().reshape(-1, 2).astype(np.float64)
+        q_start = self.q.copy()
+        q_move = np.clip(ik_analytic(target_pos, target_quat).q, JOINT_LOWER, JOINT_UPPER) - q_start
+        q_move[:, 3:] = (q_move[:, 3:] + np.pi) % (2 * np.pi) - np.pi  # shortest way round
+        count = cfg.solver.substeps
+        h = cfg.dt / count
+        reports = []
+        for k in range(count):
+            gap = self.driver.step(target_gap, self.gap, h, self.tip_force[:, 0], self.tip_force[:, 1])
+            q = self._lift_above_ground(np.clip(q_start + q_move * (k + 1) / count, JOINT_LOWER, JOINT_UPPER), gap)
+            self.q = np.where(active[:, None], q, self.q)
+            self.gap = np.where(active, gap, self.gap)
+            pos, quat = self.pad_poses()
+            self.control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
+            self.control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
+            reports.append(self.solver.step(self.state, self.state, self.control, h))
+            self.tip_force = self.state.pad_normal_force.numpy().reshape(-1, 2).astype(np.float64)
+        stats = SolveStats(
+            newton_iterations=np.sum([r.newton_iterations for r in reports], axis=0),
+            cg_iterations=np.sum([r.cg_iterations for r in reports], axis=0),
+            last_update=reports[-1].last_update,
+            residual_force=reports[-1].residual_force,
+            penetration=np.max([r.penetration for r in reports], axis=0),
+            diverged=np.any([r.diverged for r in reports], axis=0),
+        )
         self.last_stats = stats
         return stats
 

@@ -57,7 +57,7 @@ class Model:
     surfaces: list[np.ndarray]    # W x [S_w,3] int32 host: boundary triangles, world-local node ids
     rest_positions: wp.array      # [N] vec3, m: node positions at the initial pose
     tets: wp.array                # [T] vec4i: global node indices, positively oriented
-    tet_rest_inv: wp.array        # [T] mat33: inverse of the rest edge matrix D_m, 1/m
+    tet_rest_inv: wp.array        # [T] mat33: inverse of the rest edge matrix D_m (object frame), 1/m
     tet_rest_volume: wp.array     # [T] float, m^3
     tet_mu: wp.array              # [T] float, Pa: Lamé mu (shear modulus)
     tet_lambda: wp.array          # [T] float, Pa: Lamé lambda
@@ -146,7 +146,9 @@ def build_model(
         t = np.asarray(mesh.tets, dtype=np.int64)
         _check_mesh(w, nodes, t)
         x = nodes @ _quat_to_matrix(np.asarray(quat, dtype=np.float64)).T + np.asarray(pos, dtype=np.float64)
-        dm = np.stack([x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]], x[t[:, 3]] - x[t[:, 0]]], axis=2)
+        # rest shape from the object-frame nodes, so the model does not depend on the initial pose
+        dm = np.stack([nodes[t[:, 1]] - nodes[t[:, 0]], nodes[t[:, 2]] - nodes[t[:, 0]],
+                       nodes[t[:, 3]] - nodes[t[:, 0]]], axis=2)
         det = np.linalg.det(dm)
         scale = np.max(np.ptp(x, axis=0)) ** 3
         if np.any(det <= 1e-12 * scale):

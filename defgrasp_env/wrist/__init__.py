@@ -6,10 +6,18 @@ R = Rz(roll) Rx(pitch) Ry(yaw). See ``spec`` (joint table, limits, reachable set
 """
 
 from .analytic import IKResult, fk_analytic, fk_matrix_analytic, ik_analytic
-from .kinematics import WristKinematics
 from .spec import FLANGE_LINK, JOINT_LOWER, JOINT_NAMES, JOINT_UPPER, WRIST_URDF_PATH, clamp_joints
 
 __all__ = [
     "FLANGE_LINK", "IKResult", "JOINT_LOWER", "JOINT_NAMES", "JOINT_UPPER", "WRIST_URDF_PATH",
     "WristKinematics", "clamp_joints", "fk_analytic", "fk_matrix_analytic", "ik_analytic",
 ]
+
+
+def __getattr__(name: str):
+    # WristKinematics pulls in torch through pytorch-kinematics (seconds to import): load on first use
+    if name == "WristKinematics":
+        from .kinematics import WristKinematics
+
+        return WristKinematics
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
