@@ -1,8 +1,9 @@
 """Implicit (backward Euler) FEM solver: a thin launcher over the kernels.
 
 Each substep solves  M/h^2 (x - x_start - h v) = f_elastic(x) + f_contact(x) + M g + f_ext  for x by
-Newton's method (Gauss-Newton elastic Hessian, exact contact normal Hessian, lagged friction), each
-Newton system by block-Jacobi preconditioned CG, all per world.
+Newton's method (projected elastic Hessian, exact contact normal Hessian, lagged friction), each
+Newton system by block-Jacobi preconditioned CG with a coarse correction on the rigid translations
+(kernels/newton.py), all per world.
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ class SolverConfig:
     Attributes:
         substeps: backward-Euler substeps per call of ``step``.
         newton_iterations: Newton iterations per substep at most.
-        newton_tolerance: a world's Newton loop stops once its largest node update is below this, m.
+        newton_tolerance: a world's Newton loop stops once the largest node update of its full Newton
+            step (before the line search shortens it) is below this, m.
         cg_iterations: CG iterations per Newton iteration at most.
         cg_tolerance: CG stops once r.z falls below cg_tolerance^2 of its initial value.
         max_node_step: a Newton update longer than this (m) marks the world as diverged.
@@ -64,9 +66,9 @@ class SolveStats:
 
     newton_iterations: np.ndarray   # int: Newton iterations summed over substeps
     cg_iterations: np.ndarray       # int: CG iterations summed over Newton iterations and substeps
-    last_update: np.ndarray         # float, m: largest node update of the last Newton iteration
+    last_update: np.ndarray         # float, m: largest node update of the last full Newton step
     residual_force: np.ndarray      # float, N: largest node force residual at the returned state
-    penetration: np.ndarray         # float, m: deepest ground/pad penetration during the step
+    penetration: np.ndarray         # float, m: deepest ground/pad penetration at the returned state
     diverged: np.ndarray            # bool: the world blew up (NaN, runaway update); its state was kept
 
     @property
@@ -101,6 +103,8 @@ class ImplicitSolver:
         self._step_start, self._x_start, self._v_new, self._x_trial = vec(), vec(), vec(), vec()
         self._r, self._z, self._p, self._ap, self._dx = vec(), vec(), vec(), vec(), vec()
         self._diag, self._precond, self._contact_h, self._cof = mat(), mat(), mat(), mat(model.num_tets)
+        self._tet_u, self._tet_v = mat(model.num_tets), mat(model.num_tets)
+        self._tet_twist = wp.zeros(model.num_tets, dtype=wp.vec3, device=d)
         slots = n * (model.pads_per_world + 1)
         self._lag_fn = wp.zeros(slots, dtype=float, device=d)
         self._lag_normal = vec(slots)
@@ -111,6 +115,13 @@ class ImplicitSolver:
         self._wi = {k: wp.zeros(w, dtype=int, device=d) for k in (
             "newton_active", "cg_active", "newton_it", "cg_it", "cg_total", "diverged", "all_on", "searching")}
         self._wi["all_on"].fill_(1)
+        # coarse (rigid translation) correction: T_k = e_k masked by the free axes, A T_k, per-world 3x3
+        free = model.free_axes.numpy()
+        self._coarse_t = [wp.array(free * np.eye(3, dtype=np.float32)[k], dtype=wp.vec3, device=d) for k in range(3)]
+        self._coarse_at = [vec(), vec(), vec()]
+        self._coarse_m, self._coarse_inv = mat(w), mat(w)
+        self._coarse_rhs, self._coarse_coef = vec(w), vec(w)
+        self._coarse_scratch = wp.zeros(w, dtype=float, device=d)
         self._energy0 = wp.zeros(w, dtype=wp.float64, device=d)
         self._energy_trial = wp.zeros(w, dtype=wp.float64, device=d)
         self._plans: dict[float, dict] = {}
@@ -158,6 +169,8 @@ class ImplicitSolver:
             for cmd in plan["evaluate"]:
                 cmd.launch()
             self._run_cg(plan)
+            for cmd in plan["coarse_post"]:
+                cmd.launch()
             self._line_search(plan)
             for cmd in plan["apply"]:
                 cmd.launch()
@@ -225,11 +238,34 @@ class ImplicitSolver:
                 return rec(kenergy.tet_energy, t, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
                            m.tet_lambda, m.tet_world, active, energy)
             return rec(ke.evaluate_tets, t, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda,
-                       m.tet_world, active, self._r, self._diag, work.elastic_force, self._cof, work.von_mises)
+                       m.tet_world, active, self._r, self._diag, work.elastic_force, self._cof, work.von_mises,
+                       self._tet_u, self._tet_v, self._tet_twist)
 
         def begin_solve(active):
             return rec(kn.begin_linear_solve, n, self._r, self._diag, m.free_axes, m.node_world, active,
                        self._precond, self._z, self._p, self._dx, self._ap, wf["rz"], wf["res_norm"])
+
+        def coarse(active, with_matrix):
+            """Coarse solve on the rigid translations: before CG (with_matrix=1: builds T^T A T,
+            starts CG from dx = T c) and after it (corrects dx with the CG residual)."""
+            t_dirs, at = self._coarse_t, self._coarse_at
+            cmds = []
+            if with_matrix:
+                cmds.append(rec(kn.coarse_clear, n, m.node_world, active, *at))
+                for k in range(3):
+                    cmds.append(rec(ke.hessian_product_tets, t, t_dirs[k], m.tets, m.tet_rest_inv, m.tet_rest_volume,
+                                    m.tet_mu, m.tet_lambda, self._cof, m.tet_world, active, at[k], self._tet_u,
+                                    self._tet_v, self._tet_twist))
+                    cmds.append(rec(kn.cg_node_product, n, t_dirs[k], m.node_mass, self._contact_h, m.free_axes,
+                                    m.node_world, active, 1.0 / (h * h), at[k], self._coarse_scratch))
+            cmds += [
+                rec(kn.coarse_reduce, n, *at, self._r, m.free_axes, m.node_world, active, with_matrix,
+                    self._coarse_m, self._coarse_rhs),
+                rec(kn.coarse_solve, w, active, with_matrix, self._coarse_m, self._coarse_rhs, self._coarse_inv,
+                    self._coarse_coef, wf["rz"] if with_matrix else self._coarse_scratch),
+                rec(kn.coarse_apply, n, *at, self._precond, m.free_axes, m.node_world, active, self._coarse_coef,
+                    with_matrix, self._dx, self._r, self._z, self._p, wf["rz"])]
+            return cmds
 
         x, k_sub, pads = work.positions, cfg.substeps, max(w * m.pads_per_world, 1)
         newton_active, cg_active, searching = wi["newton_active"], wi["cg_active"], wi["searching"]
@@ -243,10 +279,13 @@ class ImplicitSolver:
                        m.pad_half_extents, m.pads_per_world, c.stiffness, self._lag_fn, self._lag_normal),
             "evaluate": [
                 nodes(x, newton_active, 0), tets(x, newton_active), begin_solve(newton_active),
+                *coarse(newton_active, 1),
                 rec(kn.start_cg_worlds, w, newton_active, wf["rz"], wf["rz0"], cg_active)],
+            "coarse_post": coarse(newton_active, 0),
             "cg": [
                 rec(ke.hessian_product_tets, t, self._p, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
-                    m.tet_lambda, self._cof, m.tet_world, cg_active, self._ap),
+                    m.tet_lambda, self._cof, m.tet_world, cg_active, self._ap, self._tet_u, self._tet_v,
+                    self._tet_twist),
                 rec(kn.cg_node_product, n, self._p, m.node_mass, self._contact_h, m.free_axes, m.node_world,
                     cg_active, 1.0 / (h * h), self._ap, wf["p_ap"]),
                 rec(kn.cg_update_solution, n, self._p, self._ap, self._precond, m.free_axes, m.node_world,

@@ -157,7 +157,8 @@ def evaluate_nodes(
     if depth > 0.0:
         force += stiffness * depth * n
         hess += stiffness * wp.outer(n, n)
-        wp.atomic_max(penetration, w, depth)
+        if record_pads != 0:  # only at the returned state, not at trial Newton iterates
+            wp.atomic_max(penetration, w, depth)
     lag_fn = lag_normal_force[i * slots]
     if lag_fn > 0.0:
         f_fric, h_fric = friction_force(ground_mu, lag_fn, xi - x_start[i], n, eps)
@@ -173,8 +174,8 @@ def evaluate_nodes(
             n = wp.quat_rotate(rot1, n_local)
             f_pad = stiffness * depth * n
             hess += stiffness * wp.outer(n, n)
-            wp.atomic_max(penetration, w, depth)
             if record_pads != 0:
+                wp.atomic_max(penetration, w, depth)
                 wp.atomic_add(pad_normal_force, pad, stiffness * depth)
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:

@@ -4,10 +4,17 @@ Energy density psi(F) = mu |F - R|^2 + lam/2 (J - 1)^2 (Stomakhin et al. 2012), 
 the polar decomposition of F (from the SVD with signed singular values, so inverted tets are pushed
 back). mu and lam are the Lamé parameters: the small-strain limit is linear elasticity.
 First Piola stress P = 2 mu (F - R) + lam (J - 1) cof(F), cof(F) = dJ/dF.
-The Hessian used by Newton is 2 mu I + lam cof (x) cof: it drops -2 mu dR/dF (so the shear part
-majorizes the energy, as in projective dynamics: every Newton step decreases it) and the small
-lam (J - 1) d2J/dF2 term (zero at rest). It is positive definite; the gradient, hence the converged
-solution, is exact.
+The Hessian used by Newton is 2 mu (I - dR/dF)_+ + lam cof (x) cof. Its shear part acts on
+dF in the singular frame of F = U diag(s) V^T, M = U^T dF V: the symmetric part of M is kept, the
+skew part (rotation) of the pair (i, j) is scaled by clamp(1 - 2/(s_i + s_j), 0, 1) (the exact
+eigenvalue, projected to be positive semi-definite, and 1 where s_i + s_j <= 0 for inverted tets).
+Without the -dR/dF term (the projective-dynamics majorizer 2 mu I) infinitesimal rotations of
+the elements would be as stiff as shear, and Newton converged only at a rate of about
+1 / (L/a)^2 per iteration on bending of slender objects (a beam, a rope). The small
+lam (J - 1) d2J/dF2 term (zero at rest) is dropped. The Hessian is positive semi-definite (plus
+the positive mass term); the energy line search keeps every Newton step a descent step; the
+gradient, hence the converged solution, is exact. The block-Jacobi preconditioner keeps the
+majorizer's diagonal blocks 2 mu |b|^2 I + lam (cof b)(cof b)^T.
 Node a of a tet enters F through b_a = row (a-1) of D_m^-1 (a = 1..3) and b_0 = -(b_1 + b_2 + b_3):
 F = sum_a x_a (outer) b_a, and the gradient of the element energy w.r.t. x_a is V0 P b_a.
 """
@@ -47,6 +54,14 @@ def first_piola(f: wp.mat33, cof: wp.mat33, mu: float, lam: float):
 
 
 @wp.func
+def twist_factor(s: float):
+    """Scale of the rotational (skew) part of dF for a pair of singular values of sum s."""
+    if s <= 0.0:
+        return 1.0
+    return wp.clamp(1.0 - 2.0 / s, 0.0, 1.0)
+
+
+@wp.func
 def von_mises_of(f: wp.mat33, piola: wp.mat33):
     """Von Mises stress (Pa) of the Cauchy stress sigma = P F^T / J."""
     j = wp.max(wp.abs(wp.determinant(f)), 1.0e-6)
@@ -72,9 +87,13 @@ def evaluate_tets(
     elastic_force: wp.array(dtype=wp.vec3),
     tet_cof: wp.array(dtype=wp.mat33),
     von_mises: wp.array(dtype=float),
+    tet_u: wp.array(dtype=wp.mat33),
+    tet_v: wp.array(dtype=wp.mat33),
+    tet_twist: wp.array(dtype=wp.vec3),
 ):
     """Add each tet's elastic force to ``residual`` and ``elastic_force`` and its Hessian diagonal
-    blocks to ``diag_block``; store cof(F) for Hessian products and the von Mises stress."""
+    blocks to ``diag_block``; store cof(F), the singular frames U, V of F and the twist factors
+    (pairs (1,2), (0,2), (0,1)) for Hessian products, and the von Mises stress."""
     t = wp.tid()
     if world_active[tet_world[t]] == 0:
         return
@@ -84,9 +103,14 @@ def evaluate_tets(
     cof = cofactor(f)
     mu = tet_mu[t]
     lam = tet_lambda[t]
-    p = first_piola(f, cof, mu, lam)
+    su, sig, sv = wp.svd3(f)
+    p = 2.0 * mu * (f - su * wp.transpose(sv)) + lam * (wp.determinant(f) - 1.0) * cof  # first_piola
     v0 = rest_volume[t]
     tet_cof[t] = cof
+    tet_u[t] = su
+    tet_v[t] = sv
+    tet_twist[t] = wp.vec3(twist_factor(sig[1] + sig[2]), twist_factor(sig[0] + sig[2]),
+                           twist_factor(sig[0] + sig[1]))
     von_mises[t] = von_mises_of(f, p)
     b1 = row(dm_inv, 0)
     b2 = row(dm_inv, 1)
@@ -120,8 +144,11 @@ def hessian_product_tets(
     tet_world: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
     product: wp.array(dtype=wp.vec3),
+    tet_u: wp.array(dtype=wp.mat33),
+    tet_v: wp.array(dtype=wp.mat33),
+    tet_twist: wp.array(dtype=wp.vec3),
 ):
-    """product += K * direction (the approximate elastic Hessian above), accumulated per node."""
+    """product += K * direction (the elastic Hessian above), accumulated per node."""
     t = wp.tid()
     if world_active[tet_world[t]] == 0:
         return
@@ -135,7 +162,17 @@ def hessian_product_tets(
     df = wp.outer(direction[idx[1]] - p0, b1) + wp.outer(direction[idx[2]] - p0, b2) + wp.outer(
         direction[idx[3]] - p0, b3)
     cof = tet_cof[t]
-    dp = rest_volume[t] * (2.0 * tet_mu[t] * df + tet_lambda[t] * wp.ddot(cof, df) * cof)
+    su = tet_u[t]
+    sv = tet_v[t]
+    c = tet_twist[t]
+    m = wp.transpose(su) * df * sv
+    # remove the fraction (1 - c) of the skew part of M = U^T dF V (the rotation, -dR/dF)
+    a01 = (1.0 - c[2]) * 0.5 * (m[0, 1] - m[1, 0])
+    a02 = (1.0 - c[1]) * 0.5 * (m[0, 2] - m[2, 0])
+    a12 = (1.0 - c[0]) * 0.5 * (m[1, 2] - m[2, 1])
+    rotation = wp.mat33(0.0, a01, a02, -a01, 0.0, a12, -a02, -a12, 0.0)
+    df_shear = df - su * rotation * wp.transpose(sv)
+    dp = rest_volume[t] * (2.0 * tet_mu[t] * df_shear + tet_lambda[t] * wp.ddot(cof, df) * cof)
     wp.atomic_add(product, idx[0], dp * b0)
     wp.atomic_add(product, idx[1], dp * b1)
     wp.atomic_add(product, idx[2], dp * b2)

@@ -208,7 +208,9 @@ def apply_newton_step(
         diverged[w] = 1
         return
     x[i] = x[i] + d
-    wp.atomic_max(dx_norm, w, size)
+    # convergence is judged on the full Newton direction: a step cut short by the line search
+    # (e.g. a contact that the linearisation missed) must not pass for a converged one
+    wp.atomic_max(dx_norm, w, wp.max(wp.abs(dx[i])))
 
 
 @wp.kernel
@@ -267,3 +269,123 @@ def mean_stress(
     t = wp.tid()
     w = tet_world[t]
     wp.atomic_add(mean, w, von_mises[t] * rest_volume[t] / world_volume[w])
+
+
+# -- coarse (rigid translation) correction of the linear solve ------------------------------------
+# Block-Jacobi CG barely moves the rigid translations of a stiff object (their stiffness m/dt^2 is
+# ~1e5 times below the elastic one), so a falling object did not fall. Each Newton system is
+# therefore also solved on the 3 translations T_k = e_k (masked by the free axes) per world
+# (Galerkin: (T^T A T) c = T^T r) before CG (initial guess) and after it (correction).
+
+
+@wp.kernel
+def coarse_clear(
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    at0: wp.array(dtype=wp.vec3),
+    at1: wp.array(dtype=wp.vec3),
+    at2: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    if world_active[node_world[i]] == 0:
+        return
+    at0[i] = wp.vec3(0.0)
+    at1[i] = wp.vec3(0.0)
+    at2[i] = wp.vec3(0.0)
+
+
+@wp.kernel
+def coarse_reduce(
+    at0: wp.array(dtype=wp.vec3),
+    at1: wp.array(dtype=wp.vec3),
+    at2: wp.array(dtype=wp.vec3),
+    r: wp.array(dtype=wp.vec3),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    with_matrix: int,
+    coarse_matrix: wp.array(dtype=wp.mat33),
+    coarse_rhs: wp.array(dtype=wp.vec3),
+):
+    """Per world: coarse_rhs += T^T r and (if with_matrix) coarse_matrix += T^T A T, where
+    at_k = A T_k and (T_j . v)_i = free_i[j] v_i[j]."""
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    fr = free[i]
+    wp.atomic_add(coarse_rhs, w, wp.cw_mul(fr, r[i]))
+    if with_matrix != 0:
+        a0 = at0[i]
+        a1 = at1[i]
+        a2 = at2[i]
+        m = wp.mat33(fr[0] * a0[0], fr[0] * a1[0], fr[0] * a2[0],
+                     fr[1] * a0[1], fr[1] * a1[1], fr[1] * a2[1],
+                     fr[2] * a0[2], fr[2] * a1[2], fr[2] * a2[2])
+        wp.atomic_add(coarse_matrix, w, m)
+
+
+@wp.kernel
+def coarse_solve(
+    world_active: wp.array(dtype=int),
+    store_inverse: int,
+    coarse_matrix: wp.array(dtype=wp.mat33),
+    coarse_rhs: wp.array(dtype=wp.vec3),
+    coarse_inverse: wp.array(dtype=wp.mat33),
+    coarse_coef: wp.array(dtype=wp.vec3),
+    rz: wp.array(dtype=float),
+):
+    """coef = (T^T A T)^-1 T^T r per world (axes fixed on every node get coef 0); clears the
+    sums and rz (recomputed by coarse_apply)."""
+    w = wp.tid()
+    coarse_coef[w] = wp.vec3(0.0)
+    if world_active[w] == 0:
+        return
+    if store_inverse != 0:
+        m = coarse_matrix[w]
+        for k in range(3):
+            if m[k, k] <= 0.0:
+                m[k, k] = 1.0
+        inv = wp.mat33(0.0)
+        det = wp.determinant(m)
+        if wp.isfinite(det) and det > 0.0:
+            inv = wp.inverse(m)
+        coarse_inverse[w] = inv
+    coarse_coef[w] = coarse_inverse[w] * coarse_rhs[w]
+    coarse_matrix[w] = wp.mat33(0.0)
+    coarse_rhs[w] = wp.vec3(0.0)
+    rz[w] = 0.0
+
+
+@wp.kernel
+def coarse_apply(
+    at0: wp.array(dtype=wp.vec3),
+    at1: wp.array(dtype=wp.vec3),
+    at2: wp.array(dtype=wp.vec3),
+    precond: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    coarse_coef: wp.array(dtype=wp.vec3),
+    update_residual: int,
+    dx: wp.array(dtype=wp.vec3),
+    r: wp.array(dtype=wp.vec3),
+    z: wp.array(dtype=wp.vec3),
+    p: wp.array(dtype=wp.vec3),
+    rz: wp.array(dtype=float),
+):
+    """dx += T coef; if update_residual, also r -= A T coef and restart CG's z = p = P r, rz."""
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    c = coarse_coef[w]
+    fr = free[i]
+    dx[i] = dx[i] + wp.cw_mul(fr, c)
+    if update_residual != 0:
+        ri = wp.cw_mul(r[i] - (c[0] * at0[i] + c[1] * at1[i] + c[2] * at2[i]), fr)
+        r[i] = ri
+        zi = wp.cw_mul(precond[i] * ri, fr)
+        z[i] = zi
+        p[i] = zi
+        wp.atomic_add(rz, w, wp.dot(ri, zi))
