@@ -34,6 +34,8 @@ class SolverConfig:
             step (before the line search shortens it) is below this, m.
         cg_iterations: CG iterations per Newton iteration at most.
         cg_tolerance: CG stops once r.z falls below cg_tolerance^2 of its initial value.
+        cg_update_fraction: CG also stops after an iteration that moved no node by more than this
+            fraction of ``newton_tolerance`` (r.z alone cannot fall below float32 noise near a solution).
         max_node_step: a Newton update longer than this (m) marks the world as diverged.
         line_search_steps: halvings of a Newton step at most while it raises the energy.
         check_every: on the host, test every this many CG iterations whether all worlds are done
@@ -45,6 +47,7 @@ class SolverConfig:
     newton_tolerance: float = 1e-5
     cg_iterations: int = 40
     cg_tolerance: float = 1e-3
+    cg_update_fraction: float = 1e-3
     max_node_step: float = 0.5
     line_search_steps: int = 8
     check_every: int = 4
@@ -57,6 +60,7 @@ class SolverConfig:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
         check_range("newton_tolerance", self.newton_tolerance, 0.0, math.inf, "m")
         check_range("cg_tolerance", self.cg_tolerance, 0.0, 1.0)
+        check_range("cg_update_fraction", self.cg_update_fraction, 0.0, 1.0, low_open=False, high_open=False)
         check_range("max_node_step", self.max_node_step, 0.0, math.inf, "m")
 
 
@@ -111,7 +115,7 @@ class ImplicitSolver:
         self._pad = [vec(pads), wp.zeros(pads, dtype=wp.quat, device=d), vec(pads),
                      wp.zeros(pads, dtype=wp.quat, device=d)]
         self._wf = {k: wp.zeros(w, dtype=float, device=d) for k in (
-            "rz", "rz_new", "rz0", "p_ap", "dx_norm", "last_dx", "res_norm", "penetration", "step")}
+            "rz", "rz_new", "rz0", "p_ap", "dx_norm", "last_dx", "res_norm", "penetration", "step", "cg_update")}
         self._wi = {k: wp.zeros(w, dtype=int, device=d) for k in (
             "newton_active", "cg_active", "newton_it", "cg_it", "cg_total", "diverged", "all_on", "searching")}
         self._wi["all_on"].fill_(1)
@@ -289,11 +293,12 @@ class ImplicitSolver:
                 rec(kn.cg_node_product, n, self._p, m.node_mass, self._contact_h, m.free_axes, m.node_world,
                     cg_active, 1.0 / (h * h), self._ap, wf["p_ap"]),
                 rec(kn.cg_update_solution, n, self._p, self._ap, self._precond, m.free_axes, m.node_world,
-                    cg_active, wf["rz"], wf["p_ap"], self._dx, self._r, self._z, wf["rz_new"]),
+                    cg_active, wf["rz"], wf["p_ap"], self._dx, self._r, self._z, wf["rz_new"], wf["cg_update"]),
                 rec(kn.cg_update_direction, n, self._z, m.node_world, cg_active, wf["rz"], wf["rz_new"],
                     self._p, self._ap),
                 rec(kn.cg_end_iteration, w, wf["rz"], wf["rz_new"], wf["rz0"], wf["p_ap"], cfg.cg_tolerance ** 2,
-                    cfg.cg_iterations, wi["cg_it"], wi["cg_total"], cg_active)],
+                    cfg.cg_update_fraction * cfg.newton_tolerance, cfg.cg_iterations, wi["cg_it"], wi["cg_total"], cg_active,
+                    wf["cg_update"])],
             "energy0": [
                 nodes(x, newton_active, 0, self._energy0), tets(x, newton_active, self._energy0),
                 rec(kenergy.begin_line_search, w, newton_active, wf["step"], searching, self._energy_trial)],

@@ -123,7 +123,9 @@ def cg_update_solution(
     r: wp.array(dtype=wp.vec3),
     z: wp.array(dtype=wp.vec3),
     rz_new: wp.array(dtype=float),
+    cg_update: wp.array(dtype=float),
 ):
+    """dx += alpha p, r -= alpha A p, z = P r; per world: r.z and the largest |alpha p| (m)."""
     i = wp.tid()
     w = node_world[i]
     if cg_active[w] == 0:
@@ -131,7 +133,9 @@ def cg_update_solution(
     alpha = 0.0
     if p_ap[w] > 0.0:
         alpha = rz[w] / p_ap[w]
-    dx[i] = dx[i] + alpha * p[i]
+    step = alpha * p[i]
+    dx[i] = dx[i] + step
+    wp.atomic_max(cg_update, w, wp.max(wp.abs(step)))
     ri = r[i] - alpha * ap[i]
     r[i] = ri
     zi = wp.cw_mul(precond[i] * ri, free[i])
@@ -167,19 +171,26 @@ def cg_end_iteration(
     rz_initial: wp.array(dtype=float),
     p_ap: wp.array(dtype=float),
     rel_tol_sq: float,
+    update_tol: float,
     max_iterations: int,
     cg_iterations: wp.array(dtype=int),
     cg_iterations_total: wp.array(dtype=int),
     cg_active: wp.array(dtype=int),
+    cg_update: wp.array(dtype=float),
 ):
+    """Stop a world's CG on relative residual, on an iteration that moved no node by more than
+    ``update_tol`` (m: the absolute test, as r.z cannot fall below float32 noise near a
+    solution; applied from the 8th iteration on), on the iteration cap, or on a non-positive curvature."""
     w = wp.tid()
     if cg_active[w] == 0:
         return
     it = cg_iterations[w] + 1
     cg_iterations[w] = it
     cg_iterations_total[w] = cg_iterations_total[w] + 1
-    if rz_new[w] <= rel_tol_sq * rz_initial[w] or it >= max_iterations or p_ap[w] <= 0.0:
+    stalled = cg_update[w] <= update_tol and it >= 8  # CG can creep for a few iterations first
+    if rz_new[w] <= rel_tol_sq * rz_initial[w] or stalled or it >= max_iterations or p_ap[w] <= 0.0:
         cg_active[w] = 0
+    cg_update[w] = 0.0
     rz[w] = rz_new[w]
     rz_new[w] = 0.0
     p_ap[w] = 0.0
