@@ -29,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
 
     wp.config.quiet = True
     import defgrasp_env  # noqa: F401
-    from defgrasp_env.policies import ScriptedPickupExpert
+    from defgrasp_env.policies import RECOMMENDED_ENV_KWARGS, ScriptedPickupExpert
     from defgrasp_env.sim.meshing import OBJECT_SHAPES
 
     objects = args.objects or list(OBJECT_SHAPES)
@@ -37,9 +37,9 @@ def main(argv: list[str] | None = None) -> int:
           f"{'max lift m':>10s} {'mean vM kPa':>11s} {'penetr. mm':>10s} {'ms/step':>7s}")
     successes = 0
     for name in objects:
-        expert = ScriptedPickupExpert()
         env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=args.youngs_modulus,
-                       **expert.recommended_env_kwargs)
+                       **RECOMMENDED_ENV_KWARGS)
+        expert = ScriptedPickupExpert.from_env(env)
         obs, _ = env.reset(seed=args.seed)
         expert.reset()
         scene = env.unwrapped.scene

@@ -1,0 +1,141 @@
+"""ScriptedPickupExpert: succeeds from observations only, batched, validated; grasp planning geometry."""
+
+import ast
+import copy
+import math
+import pathlib
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import defgrasp_env  # noqa: F401  (registers the env)
+from defgrasp_env.gripper import GAP_MAX
+from defgrasp_env.policies import PHASE_NAMES, ExpertConfig, ScriptedPickupExpert, plan_grasps
+
+POLICIES = pathlib.Path(defgrasp_env.__file__).parent / "policies"
+
+
+def _synthetic_obs(feature=(0.1, 0.02, 0.0), flange=(0.0, 0.3, 0.0), half=0.02):
+    """Observation dict built by hand (no simulator): a 40 mm cube at ``feature``."""
+    f = np.asarray(feature, float)
+    corners = np.array([[sx, sy, sz] for sx in (-half, half) for sy in (-half, half) for sz in (-half, half)])
+    agent = np.array([*flange, 0.0, 0.0, 0.0, 1.0, GAP_MAX, 0.0, 0.0], np.float32)
+    state = np.concatenate([f, np.zeros(3), [0.0, 0.6, 0.0], (corners + f).ravel()]).astype(np.float32)
+    return {"agent_pos": agent, "environment_state": state}
+
+
+def test_expert_lifts_default_cuboid_to_success():
+    env = gym.make("DeformablePickup-v0", object="cuboid", youngs_modulus=1e5)
+    expert = ScriptedPickupExpert.from_env(env)
+    obs, _ = env.reset(seed=0)
+    expert.reset()
+    phases = set()
+    for step in range(env.spec.max_episode_steps):
+        # the expert only ever sees a deep copy of the observation dict
+        action = expert(copy.deepcopy(obs))
+        assert action.shape == (7,) and action.dtype == np.float32
+        assert np.all(np.abs(action) <= 1.0)
+        phases.add(PHASE_NAMES[expert.phase[0]])
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    env.close()
+    assert info["is_success"], f"no success after {step + 1} steps (goal distance {info['goal_distance']:.3f} m)"
+    assert not info["sim_diverged"]
+    assert {"approach", "descend", "close", "lift"} <= phases
+    assert expert.retries[0] == 0
+
+
+def test_expert_reads_no_simulator_internals():
+    # static check: the policy package imports nothing but numpy, the stdlib and the public gripper constants
+    allowed = {"__future__", "math", "dataclasses", "numpy", "..gripper", ".grasp_planning", ".scripted_expert"}
+    for path in POLICIES.glob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                name = "." * node.level + (node.module or "")
+                assert name in allowed, f"{path.name} imports {name}"
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    assert alias.name in allowed, f"{path.name} imports {alias.name}"
+            elif isinstance(node, ast.Attribute):
+                assert node.attr not in ("scene", "state", "model", "solver", "task"), (
+                    f"{path.name} reads .{node.attr}")
+
+
+def test_expert_acts_on_a_hand_made_observation():
+    expert = ScriptedPickupExpert()
+    action = expert(_synthetic_obs(feature=(0.1, 0.02, 0.0)))
+    # cube axis-aligned: no wrist turn needed; first move is toward +x (and down), jaw open
+    assert action[0] > 0.5 and abs(action[2]) < 1e-6 and action[1] < 0.0
+    assert np.allclose(action[3:6], 0.0, atol=1e-6)
+    assert action[6] == pytest.approx(-1.0)
+
+
+def test_batched_call_matches_single_calls():
+    obs = [_synthetic_obs(feature=(0.1, 0.02, 0.0)), _synthetic_obs(feature=(-0.05, 0.02, 0.08))]
+    singles = []
+    for o in obs:
+        expert = ScriptedPickupExpert()
+        singles.append(expert(o))
+    batched = ScriptedPickupExpert()
+    stacked = {k: np.stack([o[k] for o in obs]) for k in obs[0]}
+    out = batched(stacked)
+    assert out.shape == (2, 7)
+    np.testing.assert_allclose(out, np.stack(singles), atol=1e-6)
+    batched.reset(np.array([True, False]))
+    assert batched.phase.tolist() == [0, batched.phase[1]]
+
+
+def test_invalid_inputs_raise():
+    expert = ScriptedPickupExpert()
+    with pytest.raises(TypeError):
+        expert(np.zeros(10))
+    with pytest.raises(ValueError):
+        expert({"agent_pos": np.zeros(9), "environment_state": np.zeros(33)})
+    bad = _synthetic_obs()
+    bad["environment_state"][0] = np.nan
+    with pytest.raises(ValueError):
+        expert(bad)
+    with pytest.raises(ValueError):
+        ExpertConfig(grip_force=-1.0)
+    with pytest.raises(ValueError):
+        ScriptedPickupExpert(regrip_fraction=1.5)
+    expert(_synthetic_obs())
+    with pytest.raises(ValueError):
+        expert.reset(np.ones(5, bool))
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.4, 1.2, -2.0])
+def test_plan_closes_across_the_rope(angle):
+    t = np.linspace(-0.15, 0.15, 8)
+    d = np.array([math.cos(angle), math.sin(angle)])           # rope direction in (x, z)
+    pts = np.stack([t * d[0], np.full(8, 0.008), t * d[1]], axis=1)
+    pts[::2, [0, 2]] += 0.008 * np.array([-d[1], d[0]])         # some thickness across
+    plan = plan_grasps(np.array([[0.0, 0.008, 0.0]]), pts[None], np.zeros(1))
+    axis = np.array([math.cos(plan.yaw[0]), -math.sin(plan.yaw[0])])  # closing axis x_G in (x, z)
+    assert abs(axis @ d) < 0.05, "closing axis must be across the rope"
+    assert not plan.rim[0] and plan.width[0] < 0.03
+    assert plan.point[0, 1] >= 0.0187 + 0.002                   # pads stay above the ground
+
+
+def test_plan_cube_faces_and_torus_rim():
+    half = 0.02
+    yaw = 0.5
+    c, s = math.cos(yaw), math.sin(yaw)
+    corners = np.array([[sx, 0.04, sz] for sx in (-half, half) for sz in (-half, half)]
+                       + [[sx, 0.0, sz] for sx in (-half, half) for sz in (-half, half)])
+    rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    kp = corners @ rot.T
+    plan = plan_grasps(np.array([[0.0, 0.02, 0.0]]), kp[None], np.zeros(1))
+    assert plan.width[0] == pytest.approx(0.04, abs=1e-3)        # across two faces, not the diagonal
+    assert not plan.rim[0]
+    # torus: axis y, major radius 30 mm, tube 10 mm: 80 mm across, grasped at the rim
+    phi = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    ring = np.stack([0.04 * np.cos(phi), np.full(8, 0.01), 0.04 * np.sin(phi)], axis=1)
+    ring[0, 1], ring[1, 1] = 0.02, 0.0
+    plan = plan_grasps(np.array([[0.0, 0.01, 0.0]]), ring[None], np.zeros(1))
+    assert plan.rim[0]
+    assert np.hypot(plan.point[0, 0], plan.point[0, 2]) == pytest.approx(0.03, abs=2e-3)
+    assert plan.open_gap[0] < GAP_MAX
