@@ -4,6 +4,7 @@
 * :func:`load_episode` / :func:`validate_path` - read and check episode files.
 * :func:`replay_episode` - re-simulate an episode from its recorded config, seed and actions.
 * :func:`to_lerobot` - convert episodes to a LeRobot dataset; :func:`plot_episode` - Fig. 5 panels.
+* :class:`LeRobotRecorder` - Gymnasium wrapper recording straight to a LeRobot dataset.
 * CLIs: ``defgrasp-dataset`` (validate, to-lerobot, plot, replay, schema), ``defgrasp-generate``.
 """
 
@@ -34,3 +35,12 @@ def plot_episode(*args, **kwargs):
 __all__ = ["HDF5Recorder", "Episode", "EpisodeFileError", "load_episode", "list_episodes",
            "validate_episode", "validate_path", "ValidationReport", "replay_episode", "to_lerobot",
            "plot_episode", "FIELDS", "FORMAT", "SCHEMA_VERSION", "schema_markdown"]
+
+
+def __getattr__(name: str):
+    # LeRobotRecorder imports lerobot (slow): load on first use
+    if name == "LeRobotRecorder":
+        from .lerobot_recorder import LeRobotRecorder
+
+        return LeRobotRecorder
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

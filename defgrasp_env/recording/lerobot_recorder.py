@@ -1,0 +1,97 @@
+"""Record episodes straight into a LeRobot (v3.0) dataset during collection.
+
+``LeRobotRecorder`` is a Gymnasium wrapper: every step becomes a LeRobot frame (the observation
+before the action, the action, and the step's reward/done/success, the same frame layout as
+``to_lerobot``), every ended episode is saved with ``save_episode``, and ``close`` finalizes the
+dataset. An episode cut short by ``reset`` or ``close`` is saved too, so nothing recorded is lost.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+
+import gymnasium as gym
+import numpy as np
+
+from ..envs.task import AGENT_POS_NAMES, ENV_STATE_NAMES
+from .lerobot_export import CAMERA_KEY, ROBOT_TYPE, _features, _Layout
+
+
+class LeRobotRecorder(gym.Wrapper):
+    """Wrap a single ``DeformablePickup-v0`` env (``obs_type`` "state", optionally with camera
+    frames from ``render()`` when ``record_frames``) and write a LeRobot dataset at ``root``."""
+
+    def __init__(self, env: gym.Env, root: str | os.PathLike, repo_id: str | None = None,
+                 task: str | None = None, record_frames: bool = False, use_videos: bool = False):
+        super().__init__(env)
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+        cfg = env.unwrapped.config
+        if cfg.obs_type != "state":
+            raise ValueError(f"LeRobotRecorder needs obs_type='state', got {cfg.obs_type!r}")
+        if abs(cfg.control_hz - round(cfg.control_hz)) > 1e-9:
+            raise ValueError(f"LeRobot needs an integer fps, the control rate is {cfg.control_hz} Hz")
+        root = pathlib.Path(root)
+        if root.exists():
+            raise FileExistsError(f"{root}: LeRobot dataset folder exists already; choose a new one")
+        if record_frames and env.render_mode != "rgb_array":
+            raise ValueError("record_frames needs the env made with render_mode='rgb_array'")
+        image = (cfg.camera.height, cfg.camera.width, 3) if record_frames else None
+        layout = _Layout(int(round(cfg.control_hz)), len(AGENT_POS_NAMES), len(ENV_STATE_NAMES),
+                         env.action_space.shape[0], image)
+        names = {"observations/agent_pos": list(AGENT_POS_NAMES),
+                 "observations/environment_state": list(ENV_STATE_NAMES)}
+        self.dataset = LeRobotDataset.create(repo_id or f"defgrasp/{root.name}", layout.fps,
+                                             _features(layout, names, use_videos), root=root,
+                                             robot_type=ROBOT_TYPE, use_videos=use_videos, video_backend="pyav")
+        self.task = task or (f"Pick up the {cfg.object} and lift it to "
+                             f"[{', '.join(f'{g:g}' for g in cfg.goal)}] m")
+        self.record_frames = record_frames
+        self._obs = None
+        self._frame = None
+        self._pending = 0
+        self.episodes_saved = 0
+
+    def reset(self, **kwargs):
+        self._save_pending()
+        obs, info = self.env.reset(**kwargs)
+        self._obs = obs
+        self._frame = self.env.render() if self.record_frames else None
+        return obs, info
+
+    def step(self, action):
+        if self._obs is None:
+            raise RuntimeError("call reset() before step()")
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        frame = {
+            "observation.state": np.asarray(self._obs["agent_pos"], np.float32),
+            "observation.environment_state": np.asarray(self._obs["environment_state"], np.float32),
+            "action": np.asarray(action, np.float32),
+            "next.reward": np.array([reward], np.float32),
+            "next.done": np.array([terminated or truncated]),
+            "next.success": np.array([bool(info.get("is_success", False))]),
+            "task": self.task,
+        }
+        if self._frame is not None:
+            frame[CAMERA_KEY] = self._frame
+        self.dataset.add_frame(frame)
+        self._pending += 1
+        self._obs = obs
+        self._frame = self.env.render() if self.record_frames else None
+        if terminated or truncated:
+            self._save_pending()
+        return obs, reward, terminated, truncated, info
+
+    def close(self):
+        try:
+            self._save_pending()
+            self.dataset.finalize()
+        finally:
+            super().close()
+
+    def _save_pending(self) -> None:
+        if self._pending:
+            self.dataset.save_episode()
+            self.episodes_saved += 1
+            self._pending = 0
