@@ -39,6 +39,7 @@ from defgrasp_env.sim.meshing import make_object_mesh  # noqa: E402
 from defgrasp_env.sim.model import build_model  # noqa: E402
 from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig  # noqa: E402
 from defgrasp_env.sim.state import Control, State  # noqa: E402
+from machine import cpu_model as _cpu_model  # noqa: E402
 
 OBJECTS = ("cuboid", "sphere", "torus", "cylinder", "rope")
 PAD_HALF = np.array([0.004, 0.01875, 0.011])
@@ -103,13 +104,7 @@ def run_case(name: str, scenario: str, worlds: int, device: str, config: SolverC
 
 
 def cpu_model() -> str:
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
+    return _cpu_model("unknown CPU")
 
 
 def machine(device: str) -> str:

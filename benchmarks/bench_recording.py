@@ -36,6 +36,7 @@ from defgrasp_env.recording import HDF5Recorder  # noqa: E402
 from defgrasp_env.recording.atomic import write_episode  # noqa: E402
 from defgrasp_env.recording import load_episode  # noqa: E402
 from defgrasp_env.recording.capture import EpisodeBuffer, object_record, step_record  # noqa: E402
+from machine import host  # noqa: E402
 
 
 def actions_for(steps: int, seed: int) -> np.ndarray:
@@ -64,15 +65,7 @@ def run_lockstep(plain, recorded, seed: int, actions: np.ndarray) -> tuple[float
 
 
 def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} logical CPUs, {platform.system()} {platform.release()}, Python {platform.python_version()}"
+    return f"{host()}, Python {platform.python_version()}"
 
 
 def main(argv=None) -> int:

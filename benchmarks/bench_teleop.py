@@ -36,19 +36,10 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
 
 import numpy as np  # noqa: E402
+from machine import cpu_model, host  # noqa: E402,F401
 
 DATA = ROOT / "tests" / "data"
 STREAM = "human_pick_cuboid"
-
-
-def cpu_model() -> str:
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 # timing proxies (the agent only sees PoseTracker / HapticGlove / solve / __call__) -----------------
@@ -285,7 +276,7 @@ def main(argv=None) -> int:
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     loops = [bench_loop(ik) for ik in iks]
     lats = [bench_latency(ik, args.latency_seconds) for ik in iks]
-    machine = (f"{cpu_model()}, {os.cpu_count()} logical CPUs, {platform.system()} {platform.release()}, "
+    machine = (f"{host()}, "
                f"load average {load:.1f} at start; Python {platform.python_version()}; env on Warp CPU"
                + (f"; {args.note}" if args.note else ""))
     best = max(loops, key=lambda r: r["loop_hz"])

@@ -25,7 +25,6 @@ import datetime
 import multiprocessing as mp
 import os
 import pathlib
-import platform
 import subprocess
 import sys
 import time
@@ -36,6 +35,7 @@ os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
+from machine import host  # noqa: E402
 
 OBJECTS = ("cuboid", "sphere", "torus", "cylinder", "rope")
 MODULI = (1e4, 1e5, 1e6, 1e7)
@@ -158,15 +158,7 @@ def format_report(results: list[dict], objects, moduli) -> str:
 
 
 def machine() -> str:
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
+    return host("unknown CPU", cores="cores")
 
 
 def git_state() -> str:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .linkage import GAP_MAX, GAP_MIN
+from .linkage import GAP_MAX, GAP_MIN, _finite as _array
 
 __all__ = [
     "CLOSING_SPEED_RANGE_MM_S",
@@ -79,16 +79,6 @@ class GripperConfig:
     def closing_speed(self) -> float:
         """Jaw gap speed limit in m/s."""
         return self.closing_speed_mm_s * 1e-3
-
-
-def _array(x, name: str) -> np.ndarray:
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a number or numeric array, got {type(x).__name__}") from exc
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be finite, got {a[~np.isfinite(a)].flat[0]}")
-    return a
 
 
 def driver_step(

@@ -93,13 +93,19 @@ GAP_MIN = 2.0 * (GAP_OFFSET + ARC_RADIUS * math.cos(THETA_MAX + ARC_PHASE))  # 0
 _EPS = 1e-9  # tolerance for range checks (rad or m); values within it are clipped
 
 
-def _checked(x, lo: float, hi: float, name: str, unit: str) -> np.ndarray:
+def _finite(x, name: str) -> np.ndarray:
+    """``x`` as a float64 array; TypeError if not numeric, ValueError if any entry is not finite."""
     try:
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"{name} must be a number or numeric array, got {type(x).__name__}") from exc
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name} must be finite, got {a[~np.isfinite(a)].flat[0]}")
+    return a
+
+
+def _checked(x, lo: float, hi: float, name: str, unit: str) -> np.ndarray:
+    a = _finite(x, name)
     bad = (a < lo - _EPS) | (a > hi + _EPS)
     if np.any(bad):
         raise ValueError(f"{name} must be in [{lo:.9g}, {hi:.9g}] {unit}, got {a[bad].flat[0]:.9g}")

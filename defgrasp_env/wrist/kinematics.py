@@ -21,7 +21,7 @@ import pytorch_kinematics as pk
 import torch
 
 from ..transforms import matrix_to_quat, pose_to_matrix
-from .analytic import IKResult, ik_analytic, pose_errors
+from .analytic import IKResult, _joints, ik_analytic, pose_errors
 from .spec import FLANGE_LINK, JOINT_NAMES, WRIST_URDF_PATH, load_joint_limits
 
 __all__ = ["WristKinematics"]
@@ -132,14 +132,7 @@ class WristKinematics:
 
     # ------------------------------------------------------------------------------------ FK
 
-    @staticmethod
-    def _q(q) -> np.ndarray:
-        a = np.asarray(q, dtype=np.float64)
-        if a.ndim < 1 or a.shape[-1] != 6:
-            raise ValueError(f"q must have shape [..., 6], got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError("q must be finite")
-        return a
+    _q = staticmethod(_joints)  # q as a finite float64 array [..., 6]
 
     def fk_matrix(self, q) -> np.ndarray:
         """Flange pose ``T_world_G [..., 4, 4]`` (m) for joints ``q [..., 6]`` (not clamped)."""

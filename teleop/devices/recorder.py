@@ -21,6 +21,7 @@ import logging
 import os
 import pathlib
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -31,6 +32,7 @@ log = logging.getLogger("teleop.recorder")
 FORMAT = "defgrasp-teleop-stream"
 FORMAT_VERSION = 1
 KINDS = {"tracker": TrackerSample, "glove": GloveSample}
+_S = TypeVar("_S", TrackerSample, GloveSample)
 SUFFIXES = (".jsonl", ".npz")
 
 
@@ -165,54 +167,44 @@ def load_stream(path) -> Stream:
     return Stream(kind, tuple(samples))
 
 
-class RecordingTracker(PoseTracker):
+class _RecordingDevice(Generic[_S]):
+    """Shared by RecordingTracker/RecordingGlove (sample type ``_S``): lifecycle delegated to
+    ``inner``, every ``read()`` sample appended to ``recorder`` (closed on ``disconnect()``)."""
+
+    def _wrap(self, owner: str, kind: str, inner, recorder: StreamRecorder) -> None:
+        if recorder.kind != kind:
+            raise ValueError(f"{owner} needs a {kind!r} recorder, got {recorder.kind!r}")
+        self.inner, self.recorder = inner, recorder
+
+    def connect(self) -> None:
+        self.inner.connect()
+
+    def disconnect(self) -> None:
+        self.inner.disconnect()
+        self.recorder.close()
+
+    @property
+    def is_connected(self) -> bool:
+        return self.inner.is_connected
+
+    def read(self) -> _S:
+        s = self.inner.read()
+        self.recorder.append(s)
+        return s
+
+
+class RecordingTracker(_RecordingDevice[TrackerSample], PoseTracker):
     """Wraps a PoseTracker and records every ``read()`` sample to ``recorder``."""
 
     def __init__(self, tracker: PoseTracker, recorder: StreamRecorder):
-        if recorder.kind != "tracker":
-            raise ValueError(f"RecordingTracker needs a 'tracker' recorder, got {recorder.kind!r}")
-        self.inner, self.recorder = tracker, recorder
-
-    def connect(self) -> None:
-        self.inner.connect()
-
-    def disconnect(self) -> None:
-        self.inner.disconnect()
-        self.recorder.close()
-
-    @property
-    def is_connected(self) -> bool:
-        return self.inner.is_connected
-
-    def read(self) -> TrackerSample:
-        s = self.inner.read()
-        self.recorder.append(s)
-        return s
+        self._wrap("RecordingTracker", "tracker", tracker, recorder)
 
 
-class RecordingGlove(HapticGlove):
+class RecordingGlove(_RecordingDevice[GloveSample], HapticGlove):
     """Wraps a HapticGlove and records every ``read()`` sample; haptics pass through."""
 
     def __init__(self, glove: HapticGlove, recorder: StreamRecorder):
-        if recorder.kind != "glove":
-            raise ValueError(f"RecordingGlove needs a 'glove' recorder, got {recorder.kind!r}")
-        self.inner, self.recorder = glove, recorder
-
-    def connect(self) -> None:
-        self.inner.connect()
-
-    def disconnect(self) -> None:
-        self.inner.disconnect()
-        self.recorder.close()
-
-    @property
-    def is_connected(self) -> bool:
-        return self.inner.is_connected
-
-    def read(self) -> GloveSample:
-        s = self.inner.read()
-        self.recorder.append(s)
-        return s
+        self._wrap("RecordingGlove", "glove", glove, recorder)
 
     def send_haptics(self, force_feedback, vibration, vibration_duration_s: float) -> bool:
         return self.inner.send_haptics(force_feedback, vibration, vibration_duration_s)

@@ -18,12 +18,14 @@ import collections
 import dataclasses
 import pathlib
 import time
-from typing import Callable, Sequence
+from typing import Callable, Generic, Sequence, TypeVar
 
 import numpy as np
 
 from .base import GloveSample, HapticGlove, PoseTracker, TrackerSample, check_haptics, require_connected
-from .recorder import load_stream
+from .recorder import KINDS, load_stream
+
+_S = TypeVar("_S", TrackerSample, GloveSample)
 
 
 def _load(source, kind: str) -> tuple:
@@ -34,7 +36,7 @@ def _load(source, kind: str) -> tuple:
         samples = stream.samples
     else:
         samples = tuple(source)
-    cls = TrackerSample if kind == "tracker" else GloveSample
+    cls = KINDS[kind]
     if not samples:
         raise ValueError(f"a {kind} replay needs at least one sample, got none")
     for s in samples:
@@ -89,11 +91,14 @@ class _Playback:
         return i, self.start + lap * self.span + self.rel[i]
 
 
-class ReplayTracker(PoseTracker):
-    """PoseTracker that plays back a recorded tracker stream (file path or list of samples)."""
+class _ReplayDevice(Generic[_S]):
+    """Shared by ReplayTracker/ReplayGlove (sample type ``_S``): lifecycle and ``read()``. Once the
+    stream is finished, ``read()`` returns the last sample with ``_LIVE_FIELD`` False, stamped now."""
 
-    def __init__(self, source, *, realtime: bool = True, loop: bool = False, clock: Callable[[], float] = time.monotonic):
-        self._pb = _Playback(_load(source, "tracker"), realtime, loop, clock)
+    _LIVE_FIELD: str
+
+    def _init_playback(self, source, kind: str, realtime: bool, loop: bool, clock: Callable[[], float]) -> None:
+        self._pb = _Playback(_load(source, kind), realtime, loop, clock)
         self._connected = False
 
     def connect(self) -> None:
@@ -111,50 +116,35 @@ class ReplayTracker(PoseTracker):
     def finished(self) -> bool:
         return self._pb.finished
 
-    def read(self) -> TrackerSample:
+    def read(self) -> _S:
         require_connected(self, "read")
         cur = self._pb.current()
         if cur is None:
             last = self._pb.samples[-1]
-            return TrackerSample(last.pose, False, self._pb.clock())
+            return dataclasses.replace(last, **{self._LIVE_FIELD: False, "timestamp_s": self._pb.clock()})
         i, t = cur
         s = self._pb.samples[i]
         return s if t is None else dataclasses.replace(s, timestamp_s=t)
 
 
-class ReplayGlove(HapticGlove):
+class ReplayTracker(_ReplayDevice[TrackerSample], PoseTracker):
+    """PoseTracker that plays back a recorded tracker stream (file path or list of samples)."""
+
+    _LIVE_FIELD = "valid"
+
+    def __init__(self, source, *, realtime: bool = True, loop: bool = False, clock: Callable[[], float] = time.monotonic):
+        self._init_playback(source, "tracker", realtime, loop, clock)
+
+
+class ReplayGlove(_ReplayDevice[GloveSample], HapticGlove):
     """HapticGlove that plays back a recorded glove stream; haptic commands are validated and
     kept in ``haptics_log`` as (host time, force_feedback [5], vibration [5], duration s)."""
 
+    _LIVE_FIELD = "connected"
+
     def __init__(self, source, *, realtime: bool = True, loop: bool = False, clock: Callable[[], float] = time.monotonic):
-        self._pb = _Playback(_load(source, "glove"), realtime, loop, clock)
-        self._connected = False
+        self._init_playback(source, "glove", realtime, loop, clock)
         self.haptics_log: collections.deque = collections.deque(maxlen=100_000)
-
-    def connect(self) -> None:
-        self._pb.begin()
-        self._connected = True
-
-    def disconnect(self) -> None:
-        self._connected = False
-
-    @property
-    def is_connected(self) -> bool:
-        return self._connected
-
-    @property
-    def finished(self) -> bool:
-        return self._pb.finished
-
-    def read(self) -> GloveSample:
-        require_connected(self, "read")
-        cur = self._pb.current()
-        if cur is None:
-            last = self._pb.samples[-1]
-            return GloveSample(last.joint_angles, last.fingertip_positions, False, self._pb.clock())
-        i, t = cur
-        s = self._pb.samples[i]
-        return s if t is None else dataclasses.replace(s, timestamp_s=t)
 
     def send_haptics(self, force_feedback, vibration, vibration_duration_s: float) -> bool:
         ff, vib, dur = check_haptics(force_feedback, vibration, vibration_duration_s)

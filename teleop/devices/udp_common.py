@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from .._validate import check_number, check_port
+from .base import require_connected
 from .wire import MAX_DATAGRAM, MSG_NAMES, Message, ProtocolError, decode, encode, seq_newer
 
 log = logging.getLogger("teleop.udp")
@@ -59,6 +60,18 @@ class ReceiverStats:
     @property
     def dropped(self) -> int:
         return self.malformed + self.out_of_order + self.stale + self.other_stream
+
+
+def _drain(sock: socket.socket):
+    """Yield (data, addr) for every datagram waiting on non-blocking ``sock`` (at most MAX_DRAIN)."""
+    for _ in range(MAX_DRAIN):
+        try:
+            data, addr = sock.recvfrom(MAX_DATAGRAM + 1)
+        except (BlockingIOError, InterruptedError):
+            break
+        except ConnectionResetError:  # ICMP port unreachable echoed on some platforms
+            continue
+        yield data, addr
 
 
 def _check_host(name: str, host) -> str:
@@ -135,13 +148,7 @@ class UdpStreamReceiver:
         if self._sock is None:
             raise RuntimeError("the receiver is not open: call connect() first")
         batch = []
-        for _ in range(MAX_DRAIN):
-            try:
-                data, addr = self._sock.recvfrom(MAX_DATAGRAM + 1)
-            except (BlockingIOError, InterruptedError):
-                break
-            except ConnectionResetError:  # ICMP port unreachable echoed on some platforms
-                continue
+        for data, addr in _drain(self._sock):
             msg = self._screen(data, addr, self._clock())
             if msg is not None:
                 batch.append((msg, addr))
@@ -272,16 +279,7 @@ class UdpStreamSender:
     def recv_all(self) -> list[bytes]:
         """Drain datagrams sent back to this sender's socket (e.g. haptics)."""
         self._require_open()
-        out = []
-        for _ in range(MAX_DRAIN):
-            try:
-                data, _ = self._sock.recvfrom(MAX_DATAGRAM + 1)
-            except (BlockingIOError, InterruptedError):
-                break
-            except ConnectionResetError:
-                continue
-            out.append(data)
-        return out
+        return [data for data, _ in _drain(self._sock)]
 
     @property
     def address(self) -> tuple[str, int]:
@@ -296,6 +294,65 @@ class UdpStreamSender:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class UdpReceiverDevice:
+    """Device side of a UDP receiver driver (glove, tracker): lifecycle, ``address`` and ``stats``
+    delegated to the ``UdpStreamReceiver`` in ``self._rx``. Mix in before the device interface."""
+
+    _rx: UdpStreamReceiver
+
+    def _init_rx(self, msg_type: int, host, port, timeout_s, max_delay_s, clock: Callable[[], float]) -> None:
+        self._rx = UdpStreamReceiver(msg_type, host, port, timeout_s=timeout_s, max_delay_s=max_delay_s, clock=clock)
+        self._clock = clock
+
+    def _poll_rx(self) -> tuple[Message | None, float, bool]:
+        """``read()`` prologue: require connect(), then drain (see ``UdpStreamReceiver.poll``)."""
+        require_connected(self, "read")
+        return self._rx.poll()
+
+    def connect(self) -> None:
+        self._rx.open()
+
+    def disconnect(self) -> None:
+        self._rx.close()
+
+    @property
+    def is_connected(self) -> bool:
+        return self._rx.is_open
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) the receiver is bound to."""
+        return self._rx.address
+
+    @property
+    def stats(self):
+        return self._rx.stats
+
+
+class UdpSenderDevice:
+    """Reference-sender side shared by the glove and tracker senders: ``stream_id``, ``send_raw``,
+    ``close`` and the context manager, delegated to the ``UdpStreamSender`` in ``self._tx``."""
+
+    _tx: UdpStreamSender
+
+    @property
+    def stream_id(self) -> int:
+        return self._tx.stream_id
+
+    def send_raw(self, data: bytes) -> None:
+        """Send arbitrary bytes to the receiver (protocol tests)."""
+        self._tx.send_raw(data)
+
+    def close(self) -> None:
+        self._tx.close()
 
     def __enter__(self):
         return self

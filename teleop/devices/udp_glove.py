@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from .base import JOINTS_PER_FINGER, N_FINGERS, GloveSample, HapticGlove, check_haptics, require_connected
-from .udp_common import UdpStreamReceiver, UdpStreamSender
+from .udp_common import UdpReceiverDevice, UdpSenderDevice, UdpStreamSender
 from .wire import (
     FLAG_GLOVE_CONNECTED, FLAG_RIGHT_HAND, MSG_GLOVE_HAPTICS, MSG_GLOVE_STATE, ProtocolError, decode, encode, seq_newer,
 )
@@ -36,7 +36,7 @@ class HapticsCommand:
     t_sender_s: float  # receiver-side (defgrasp host) clock when it was sent
 
 
-class UdpGloveReceiver(HapticGlove):
+class UdpGloveReceiver(UdpReceiverDevice, HapticGlove):
     """HapticGlove fed by ``glove_state`` datagrams on ``host:port`` (non-blocking, latest wins).
 
     ``read()`` returns the newest accepted sample with ``connected`` = the sender's
@@ -56,38 +56,17 @@ class UdpGloveReceiver(HapticGlove):
         haptics_address: tuple[str, int] | None = None,
         clock: Callable[[], float] = time.monotonic,
     ):
-        self._rx = UdpStreamReceiver(MSG_GLOVE_STATE, host, port, timeout_s=timeout_s, max_delay_s=max_delay_s, clock=clock)
+        self._init_rx(MSG_GLOVE_STATE, host, port, timeout_s, max_delay_s, clock)
         if haptics_address is not None and not (isinstance(haptics_address, tuple) and len(haptics_address) == 2):
             raise ValueError(f"haptics_address must be a (host, port) tuple or None, got {haptics_address!r}")
         self.haptics_address = haptics_address
-        self._clock = clock
         self._haptics_seq = 0
         self._last_angles = np.zeros((N_FINGERS, JOINTS_PER_FINGER))
         self._last_tips = np.zeros((N_FINGERS, 3))
         self.right_hand: bool | None = None
 
-    def connect(self) -> None:
-        self._rx.open()
-
-    def disconnect(self) -> None:
-        self._rx.close()
-
-    @property
-    def is_connected(self) -> bool:
-        return self._rx.is_open
-
-    @property
-    def address(self) -> tuple[str, int]:
-        """(host, port) the receiver is bound to."""
-        return self._rx.address
-
-    @property
-    def stats(self):
-        return self._rx.stats
-
     def read(self) -> GloveSample:
-        require_connected(self, "read")
-        msg, t_recv, live = self._rx.poll()
+        msg, t_recv, live = self._poll_rx()
         if msg is None:
             return GloveSample(self._last_angles, self._last_tips, False, self._clock())
         v = msg.values
@@ -113,7 +92,7 @@ class UdpGloveReceiver(HapticGlove):
         return True
 
 
-class UdpGloveSender:
+class UdpGloveSender(UdpSenderDevice):
     """Reference sender (what a SGCore / ROS bridge does), also used by the tests.
 
     ``send(joint_angles [5,4] rad, fingertip_positions [5,3] m)`` emits one ``glove_state``
@@ -138,10 +117,6 @@ class UdpGloveSender:
         self._last_haptics_seq: int | None = None
 
     @property
-    def stream_id(self) -> int:
-        return self._tx.stream_id
-
-    @property
     def address(self) -> tuple[str, int]:
         return self._tx.address
 
@@ -159,10 +134,6 @@ class UdpGloveSender:
         flags = (FLAG_GLOVE_CONNECTED if connected else 0) | (FLAG_RIGHT_HAND if self.right_hand else 0)
         values = np.concatenate([s.joint_angles.ravel(), s.fingertip_positions.ravel()])
         return self._tx.send_values(flags, values, timestamp_s=timestamp_s, sequence=sequence)
-
-    def send_raw(self, data: bytes) -> None:
-        """Send arbitrary bytes to the receiver (protocol tests)."""
-        self._tx.send_raw(data)
 
     def poll_haptics(self) -> HapticsCommand | None:
         """Newest valid haptics command received since the last poll, or None."""
@@ -183,12 +154,3 @@ class UdpGloveSender:
             self._last_haptics_seq = h.sequence
             newest = HapticsCommand(v[:5].copy(), v[5:10].copy(), float(v[10]), h.sequence, h.t_sender_s)
         return newest
-
-    def close(self) -> None:
-        self._tx.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

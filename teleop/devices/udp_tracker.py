@@ -13,15 +13,15 @@ from typing import Callable
 
 import numpy as np
 
-from .base import PoseTracker, TrackerSample, require_connected
-from .udp_common import UdpStreamReceiver, UdpStreamSender
+from .base import PoseTracker, TrackerSample
+from .udp_common import UdpReceiverDevice, UdpSenderDevice, UdpStreamSender
 from .wire import FLAG_DEVICE_CONNECTED, FLAG_POSE_VALID, MSG_TRACKER_POSE
 from ..se3 import check_rigid, matrix_to_pose, pose_to_matrix
 
 DEFAULT_TRACKER_PORT = 47002
 
 
-class UdpTrackerReceiver(PoseTracker):
+class UdpTrackerReceiver(UdpReceiverDevice, PoseTracker):
     """PoseTracker fed by ``tracker_pose`` datagrams on ``host:port`` (non-blocking, latest wins).
 
     ``read()``: ``valid`` = pose-valid and device-connected flags of the newest accepted datagram,
@@ -37,31 +37,11 @@ class UdpTrackerReceiver(PoseTracker):
         max_delay_s: float = 0.1,
         clock: Callable[[], float] = time.monotonic,
     ):
-        self._rx = UdpStreamReceiver(MSG_TRACKER_POSE, host, port, timeout_s=timeout_s, max_delay_s=max_delay_s, clock=clock)
-        self._clock = clock
+        self._init_rx(MSG_TRACKER_POSE, host, port, timeout_s, max_delay_s, clock)
         self._last_pose = np.eye(4)
 
-    def connect(self) -> None:
-        self._rx.open()
-
-    def disconnect(self) -> None:
-        self._rx.close()
-
-    @property
-    def is_connected(self) -> bool:
-        return self._rx.is_open
-
-    @property
-    def address(self) -> tuple[str, int]:
-        return self._rx.address
-
-    @property
-    def stats(self):
-        return self._rx.stats
-
     def read(self) -> TrackerSample:
-        require_connected(self, "read")
-        msg, t_recv, live = self._rx.poll()
+        msg, t_recv, live = self._poll_rx()
         if msg is None:
             return TrackerSample(self._last_pose, False, self._clock())
         flags = msg.header.flags
@@ -71,7 +51,7 @@ class UdpTrackerReceiver(PoseTracker):
         return TrackerSample(self._last_pose, ok and live, t_recv if live else self._clock())
 
 
-class UdpTrackerSender:
+class UdpTrackerSender(UdpSenderDevice):
     """Reference sender of ``tracker_pose`` datagrams (bridges and tests)."""
 
     def __init__(
@@ -84,10 +64,6 @@ class UdpTrackerSender:
         clock: Callable[[], float] = time.monotonic,
     ):
         self._tx = UdpStreamSender(MSG_TRACKER_POSE, destination, bind_host=bind_host, bind_port=bind_port, stream_id=stream_id, clock=clock)
-
-    @property
-    def stream_id(self) -> int:
-        return self._tx.stream_id
 
     def send(
         self,
@@ -102,15 +78,3 @@ class UdpTrackerSender:
         pos, quat = matrix_to_pose(check_rigid("pose", pose))
         flags = (FLAG_POSE_VALID if valid else 0) | (FLAG_DEVICE_CONNECTED if connected else 0)
         return self._tx.send_values(flags, np.concatenate([pos, quat]), timestamp_s=timestamp_s, sequence=sequence)
-
-    def send_raw(self, data: bytes) -> None:
-        self._tx.send_raw(data)
-
-    def close(self) -> None:
-        self._tx.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

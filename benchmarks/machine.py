@@ -1,0 +1,28 @@
+"""Description of the machine a benchmark ran on, for the lines the scripts append to RESULTS.md.
+
+Imported by the scripts in this folder as ``machine`` (``python benchmarks/<script>.py`` puts this
+folder first on ``sys.path``).
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import platform
+
+
+def cpu_model(unknown: str | None = None) -> str:
+    """CPU model name from /proc/cpuinfo, else ``platform.processor()``, else ``unknown``
+    (``platform.machine()`` when None)."""
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or (platform.machine() if unknown is None else unknown)
+
+
+def host(unknown: str | None = None, *, cores: str = "CPUs") -> str:
+    """``"<CPU model>, <n> logical <cores>, <OS> <release>"``; ``unknown`` as for ``cpu_model``."""
+    return f"{cpu_model(unknown)}, {os.cpu_count()} logical {cores}, {platform.system()} {platform.release()}"
