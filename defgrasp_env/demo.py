@@ -24,7 +24,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     import gymnasium as gym
-    import numpy as np
     import warp as wp
 
     wp.config.quiet = True

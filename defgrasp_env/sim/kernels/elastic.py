@@ -47,10 +47,9 @@ def deformation_gradient(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, res
 
 
 @wp.func
-def first_piola(f: wp.mat33, cof: wp.mat33, mu: float, lam: float):
-    u, sigma, v = wp.svd3(f)
-    r = u * wp.transpose(v)
-    return 2.0 * mu * (f - r) + lam * (wp.determinant(f) - 1.0) * cof
+def first_piola(f: wp.mat33, cof: wp.mat33, u: wp.mat33, v: wp.mat33, mu: float, lam: float):
+    """P = 2 mu (F - R) + lam (J - 1) cof(F) with R = U V^T from the SVD of F (signed singular values)."""
+    return 2.0 * mu * (f - u * wp.transpose(v)) + lam * (wp.determinant(f) - 1.0) * cof
 
 
 @wp.func
@@ -104,7 +103,7 @@ def evaluate_tets(
     mu = tet_mu[t]
     lam = tet_lambda[t]
     su, sig, sv = wp.svd3(f)
-    p = 2.0 * mu * (f - su * wp.transpose(sv)) + lam * (wp.determinant(f) - 1.0) * cof  # first_piola
+    p = first_piola(f, cof, su, sv, mu, lam)
     v0 = rest_volume[t]
     tet_cof[t] = cof
     tet_u[t] = su

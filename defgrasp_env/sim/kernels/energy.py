@@ -9,7 +9,7 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 import warp as wp
 
 from .contact import box_penetration
-from .elastic import cofactor, deformation_gradient
+from .elastic import deformation_gradient
 
 
 @wp.func
