@@ -177,3 +177,19 @@ def test_out_of_range_action_is_clipped():
     oa, *_ = a.step(big)
     ob, *_ = b.step(np.ones(7, np.float32))
     assert np.array_equal(oa["agent_pos"], ob["agent_pos"])
+
+
+def test_torch_outputs_and_zero_copy_full_state():
+    torch = pytest.importorskip("torch")
+    venv = gym.make_vec(ENV_ID, num_envs=2, torch_outputs=True)
+    obs, _ = venv.reset(seed=0)
+    assert isinstance(obs["agent_pos"], torch.Tensor) and obs["agent_pos"].shape == (2, 10)
+    full = venv.unwrapped.full_state_torch()
+    scene = venv.unwrapped.scene
+    # zero-copy: the tensor shares memory with the simulation's array and sees the next step
+    assert full["positions"].data_ptr() == scene.state.positions.ptr
+    before = full["positions"].clone()
+    venv.step(np.tile(np.array([0, -1, 0, 0, 0, 0, 1], np.float32), (2, 1)))
+    assert not torch.equal(before, full["positions"])
+    np.testing.assert_array_equal(full["positions"].numpy(), scene.state.positions.numpy())
+    assert full["von_mises"].shape == (scene.model.num_tets,)

@@ -30,7 +30,11 @@ class DeformablePickupVectorEnv(VectorEnv):
     inside the ending step; its last observation and info go to ``info["final_obs"]`` and
     ``info["final_info"]``), ``DISABLED`` (reset with ``reset(options={"reset_mask": mask})``; other
     worlds stay bit-identical). ``info`` holds arrays [N] with ``_key`` masks.
-    ``torch_outputs=True`` returns observations as torch tensors (zero-copy from the numpy arrays).
+    ``torch_outputs=True`` returns observations as torch tensors on the simulation device (they are
+    small and assembled on the host, so on CUDA they are one upload per step).
+    ``full_state_torch()`` gives the complete FEM state as zero-copy torch views of the simulation's
+    own arrays (on the GPU when ``device="cuda:0"``): node positions/velocities/forces [N, 3] and
+    von Mises stress [T] of all worlds, with ``model.node_start`` / ``model.tet_start`` offsets.
     """
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
@@ -117,6 +121,18 @@ class DeformablePickupVectorEnv(VectorEnv):
             return None
         return np.stack([self._render_world(w) for w in range(self.num_envs)])
 
+    def full_state_torch(self) -> dict:
+        """Zero-copy torch views of the FEM state of all worlds (world frame, SI units): valid until
+        the next ``step``/``reset`` writes into them; copy what must be kept."""
+        if self.scene is None:
+            raise RuntimeError("call reset() before full_state_torch()")
+        import warp as wp
+
+        st = self.scene.state
+        return {name: wp.to_torch(getattr(st, name)) for name in (
+            "positions", "velocities", "elastic_force", "contact_force", "von_mises", "mean_von_mises",
+            "pad_normal_force")}
+
     def close_extras(self, **kwargs):
         self.scene = None
         self._renderers = {}
@@ -141,7 +157,8 @@ class DeformablePickupVectorEnv(VectorEnv):
         if self.torch_outputs:
             import torch
 
-            obs = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in obs.items()}
+            device = "cpu" if self.config.device == "cpu" else str(self.config.device)
+            obs = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device) for k, v in obs.items()}
         return obs
 
     def _render_world(self, w: int) -> np.ndarray:
