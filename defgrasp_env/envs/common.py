@@ -77,3 +77,25 @@ def step_infos(scene: PickupScene, result: dict, stats, diverged: np.ndarray) ->
         penetration=stats.penetration.astype(np.float64),
     )
     return info
+
+
+class SceneCamera:
+    """Renders worlds of a ``PickupScene`` with the configured camera; one renderer (its object's
+    surface and ray-cast structure) per world, rebuilt when the world's object changes."""
+
+    def __init__(self, config: PickupConfig):
+        self.config = config
+        self._renderers: dict[int, tuple[str, object]] = {}
+
+    def render(self, scene: PickupScene, w: int) -> np.ndarray:
+        """HxWx3 uint8 image of world ``w``."""
+        from ..render.renderer import SceneRenderer
+
+        name = scene.object_names[w]
+        if w not in self._renderers or self._renderers[w][0] != name:
+            mesh = scene.meshes[w]
+            self._renderers[w] = (name, SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2))
+        centers, quats = scene.pad_poses()
+        half = scene.model.pad_half_extents.numpy()[2 * w:2 * w + 2]
+        return self._renderers[w][1].render(scene.node_positions(w), centers[w], quats[w], half,
+                                            goal=np.asarray(self.config.goal, np.float32))

@@ -8,8 +8,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from ..render.renderer import SceneRenderer
-from .common import check_actions, draw_setup, observations, step_infos, targets
+from .common import SceneCamera, check_actions, draw_setup, observations, step_infos, targets
 from .config import PickupConfig
 from .scene import PickupScene
 from .task import PickupTask, action_space, observation_spaces
@@ -87,8 +86,7 @@ class DeformablePickupEnv(gym.Env):
         self.action_space = action_space(self.config)
         self.scene: PickupScene | None = None
         self.task = PickupTask(self.config, 1)
-        self._renderer: SceneRenderer | None = None
-        self._renderer_object: str | None = None
+        self._camera = SceneCamera(self.config)
 
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -120,7 +118,7 @@ class DeformablePickupEnv(gym.Env):
         return self._render_world(0)
 
     def close(self):
-        self._renderer = None
+        self._camera = SceneCamera(self.config)
         self.scene = None
 
     # -- internals -------------------------------------------------------------------------
@@ -129,12 +127,4 @@ class DeformablePickupEnv(gym.Env):
         return {k: v[0] for k, v in observations(self.config, self.scene, self.task, pixels).items()}
 
     def _render_world(self, w: int) -> np.ndarray:
-        scene = self.scene
-        if self._renderer is None or self._renderer_object != scene.object_names[w]:
-            mesh = scene.meshes[w]
-            self._renderer = SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2)
-            self._renderer_object = scene.object_names[w]
-        centers, quats = scene.pad_poses()
-        half = scene.model.pad_half_extents.numpy()[:2]
-        return self._renderer.render(scene.node_positions(w), centers[w], quats[w], half,
-                                     goal=np.asarray(self.config.goal, np.float32))
+        return self._camera.render(self.scene, w)

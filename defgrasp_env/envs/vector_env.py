@@ -9,7 +9,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .common import check_actions, draw_setup, observations, step_infos, targets
+from .common import SceneCamera, check_actions, draw_setup, observations, step_infos, targets
 from .config import PickupConfig
 from .pickup_env import make_config
 from .scene import PickupScene
@@ -64,7 +64,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         self.scene: PickupScene | None = None
         self.task = PickupTask(self.config, num_envs)
         self._needs_reset = np.zeros(num_envs, bool)
-        self._renderers: dict[int, Any] = {}
+        self._camera = SceneCamera(self.config)
 
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
@@ -135,7 +135,7 @@ class DeformablePickupVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs):
         self.scene = None
-        self._renderers = {}
+        self._camera = SceneCamera(self.config)
 
     # -- internals -------------------------------------------------------------------------
     def _reset_worlds(self, mask: np.ndarray) -> None:
@@ -162,13 +162,4 @@ class DeformablePickupVectorEnv(VectorEnv):
         return obs
 
     def _render_world(self, w: int) -> np.ndarray:
-        from ..render.renderer import SceneRenderer
-
-        scene = self.scene
-        if w not in self._renderers:
-            mesh = scene.meshes[w]
-            self._renderers[w] = SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2)
-        centers, quats = scene.pad_poses()
-        half = scene.model.pad_half_extents.numpy()[:2]
-        return self._renderers[w].render(scene.node_positions(w), centers[w], quats[w], half,
-                                         goal=np.asarray(self.config.goal, np.float32))
+        return self._camera.render(self.scene, w)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from numbers import Real
 
-__all__ = ["positive_length", "check_node_budget", "MAX_LATTICE_NODES"]
+__all__ = ["positive_length", "checked_resolution", "check_node_budget", "MAX_LATTICE_NODES"]
 
 # Guard against a resolution so fine that the meshing would exhaust memory.
 MAX_LATTICE_NODES = 16_000_000
@@ -20,6 +20,18 @@ def positive_length(name: str, value: object, upper: float = math.inf) -> float:
         hi = "inf)" if math.isinf(upper) else f"{upper:g}]"
         raise ValueError(f"{name} must be in (0, {hi} m, got {value!r}")
     return v
+
+
+def checked_resolution(resolution: object, limit: float, subject: str, across: str) -> float:
+    """``resolution`` as a float in (0, limit] m (at least one tet layer across ``across`` of
+    ``subject``), or raise TypeError/ValueError naming the accepted range."""
+    try:
+        return positive_length("resolution", resolution, upper=limit)
+    except ValueError:
+        raise ValueError(
+            f"resolution must be in (0, {limit:g}] m for {subject} (at least one tet layer "
+            f"across {across}), got {resolution!r}"
+        ) from None
 
 
 def check_node_budget(count: int, spacing: float) -> None:

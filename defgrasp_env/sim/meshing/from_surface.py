@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from ._checks import positive_length
+from ._checks import checked_resolution
 from .primitives import BCC_SPACING_PER_EDGE
 from .sdf import Implicit
 from .stuffing import stuff_implicit
@@ -146,12 +146,6 @@ def mesh_from_surface(source: str | os.PathLike | trimesh.Trimesh, resolution: f
     """
     mesh = _load(source)
     extent = float(np.min(mesh.extents))
-    try:
-        res = positive_length("resolution", resolution, upper=extent)
-    except ValueError:
-        raise ValueError(
-            f"resolution must be in (0, {extent:g}] m for this surface (at least one tet layer "
-            f"across its smallest bounding-box extent), got {resolution!r}"
-        ) from None
+    res = checked_resolution(resolution, extent, "this surface", "its smallest bounding-box extent")
     nodes, tets = stuff_implicit(TrimeshImplicit(mesh), res * BCC_SPACING_PER_EDGE)
     return finalize_mesh(nodes, tets, what=f"surface mesh at resolution {res:g} m")

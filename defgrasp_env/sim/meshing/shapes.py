@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from . import primitives as prim
-from ._checks import positive_length
+from ._checks import checked_resolution, positive_length
 from .tetmesh import TetMesh, finalize_mesh
 
 __all__ = ["ObjectShape", "OBJECT_SHAPES", "make_object_mesh"]
@@ -162,13 +162,7 @@ def make_object_mesh(name: str, resolution: float | None = None, **size_kwargs: 
     if resolution is None:
         res = min(shape.default_resolution, thickness)
     else:
-        try:
-            res = positive_length("resolution", resolution, upper=thickness)
-        except ValueError:
-            raise ValueError(
-                f"resolution must be in (0, {thickness:g}] m for {name} (at least one tet "
-                f"layer across its smallest dimension), got {resolution!r}"
-            ) from None
+        res = checked_resolution(resolution, thickness, name, "its smallest dimension")
     nodes, tets = shape.build(sizes, res)
     return finalize_mesh(nodes, tets, what=f"{name} at resolution {res:g} m")
 
