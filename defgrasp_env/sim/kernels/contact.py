@@ -195,3 +195,38 @@ def evaluate_nodes(
     contact_hessian[i] = hess
     contact_force[i] = force
     elastic_force[i] = wp.vec3(0.0)
+
+
+@wp.kernel
+def keep_pad_depth(
+    x_start: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    free: wp.array(dtype=wp.vec3),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pads_per_world: int,
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=wp.vec3),
+):
+    """Initial Newton guess of a node touching a pad at the substep start: the guess x (x_start +
+    dt v_start) with its depth along the pad normal put back to the depth it had at the start, in
+    the pad's moved frame; the tangential part (sliding or sticking) is kept.
+
+    The plain guess lets a node of a squeezed object that a turn or slide of the pad moves by
+    micrometres start outside the pad; Newton sees no contact stiffness there, sends the node
+    millimetres into the pad, and the line search shortens the whole world's step to ~1 %."""
+    i = wp.tid()
+    w = node_world[i]
+    slots = pads_per_world + 1
+    for k in range(pads_per_world):
+        if lag_normal_force[i * slots + 1 + k] > 0.0:
+            pad = w * pads_per_world + k
+            n = lag_normal[i * slots + 1 + k]  # pad frame
+            start = wp.quat_rotate_inv(pad_rot0[pad], x_start[i] - pad_pos0[pad])
+            guess = wp.quat_rotate_inv(pad_rot1[pad], x[i] - pad_pos1[pad])
+            guess = guess + wp.dot(start - guess, n) * n
+            fr = free[i]
+            x[i] = wp.cw_mul(fr, pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], guess)) + wp.cw_mul(wp.vec3(1.0) - fr, x[i])
