@@ -107,8 +107,9 @@ class ImplicitSolver:
         self._step_start, self._x_start, self._v_new, self._x_trial = vec(), vec(), vec(), vec()
         self._r, self._z, self._p, self._ap, self._dx = vec(), vec(), vec(), vec(), vec()
         self._diag, self._precond, self._contact_h, self._cof = mat(), mat(), mat(), mat(model.num_tets)
-        self._tet_u, self._tet_v = mat(model.num_tets), mat(model.num_tets)
-        self._tet_twist = wp.zeros(model.num_tets, dtype=wp.vec3, device=d)
+        self._tet_rotation = wp.zeros(model.num_tets, dtype=wp.quat, device=d)
+        self._tet_r = mat(model.num_tets)
+        self._tet_twist = wp.zeros(model.num_tets, dtype=float, device=d)
         slots = n * (model.pads_per_world + 1)
         self._lag_fn = wp.zeros(slots, dtype=float, device=d)
         self._lag_normal = vec(slots)
@@ -170,13 +171,13 @@ class ImplicitSolver:
     def _newton(self, plan: dict) -> None:
         cfg, wi = self.config, self._wi
         wp.copy(wi["newton_active"], wi["all_on"])
-        for _ in range(cfg.newton_iterations):
+        for it in range(cfg.newton_iterations):
             for cmd in plan["evaluate"]:
                 cmd.launch()
             self._run_cg(plan)
             for cmd in plan["coarse_post"]:
                 cmd.launch()
-            self._line_search(plan)
+            self._line_search(plan, first=it == 0)
             for cmd in plan["apply"]:
                 cmd.launch()
             if cfg.check_every and not wi["newton_active"].numpy().any():
@@ -190,15 +191,19 @@ class ImplicitSolver:
             if cfg.check_every and (it + 1) % cfg.check_every == 0 and not active.numpy().any():
                 break
 
-    def _line_search(self, plan: dict) -> None:
-        """Per world, halve the Newton step until the incremental potential does not increase."""
+    def _line_search(self, plan: dict, first: bool) -> None:
+        """Per world, halve the Newton step until the incremental potential does not increase.
+        The start energy is evaluated at the first Newton iteration of a substep; later ones start
+        from the energy of the step accepted last (kept by ``end_line_search_trial``)."""
         cfg = self.config
         self._wf["step"].fill_(1.0)
         if cfg.line_search_steps == 0:
             return
-        self._energy0.zero_()
-        for cmd in plan["energy0"]:
-            cmd.launch()
+        if first:
+            self._energy0.zero_()
+            for cmd in plan["energy0"]:
+                cmd.launch()
+        plan["begin_search"].launch()
         for _ in range(cfg.line_search_steps + 1):
             for cmd in plan["trial"]:
                 cmd.launch()
@@ -241,10 +246,10 @@ class ImplicitSolver:
         def tets(x, active, energy=None):
             if energy is not None:
                 return rec(kenergy.tet_energy, t, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
-                           m.tet_lambda, m.tet_world, active, energy)
+                           m.tet_lambda, m.tet_world, active, self._tet_rotation, energy)
             return rec(ke.evaluate_tets, t, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda,
-                       m.tet_world, active, self._r, self._diag, work.elastic_force, self._cof, work.von_mises,
-                       self._tet_u, self._tet_v, self._tet_twist)
+                       m.tet_world, active, self._tet_rotation, self._r, self._diag, work.elastic_force, self._cof,
+                       work.von_mises, self._tet_r, self._tet_twist)
 
         def begin_solve(active):
             return rec(kn.begin_linear_solve, n, self._r, self._diag, m.free_axes, m.node_world, active,
@@ -259,8 +264,8 @@ class ImplicitSolver:
                 cmds.append(rec(kn.coarse_clear, n, m.node_world, active, *at))
                 for k in range(3):
                     cmds.append(rec(ke.hessian_product_tets, t, t_dirs[k], m.tets, m.tet_rest_inv, m.tet_rest_volume,
-                                    m.tet_mu, m.tet_lambda, self._cof, m.tet_world, active, at[k], self._tet_u,
-                                    self._tet_v, self._tet_twist))
+                                    m.tet_mu, m.tet_lambda, self._cof, m.tet_world, active, at[k], self._tet_r,
+                                    self._tet_twist))
                     cmds.append(rec(kn.cg_node_product, n, t_dirs[k], m.node_mass, self._contact_h, m.free_axes,
                                     m.node_world, active, 1.0 / (h * h), at[k], self._coarse_scratch))
             cmds += [
@@ -283,7 +288,8 @@ class ImplicitSolver:
             "lag": [rec(kc.lag_contacts, n, self._x_start, m.node_world, self._pad[0], self._pad[1],
                         m.pad_half_extents, m.pads_per_world, c.stiffness, self._lag_fn, self._lag_normal),
                     rec(kc.keep_pad_depth, n, self._x_start, m.node_world, m.free_axes, *self._pad, m.pads_per_world,
-                        self._lag_fn, self._lag_normal, x)],
+                       self._lag_fn, self._lag_normal, x),
+                    rec(ke.seed_rotations, t, x, m.tets, m.tet_rest_inv, self._tet_rotation)],
             "evaluate": [
                 nodes(x, newton_active, 0), tets(x, newton_active), begin_solve(newton_active),
                 *coarse(newton_active, 1),
@@ -291,8 +297,7 @@ class ImplicitSolver:
             "coarse_post": coarse(newton_active, 0),
             "cg": [
                 rec(ke.hessian_product_tets, t, self._p, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
-                    m.tet_lambda, self._cof, m.tet_world, cg_active, self._ap, self._tet_u, self._tet_v,
-                    self._tet_twist),
+                    m.tet_lambda, self._cof, m.tet_world, cg_active, self._ap, self._tet_r, self._tet_twist),
                 rec(kn.cg_node_product, n, self._p, m.node_mass, self._contact_h, m.free_axes, m.node_world,
                     cg_active, 1.0 / (h * h), self._ap, wf["p_ap"]),
                 rec(kn.cg_update_solution, n, self._p, self._ap, self._precond, m.free_axes, m.node_world,
@@ -302,9 +307,8 @@ class ImplicitSolver:
                 rec(kn.cg_end_iteration, w, wf["rz"], wf["rz_new"], wf["rz0"], wf["p_ap"], cfg.cg_tolerance ** 2,
                     cfg.cg_update_fraction * cfg.newton_tolerance, cfg.cg_iterations, wi["cg_it"], wi["cg_total"], cg_active,
                     wf["cg_update"])],
-            "energy0": [
-                nodes(x, newton_active, 0, self._energy0), tets(x, newton_active, self._energy0),
-                rec(kenergy.begin_line_search, w, newton_active, wf["step"], searching, self._energy_trial)],
+            "energy0": [nodes(x, newton_active, 0, self._energy0), tets(x, newton_active, self._energy0)],
+            "begin_search": rec(kenergy.begin_line_search, w, newton_active, wf["step"], searching, self._energy_trial),
             "trial": [
                 rec(kenergy.trial_positions, n, x, self._dx, m.node_world, wf["step"], self._x_trial),
                 nodes(self._x_trial, searching, 0, self._energy_trial),

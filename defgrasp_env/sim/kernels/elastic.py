@@ -4,13 +4,16 @@ Energy density psi(F) = mu |F - R|^2 + lam/2 (J - 1)^2 (Stomakhin et al. 2012), 
 the polar decomposition of F (from the SVD with signed singular values, so inverted tets are pushed
 back). mu and lam are the Lamé parameters: the small-strain limit is linear elasticity.
 First Piola stress P = 2 mu (F - R) + lam (J - 1) cof(F), cof(F) = dJ/dF.
-The Hessian used by Newton is 2 mu (I - dR/dF)_+ + lam cof (x) cof. Its shear part acts on
-dF in the singular frame of F = U diag(s) V^T, M = U^T dF V: the symmetric part of M is kept, the
-skew part (rotation) of the pair (i, j) is scaled by clamp(1 - 2/(s_i + s_j), 0, 1) (the exact
-eigenvalue, projected to be positive semi-definite, and 1 where s_i + s_j <= 0 for inverted tets).
-Without the -dR/dF term (the projective-dynamics majorizer 2 mu I) infinitesimal rotations of
-the elements would be as stiff as shear, and Newton converged only at a rate of about
-1 / (L/a)^2 per iteration on bending of slender objects (a beam, a rope). The small
+The Hessian used by Newton is 2 mu (I - dR/dF)_+ + lam cof (x) cof. Its shear part acts on dF
+through M = R^T dF: the symmetric part of M is kept, the skew part (an infinitesimal rotation) is
+scaled by c = clamp(1 - 3 / tr(S), 0, 1), S = R^T F (1 where tr(S) <= 0, for inverted tets).
+The exact eigenvalue of the rotation pair (i, j) in the singular frame is 2 mu (1 - 2 / (s_i + s_j));
+c uses the mean pair sum 2 tr(S) / 3 for all three pairs, so products need R only, not the SVD
+frames. Without the -dR/dF term (the projective-dynamics majorizer 2 mu I) infinitesimal rotations
+of the elements would be as stiff as shear, and Newton converged only at a rate of about
+1 / (L/a)^2 per iteration on bending of slender objects (a beam, a rope). R comes from a
+warm-started Newton iteration on the rotation (``polar_rotation``), seeded by the SVD once per
+substep. The small
 lam (J - 1) d2J/dF2 term (zero at rest) is dropped. The Hessian is positive semi-definite (plus
 the positive mass term); the energy line search keeps every Newton step a descent step; the
 gradient, hence the converged solution, is exact. The block-Jacobi preconditioner keeps the
@@ -47,17 +50,68 @@ def deformation_gradient(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, res
 
 
 @wp.func
-def first_piola(f: wp.mat33, cof: wp.mat33, u: wp.mat33, v: wp.mat33, mu: float, lam: float):
-    """P = 2 mu (F - R) + lam (J - 1) cof(F) with R = U V^T from the SVD of F (signed singular values)."""
-    return 2.0 * mu * (f - u * wp.transpose(v)) + lam * (wp.determinant(f) - 1.0) * cof
+def first_piola(f: wp.mat33, cof: wp.mat33, r: wp.mat33, mu: float, lam: float):
+    """P = 2 mu (F - R) + lam (J - 1) cof(F), R the rotation of the polar decomposition of F."""
+    return 2.0 * mu * (f - r) + lam * (wp.determinant(f) - 1.0) * cof
 
 
 @wp.func
-def twist_factor(s: float):
-    """Scale of the rotational (skew) part of dF for a pair of singular values of sum s."""
-    if s <= 0.0:
+def svd_rotation(f: wp.mat33):
+    """R = U V^T from the SVD of F with signed singular values (det R = +1, also for det F < 0)."""
+    u, sigma, v = wp.svd3(f)
+    return wp.quat_from_matrix(u * wp.transpose(v))
+
+
+@wp.func
+def newton_polar(f: wp.mat33, guess: wp.quat):
+    """Newton's method for the rotation R that maximises tr(R^T F), from ``guess``. With A = R^T F,
+    the gradient of tr(R^T F) over a body rotation d (R <- R exp(d)) is
+    g = (A21 - A12, A02 - A20, A10 - A01) and its Hessian -(tr(A) I - sym(A)), so
+    d = (tr(A) I - sym(A))^-1 g. That matrix is positive definite exactly near the maximum (its
+    eigenvalues are the pair sums of the signed singular values of F), so it also tells whether
+    a stationary point is the maximum. Returns the rotation and whether it converged: |d| < 1e-7
+    rad, or < 1e-5 rad after 6 steps (float32 noise of an ill-conditioned F; the convergence
+    is quadratic, so from a good guess it takes 1-3 steps)."""
+    q = guess
+    state = int(0)  # 0 iterating, 1 converged, -1 not near the maximum
+    angle = float(1.0)
+    for _ in range(6):
+        if state == 0:
+            a = wp.transpose(wp.quat_to_matrix(q)) * f
+            g = wp.vec3(a[2, 1] - a[1, 2], a[0, 2] - a[2, 0], a[1, 0] - a[0, 1])
+            h = wp.trace(a) * wp.identity(n=3, dtype=float) - 0.5 * (a + wp.transpose(a))
+            if h[0, 0] <= 0.0 or h[0, 0] * h[1, 1] - h[0, 1] * h[1, 0] <= 0.0 or wp.determinant(h) <= 0.0:
+                state = -1
+            else:
+                d = wp.inverse(h) * g
+                angle = wp.length(d)
+                if angle > 0.0:
+                    q = wp.normalize(q * wp.quat_from_axis_angle(d / angle, angle))
+                if angle < 1.0e-7:
+                    state = 1
+    return q, state == 1 or (state == 0 and angle < 1.0e-5)
+
+
+@wp.func
+def polar_rotation(f: wp.mat33, guess: wp.quat):
+    """Rotation of the polar decomposition F = R S (the R in SO(3) that maximises tr(R^T F)):
+    ``newton_polar`` from ``guess``, else from the float32 SVD's rotation (which alone is off by
+    up to 5e-4 for some F), else that rotation."""
+    q, ok = newton_polar(f, guess)
+    if not ok:
+        seed = svd_rotation(f)
+        q, ok = newton_polar(f, seed)
+        if not ok:
+            q = seed
+    return q
+
+
+@wp.func
+def twist_factor(trace_s: float):
+    """Kept fraction of the rotational (skew) part of R^T dF, from tr(S) = tr(R^T F)."""
+    if trace_s <= 0.0:
         return 1.0
-    return wp.clamp(1.0 - 2.0 / s, 0.0, 1.0)
+    return wp.clamp(1.0 - 3.0 / trace_s, 0.0, 1.0)
 
 
 @wp.func
@@ -80,19 +134,20 @@ def evaluate_tets(
     tet_lambda: wp.array(dtype=float),
     tet_world: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
+    # in: warm start; out: the rotation at x
+    tet_rotation: wp.array(dtype=wp.quat),
     # outputs
     residual: wp.array(dtype=wp.vec3),
     diag_block: wp.array(dtype=wp.mat33),
     elastic_force: wp.array(dtype=wp.vec3),
     tet_cof: wp.array(dtype=wp.mat33),
     von_mises: wp.array(dtype=float),
-    tet_u: wp.array(dtype=wp.mat33),
-    tet_v: wp.array(dtype=wp.mat33),
-    tet_twist: wp.array(dtype=wp.vec3),
+    tet_r: wp.array(dtype=wp.mat33),
+    tet_twist: wp.array(dtype=float),
 ):
     """Add each tet's elastic force to ``residual`` and ``elastic_force`` and its Hessian diagonal
-    blocks to ``diag_block``; store cof(F), the singular frames U, V of F and the twist factors
-    (pairs (1,2), (0,2), (0,1)) for Hessian products, and the von Mises stress."""
+    blocks to ``diag_block``; store cof(F), the polar rotation R of F (as quaternion and matrix)
+    and the twist factor for Hessian products, and the von Mises stress."""
     t = wp.tid()
     if world_active[tet_world[t]] == 0:
         return
@@ -102,14 +157,14 @@ def evaluate_tets(
     cof = cofactor(f)
     mu = tet_mu[t]
     lam = tet_lambda[t]
-    su, sig, sv = wp.svd3(f)
-    p = first_piola(f, cof, su, sv, mu, lam)
+    q = polar_rotation(f, tet_rotation[t])
+    r = wp.quat_to_matrix(q)
+    p = first_piola(f, cof, r, mu, lam)
     v0 = rest_volume[t]
     tet_cof[t] = cof
-    tet_u[t] = su
-    tet_v[t] = sv
-    tet_twist[t] = wp.vec3(twist_factor(sig[1] + sig[2]), twist_factor(sig[0] + sig[2]),
-                           twist_factor(sig[0] + sig[1]))
+    tet_rotation[t] = q
+    tet_r[t] = r
+    tet_twist[t] = twist_factor(wp.trace(wp.transpose(r) * f))
     von_mises[t] = von_mises_of(f, p)
     b1 = row(dm_inv, 0)
     b2 = row(dm_inv, 1)
@@ -143,9 +198,8 @@ def hessian_product_tets(
     tet_world: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
     product: wp.array(dtype=wp.vec3),
-    tet_u: wp.array(dtype=wp.mat33),
-    tet_v: wp.array(dtype=wp.mat33),
-    tet_twist: wp.array(dtype=wp.vec3),
+    tet_r: wp.array(dtype=wp.mat33),
+    tet_twist: wp.array(dtype=float),
 ):
     """product += K * direction (the elastic Hessian above), accumulated per node."""
     t = wp.tid()
@@ -161,18 +215,26 @@ def hessian_product_tets(
     df = wp.outer(direction[idx[1]] - p0, b1) + wp.outer(direction[idx[2]] - p0, b2) + wp.outer(
         direction[idx[3]] - p0, b3)
     cof = tet_cof[t]
-    su = tet_u[t]
-    sv = tet_v[t]
-    c = tet_twist[t]
-    m = wp.transpose(su) * df * sv
-    # remove the fraction (1 - c) of the skew part of M = U^T dF V (the rotation, -dR/dF)
-    a01 = (1.0 - c[2]) * 0.5 * (m[0, 1] - m[1, 0])
-    a02 = (1.0 - c[1]) * 0.5 * (m[0, 2] - m[2, 0])
-    a12 = (1.0 - c[0]) * 0.5 * (m[1, 2] - m[2, 1])
-    rotation = wp.mat33(0.0, a01, a02, -a01, 0.0, a12, -a02, -a12, 0.0)
-    df_shear = df - su * rotation * wp.transpose(sv)
+    r = tet_r[t]
+    m = wp.transpose(r) * df
+    # remove the fraction (1 - c) of the skew part of M = R^T dF (the rotation, -dR/dF)
+    df_shear = df - (0.5 * (1.0 - tet_twist[t])) * (r * (m - wp.transpose(m)))
     dp = rest_volume[t] * (2.0 * tet_mu[t] * df_shear + tet_lambda[t] * wp.ddot(cof, df) * cof)
     wp.atomic_add(product, idx[0], dp * b0)
     wp.atomic_add(product, idx[1], dp * b1)
     wp.atomic_add(product, idx[2], dp * b2)
     wp.atomic_add(product, idx[3], dp * b3)
+
+
+@wp.kernel
+def seed_rotations(
+    x: wp.array(dtype=wp.vec3),
+    tets: wp.array(dtype=wp.vec4i),
+    rest_inv: wp.array(dtype=wp.mat33),
+    tet_rotation: wp.array(dtype=wp.quat),
+):
+    """Polar rotation of every tet by the SVD: the warm start of ``polar_rotation`` for a substep,
+    so that results depend on the state only, not on the solver's history."""
+    t = wp.tid()
+    idx = tets[t]
+    tet_rotation[t] = svd_rotation(deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t]))

@@ -9,7 +9,7 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 import warp as wp
 
 from .contact import box_penetration
-from .elastic import deformation_gradient
+from .elastic import deformation_gradient, polar_rotation
 
 
 @wp.func
@@ -23,9 +23,8 @@ def friction_potential(mu: float, normal_force: float, slip: wp.vec3, n: wp.vec3
 
 
 @wp.func
-def strain_energy_density(f: wp.mat33, mu: float, lam: float):
-    u, sigma, v = wp.svd3(f)
-    d = f - u * wp.transpose(v)
+def strain_energy_density(f: wp.mat33, rotation_guess: wp.quat, mu: float, lam: float):
+    d = f - wp.quat_to_matrix(polar_rotation(f, rotation_guess))
     j = wp.determinant(f)
     return mu * wp.ddot(d, d) + 0.5 * lam * (j - 1.0) * (j - 1.0)
 
@@ -108,15 +107,18 @@ def tet_energy(
     tet_lambda: wp.array(dtype=float),
     tet_world: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
+    tet_rotation: wp.array(dtype=wp.quat),
     energy: wp.array(dtype=wp.float64),
 ):
+    """energy += V0 psi(F) per world; ``tet_rotation`` (the rotations at the last evaluated
+    positions) warm-starts the polar rotation of F."""
     t = wp.tid()
     w = tet_world[t]
     if world_active[w] == 0:
         return
     idx = tets[t]
     f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t])
-    e = rest_volume[t] * strain_energy_density(f, tet_mu[t], tet_lambda[t])
+    e = rest_volume[t] * strain_energy_density(f, tet_rotation[t], tet_mu[t], tet_lambda[t])
     wp.atomic_add(energy, w, wp.float64(e))
 
 
@@ -143,7 +145,8 @@ def end_line_search_trial(
     searching: wp.array(dtype=int),
 ):
     """Accept the trial if it does not raise the energy (within float32 rounding of its terms),
-    else halve the step; stop halving at ``min_step``."""
+    else halve the step; stop halving at ``min_step``. An accepted trial's energy becomes the
+    start energy of the next Newton iteration (the step applied is the trial's, bit for bit)."""
     w = wp.tid()
     if searching[w] == 0:
         return
@@ -151,6 +154,7 @@ def end_line_search_trial(
     tol = wp.float64(rel_tol) * wp.abs(e0) + wp.float64(1.0e-12)
     if trial_energy[w] <= e0 + tol or step_length[w] <= min_step:
         searching[w] = 0
+        start_energy[w] = trial_energy[w]
     else:
         step_length[w] = 0.5 * step_length[w]
     trial_energy[w] = wp.float64(0.0)
