@@ -29,6 +29,9 @@ NUM_KEYPOINTS = 8
 #: Start height of the flange above the ground (m) and pad clearance kept above the ground (m).
 START_FLANGE_HEIGHT = 0.30
 GROUND_CLEARANCE = 0.001
+#: Half extents (m) of each pad's collision box, and the signs of its 8 corners.
+PAD_HALF_EXTENTS = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2, 0.0, 0.0])
+_CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
 @functools.lru_cache(maxsize=16)
@@ -72,7 +75,7 @@ class PickupScene:
         self.object_names = [s.object_name for s in setups]
         meshes = [object_mesh(s.object_name, config.object_resolution) for s in setups]
         contact = ContactParams(config.contact_stiffness, config.ground_friction, config.pad_friction)
-        half = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2, 0.0, 0.0])
+        half = PAD_HALF_EXTENTS
         self.model = build_model(meshes, [s.material for s in setups],
                                  [(s.position, s.quat) for s in setups], pad_half_extents=[half, half],
                                  contact=contact, device=config.device)
@@ -148,16 +151,17 @@ class PickupScene:
         world = pos[:, None, :] + quat_rotate(quat[:, None, :], centers)
         return world, np.repeat(quat[:, None, :], 2, axis=1)
 
-    def _lift_above_ground(self, q: np.ndarray, gap: np.ndarray) -> np.ndarray:
-        """Raise the flange so that no pad corner is below GROUND_CLEARANCE."""
+    def _lift_above_ground(self, q: np.ndarray, gap: np.ndarray):
+        """Raise the flange so that no pad corner is below GROUND_CLEARANCE. Returns the joints and
+        the pad poses (as ``pad_poses``) for them."""
         centers, quats = self.pad_poses(q, gap)
-        half = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2, 0, 0])
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
-        corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], signs * half)
+        corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], _CORNER_SIGNS * PAD_HALF_EXTENTS)
         lowest = corners[..., 1].reshape(len(q), -1).min(axis=1)
-        q = q.copy()
-        q[:, 1] += np.maximum(GROUND_CLEARANCE - lowest, 0.0)
-        return np.clip(q, JOINT_LOWER, JOINT_UPPER)
+        lifted = q.copy()
+        lifted[:, 1] += np.maximum(GROUND_CLEARANCE - lowest, 0.0)
+        lifted = np.clip(lifted, JOINT_LOWER, JOINT_UPPER)
+        centers[..., 1] += (lifted[:, 1] - q[:, 1])[:, None]  # joint 1 is the world-y slide
+        return lifted, centers, quats
 
     def wrist_targets_from_delta(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Target flange pos [W,3], quat [W,4] and gap [W] for normalised delta actions [W,7]."""
@@ -201,10 +205,14 @@ class PickupScene:
         reports = []
         for k in range(count):
             gap = self.driver.step(target_gap, self.gap, h, self.tip_force[:, 0], self.tip_force[:, 1])
-            q = self._lift_above_ground(np.clip(q_start + q_move * (k + 1) / count, JOINT_LOWER, JOINT_UPPER), gap)
-            self.q = np.where(active[:, None], q, self.q)
-            self.gap = np.where(active, gap, self.gap)
-            pos, quat = self.pad_poses()
+            q, pos, quat = self._lift_above_ground(
+                np.clip(q_start + q_move * (k + 1) / count, JOINT_LOWER, JOINT_UPPER), gap)
+            if not active.all():
+                self.q = np.where(active[:, None], q, self.q)
+                self.gap = np.where(active, gap, self.gap)
+                pos, quat = self.pad_poses()
+            else:
+                self.q, self.gap = q, gap
             self.control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
             self.control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
             reports.append(self.solver.step(self.state, self.state, self.control, h))

@@ -92,9 +92,18 @@ def fk_matrix_analytic(q) -> np.ndarray:
 
 
 def fk_analytic(q) -> tuple[np.ndarray, np.ndarray]:
-    """Flange ``(position [..., 3] m, quaternion [..., 4] xyzw)`` in the world for ``q [..., 6]``."""
-    T = fk_matrix_analytic(q)
-    return T[..., :3, 3].copy(), matrix_to_quat(T[..., :3, :3])
+    """Flange ``(position [..., 3] m, quaternion [..., 4] xyzw, w >= 0)`` in the world for ``q [..., 6]``.
+
+    The orientation Rz(q3) Rx(q4) Ry(q5) as the product of the three axis quaternions, in closed form.
+    """
+    a = _joints(q)
+    half = 0.5 * a[..., 3:]
+    c, s = np.cos(half), np.sin(half)
+    cz, cx, cy = c[..., 0], c[..., 1], c[..., 2]
+    sz, sx, sy = s[..., 0], s[..., 1], s[..., 2]
+    p0, p1, p2, p3 = cz * sx, sz * sx, cx * sz, cz * cx           # q_z * q_x
+    quat = np.stack([cy * p0 - sy * p2, cy * p1 + sy * p3, cy * p2 + sy * p0, cy * p3 - sy * p1], axis=-1)
+    return a[..., :3].copy(), np.where(quat[..., 3:4] < 0.0, -quat, quat)
 
 
 def pose_errors(q, target_pos, target_quat) -> tuple[np.ndarray, np.ndarray]:
