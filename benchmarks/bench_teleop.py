@@ -113,8 +113,11 @@ def make_setup(ik: str):
 
     import defgrasp_env  # noqa: F401
     from teleop import HumanTeleopAgent, HumanTeleopConfig, UdpGloveReceiver, UdpTrackerReceiver
+    from teleop.app.cli import one_torch_thread
     from teleop.app.devices import IK_SOLVERS
     from teleop.retarget import PinchRetargeter, RateLimits
+
+    one_torch_thread()  # as defgrasp-teleop does
 
     meta = json.loads((DATA / f"{STREAM}.json").read_text())
     env = gym.make("DeformablePickup-v0", action_mode="absolute", **meta["env_kwargs"])
