@@ -139,3 +139,29 @@ def test_plan_cube_faces_and_torus_rim():
     assert plan.rim[0]
     assert np.hypot(plan.point[0, 0], plan.point[0, 2]) == pytest.approx(0.03, abs=2e-3)
     assert plan.open_gap[0] < GAP_MAX
+
+
+@pytest.mark.parametrize("name", ["cuboid", "sphere"])
+def test_stiff_object_is_held_at_the_grip_force_limit(name):
+    """E = 1e7 and the scripted expert, which keeps commanding the jaw closed past contact: the
+    grip force (mean pad normal force at each control step) stays within 2 % of the 20 N limit over
+    the last 40 gripped steps (the object lifted and held) and exceeds it by more than 5 % in at
+    most 1 step (the first touch, which the driver backs off from). Before the regulation
+    (gripper.driver rule 4) these objects were held at 95 and 32 N."""
+    env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=1e7)
+    limit = env.unwrapped.config.gripper.grip_force_limit
+    expert = ScriptedPickupExpert.from_env(env.unwrapped)
+    obs, _ = env.reset(seed=0)
+    grip = []
+    for _ in range(env.spec.max_episode_steps):
+        obs, _, terminated, truncated, info = env.step(expert(obs))
+        grip.append(env.unwrapped.scene.tip_force[0].mean())
+        if terminated or truncated:
+            break
+    env.close()
+    grip = np.array(grip)
+    gripped = grip[grip > 0.5]
+    assert info["is_success"]
+    assert len(gripped) >= 40
+    np.testing.assert_allclose(gripped[-40:], limit, rtol=0.02)
+    assert np.sum(gripped > 1.05 * limit) <= 1

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..gripper import GAP_MAX, GAP_MIN, GripperDriver, pad_boxes
+from ..gripper import GAP_MAX, GAP_MIN, GripperDriver, pad_boxes, update_grip_stiffness
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.model import ContactParams, build_model, set_world_material
@@ -29,8 +29,8 @@ NUM_KEYPOINTS = 8
 #: Start height of the flange above the ground (m) and pad clearance kept above the ground (m).
 START_FLANGE_HEIGHT = 0.30
 GROUND_CLEARANCE = 0.001
-#: Half extents (m) of each pad's collision box, and the signs of its 8 corners.
-PAD_HALF_EXTENTS = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2, 0.0, 0.0])
+#: Half extents (m) of each pad's collision box (the pad plus its backing), and the signs of its 8 corners.
+PAD_BOX_HALF_EXTENTS = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2, 0.0, 0.0])
 _CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
@@ -75,7 +75,7 @@ class PickupScene:
         self.object_names = [s.object_name for s in setups]
         meshes = [object_mesh(s.object_name, config.object_resolution) for s in setups]
         contact = ContactParams(config.contact_stiffness, config.ground_friction, config.pad_friction)
-        half = PAD_HALF_EXTENTS
+        half = PAD_BOX_HALF_EXTENTS
         self.model = build_model(meshes, [s.material for s in setups],
                                  [(s.position, s.quat) for s in setups], pad_half_extents=[half, half],
                                  contact=contact, device=config.device)
@@ -89,6 +89,7 @@ class PickupScene:
         self.q = np.zeros((w, 6))
         self.gap = np.full(w, GAP_MAX)
         self.tip_force = np.zeros((w, 2))
+        self.grip_stiffness = np.zeros(w)  # N/m, the jaw driver's estimate (0: not gripping)
         self.materials = [s.material for s in setups]
         self.setups = list(setups)  # the setup each world was last reset to (initial pose, material)
         self.last_stats: SolveStats | None = None
@@ -116,6 +117,7 @@ class PickupScene:
             self.q[w] = [s.position[0], START_FLANGE_HEIGHT, s.position[2], 0.0, 0.0, 0.0]
             self.gap[w] = GAP_MAX
             self.tip_force[w] = 0.0
+            self.grip_stiffness[w] = 0.0
         self.state.positions.assign(x)
         self.state.velocities.assign(v)
         self._zero_outputs(mask)
@@ -155,7 +157,7 @@ class PickupScene:
         """Raise the flange so that no pad corner is below GROUND_CLEARANCE. Returns the joints and
         the pad poses (as ``pad_poses``) for them."""
         centers, quats = self.pad_poses(q, gap)
-        corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], _CORNER_SIGNS * PAD_HALF_EXTENTS)
+        corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], _CORNER_SIGNS * PAD_BOX_HALF_EXTENTS)
         lowest = corners[..., 1].reshape(len(q), -1).min(axis=1)
         lifted = q.copy()
         lifted[:, 1] += np.maximum(GROUND_CLEARANCE - lowest, 0.0)
@@ -193,8 +195,8 @@ class PickupScene:
              active: np.ndarray | None = None) -> SolveStats:
         """Move wrists and jaws toward the targets (limits enforced) and advance the FEM by one
         control period, in ``config.solver.substeps`` physics substeps. The jaw driver runs every
-        substep on the pad forces of the previous one, so closing stops within one substep of
-        reaching the force limit. Worlds with ``active == False`` keep their wrist and jaw still."""
+        substep on the pad forces of the previous one and a grip-stiffness estimate, and holds the
+        grip force at the limit (``gripper.driver`` rules 3-4). Worlds with ``active == False`` keep their wrist and jaw still."""
         cfg = self.config
         active = np.ones(self.num_worlds, bool) if active is None else active
         q_start = self.q.copy()
@@ -204,7 +206,9 @@ class PickupScene:
         h = cfg.dt / count
         reports = []
         for k in range(count):
-            gap = self.driver.step(target_gap, self.gap, h, self.tip_force[:, 0], self.tip_force[:, 1])
+            gap_before, force_before = self.gap, self.tip_force.mean(axis=1)
+            gap = self.driver.step(target_gap, self.gap, h, self.tip_force[:, 0], self.tip_force[:, 1],
+                                   self.grip_stiffness)
             q, pos, quat = self._lift_above_ground(
                 np.clip(q_start + q_move * (k + 1) / count, JOINT_LOWER, JOINT_UPPER), gap)
             if not active.all():
@@ -217,6 +221,8 @@ class PickupScene:
             self.control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
             reports.append(self.solver.step(self.state, self.state, self.control, h))
             self.tip_force = self.state.pad_normal_force.numpy().reshape(-1, 2).astype(np.float64)
+            self.grip_stiffness = update_grip_stiffness(self.grip_stiffness, gap_before, self.gap, force_before,
+                                                        self.tip_force.mean(axis=1), target_gap)
         stats = SolveStats(
             newton_iterations=np.sum([r.newton_iterations for r in reports], axis=0),
             cg_iterations=np.sum([r.cg_iterations for r in reports], axis=0),

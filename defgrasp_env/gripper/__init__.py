@@ -5,7 +5,15 @@ closing axis x_G (left pad at +x_G, right pad at -x_G), z_G = x_G x y_G. See ``l
 model and ``driver`` for the speed/force-limited actuation. All lengths in m, angles in rad.
 """
 
-from .driver import CLOSING_SPEED_RANGE_MM_S, GRIP_FORCE_RANGE, GripperConfig, GripperDriver, driver_step
+from .driver import (
+    CLOSING_SPEED_RANGE_MM_S,
+    CONTACT_FORCE,
+    GRIP_FORCE_RANGE,
+    GripperConfig,
+    GripperDriver,
+    driver_step,
+    update_grip_stiffness,
+)
 from .linkage import (
     ARC_PHASE,
     ARC_RADIUS,
@@ -26,8 +34,8 @@ from .linkage import (
 )
 
 __all__ = [
-    "ARC_PHASE", "ARC_RADIUS", "CLOSING_SPEED_RANGE_MM_S", "GAP_MAX", "GAP_MIN", "GAP_OFFSET",
+    "ARC_PHASE", "ARC_RADIUS", "CLOSING_SPEED_RANGE_MM_S", "CONTACT_FORCE", "GAP_MAX", "GAP_MIN", "GAP_OFFSET",
     "GRIP_FORCE_RANGE", "GripperConfig", "GripperDriver", "PAD_HALF_EXTENTS", "PAD_INWARD_NORMALS",
     "PAD_NAMES", "THETA_MAX", "THETA_MIN", "driver_step", "gap_from_theta", "pad_arc_centers",
-    "pad_boxes", "pad_centers", "tcp_offset", "theta_from_gap",
+    "pad_boxes", "pad_centers", "tcp_offset", "theta_from_gap", "update_grip_stiffness",
 ]
