@@ -275,14 +275,30 @@ def test_driver_regulates_a_stiffening_hertz_contact():
 
 def test_grip_stiffness_estimate_rules():
     """Secant of two touching readings; first touch gives 2 force / closing (contact taken to
-    begin halfway through the move); a
-    release (no touch, command open) resets to 0; contact lost while backing off under a closing
-    command keeps the estimate; a tiny move keeps the old value."""
+    begin halfway through the move); a release (no touch, command open) resets to 0; contact lost
+    while backing off under a closing command keeps the estimate; a tiny move keeps the old value;
+    a closing move without touch halves it, and 1 N/m or less is 0."""
     k = update_grip_stiffness(
-        [500.0, 0.0, 700.0, 700.0, 700.0],          # current estimates
-        [0.040, 0.040, 0.040, 0.0400, 0.040],       # gap before (m)
-        [0.039, 0.039, 0.041, 0.0410, 0.0400005],   # gap after
-        [1.0, 0.0, 1.0, 1.0, 1.0],                  # force before (N)
-        [3.0, 2.0, 0.0, 0.0, 1.5],                  # force after
-        [0.0, 0.0, 0.085, 0.0, 0.0])                # command
-    np.testing.assert_allclose(k, [2000.0, 4000.0, 0.0, 700.0, 700.0])
+        [500.0, 0.0, 700.0, 700.0, 700.0, 700.0, 1.5],              # current estimates
+        [0.040, 0.040, 0.040, 0.0400, 0.040, 0.040, 0.040],         # gap before (m)
+        [0.039, 0.039, 0.041, 0.0410, 0.0400005, 0.039, 0.039],     # gap after
+        [1.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0],                        # force before (N)
+        [3.0, 2.0, 0.0, 0.0, 1.5, 0.0, 0.0],                        # force after
+        [0.0, 0.0, 0.085, 0.0, 0.0, 0.0, 0.0])                      # command
+    np.testing.assert_allclose(k, [2000.0, 4000.0, 0.0, 700.0, 700.0, 350.0, 0.0])
+
+
+def test_jaw_closes_back_to_full_speed_after_the_object_slips_out():
+    """Gripping a stiff spring (k = 2e5 N/m) at the limit, then the object is gone (force 0) while
+    the command stays closed: the jaw's step doubles each substep and is back at the speed limit
+    (1.875 mm per 12.5 ms substep) within 6 substeps."""
+    cfg, h = GripperConfig(), 0.0125
+    g, k, f = np.array([0.0399]), np.array([2e5]), np.array([20.0])
+    steps = []
+    for _ in range(8):
+        g_new = driver_step(cfg, 0.0, g, h, f, f, k)[0]
+        k = update_grip_stiffness(k, g, g_new, f, 0.0, 0.0)
+        steps.append(g[0] - g_new[0])
+        g, f = g_new, np.zeros(1)
+    assert steps[0] == 0.0  # at the limit: holds
+    assert steps[6] == pytest.approx(cfg.closing_speed * h)

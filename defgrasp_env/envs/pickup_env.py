@@ -39,7 +39,7 @@ class DeformablePickupEnv(gym.Env):
       * ``"delta"`` (default): Box [-1, 1]^7 = flange linear velocity (3) x ``max_linear_speed``
         (m/s, world frame), flange angular velocity (3, axis-angle rate) x ``max_angular_speed``
         (rad/s, world frame), jaw command (1): -1 fully open (86 mm) ... +1 fully closed; the jaw
-        moves toward it at the gripper's closing speed and stops closing at its force limit.
+        moves toward it at the gripper's closing speed and holds the grip force at its force limit.
       * ``"absolute"``: Box [8] = target flange position (3, m), orientation quaternion xyzw (4),
         jaw gap (1, m); reached at most at the speed limits (used by teleoperation).
       Out-of-range values are clipped to the box; NaN/inf or a wrong shape raise ``ValueError``.

@@ -196,7 +196,8 @@ class PickupScene:
         """Move wrists and jaws toward the targets (limits enforced) and advance the FEM by one
         control period, in ``config.solver.substeps`` physics substeps. The jaw driver runs every
         substep on the pad forces of the previous one and a grip-stiffness estimate, and holds the
-        grip force at the limit (``gripper.driver`` rules 3-4). Worlds with ``active == False`` keep their wrist and jaw still."""
+        grip force at the limit (``gripper.driver`` rules 3-4). Worlds with ``active == False``
+        keep their wrist and jaw still."""
         cfg = self.config
         active = np.ones(self.num_worlds, bool) if active is None else active
         q_start = self.q.copy()

@@ -174,6 +174,9 @@ def update_grip_stiffness(stiffness, gap_before, gap_after, force_before, force_
     * not touching and the command is to open or hold (a release): 0 again; a contact lost while
       the jaw backs off under a closing command keeps its estimate, so that the jaw closes back
       by (limit - force) / k instead of overshooting again at full speed;
+    * a closing move that neither started nor ended touching: halved (below 1 N/m: 0), so a jaw
+      that closes on nothing (the object slipped out) doubles its step each substep back to the
+      speed limit;
     * otherwise unchanged.
     """
     k, g0, g1, f0, f1, cmd = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (
@@ -186,8 +189,10 @@ def update_grip_stiffness(stiffness, gap_before, gap_after, force_before, force_
     first_touch = ~touch0 & touch1 & (closing >= 1e-6)
     halfway = np.divide(2.0 * f1, closing, out=np.zeros_like(k), where=closing >= 1e-6)
     released = ~touch1 & (cmd >= g1)
-    out = np.where(two_point, secant, np.where(first_touch, np.maximum(k, halfway), k))
-    return np.clip(np.where(released, 0.0, out), 0.0, MAX_GRIP_STIFFNESS)
+    coasting = ~touch0 & ~touch1 & (closing >= 1e-6)
+    out = np.where(two_point, secant, np.where(first_touch, np.maximum(k, halfway), np.where(coasting, 0.5 * k, k)))
+    out = np.where(released | (out < 1.0), 0.0, out)
+    return np.minimum(out, MAX_GRIP_STIFFNESS)
 
 
 @dataclass(frozen=True)

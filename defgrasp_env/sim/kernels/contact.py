@@ -229,4 +229,5 @@ def keep_pad_depth(
             guess = wp.quat_rotate_inv(pad_rot1[pad], x[i] - pad_pos1[pad])
             guess = guess + wp.dot(start - guess, n) * n
             fr = free[i]
-            x[i] = wp.cw_mul(fr, pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], guess)) + wp.cw_mul(wp.vec3(1.0) - fr, x[i])
+            kept = pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], guess)
+            x[i] = wp.cw_mul(fr, kept) + wp.cw_mul(wp.vec3(1.0) - fr, x[i])
