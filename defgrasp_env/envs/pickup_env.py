@@ -69,6 +69,9 @@ class DeformablePickupEnv(gym.Env):
     ``gripper``, ``solver``, ``obs_type``, ``action_mode``, ``device``), plus ``render_mode``
     ("rgb_array").
 
+    **Reset options**: ``{"object": name}`` picks the episode's object among the configured ones
+    (for ``object="random"``; the random draw is still made, so the other draws stay the same).
+
     **Full state** beyond observations: ``env.unwrapped.scene`` (node positions, forces, stresses).
 
     **Version history**: v0: first release.
@@ -91,7 +94,13 @@ class DeformablePickupEnv(gym.Env):
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        setup = draw_setup(self.config, self.np_random)
+        unknown = sorted(set(options or {}) - {"object"})
+        if unknown:
+            raise ValueError(f"reset options must be a subset of ['object'], got {unknown}")
+        name = (options or {}).get("object")
+        if name is not None and name not in self.config.object_names:
+            raise ValueError(f"reset option object must be one of {list(self.config.object_names)}, got {name!r}")
+        setup = draw_setup(self.config, self.np_random, name)
         if self.scene is None or self.scene.object_names[0] != setup.object_name:
             self.scene = PickupScene(self.config, [setup])
         else:

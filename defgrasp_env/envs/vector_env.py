@@ -92,8 +92,6 @@ class DeformablePickupVectorEnv(VectorEnv):
         a = check_actions(actions, (n,) + self.single_action_space.shape, self.single_action_space.low,
                           self.single_action_space.high)
         resetting = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
-        if resetting.any():
-            self._reset_worlds(resetting)
         stats = self.scene.step(*targets(self.scene, a, self.config.action_mode), active=~resetting)
         diverged = (stats.diverged | ~self.scene.finite()) & ~resetting
         result = self.task.evaluate(self.scene, stats, ~diverged & ~resetting)
@@ -104,6 +102,10 @@ class DeformablePickupVectorEnv(VectorEnv):
         live = ~resetting
         info = {**info, **{f"_{k}": live.copy() for k in list(info)}}
         done = terminated | truncated
+        if resetting.any():
+            # after the step: the worlds' frozen-gripper step is discarded, and their first
+            # observation is the state the reset sets, as a single env's reset returns it
+            self._reset_worlds(resetting)
         obs = self._obs()
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self._needs_reset = done

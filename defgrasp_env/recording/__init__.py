@@ -1,6 +1,8 @@
 """Recording of DeformablePickup episodes to HDF5 (the paper's Table 1 schema) and dataset tools.
 
 * :class:`HDF5Recorder` - Gymnasium wrapper writing one crash-safe HDF5 file per episode.
+* :class:`VectorHDF5Recorder` - the same for every world of the native vector env (files replay
+  bit-exactly in a single env).
 * :func:`load_episode` / :func:`validate_path` - read and check episode files.
 * :func:`replay_episode` - re-simulate an episode from its recorded config, seed and actions.
 * :func:`to_lerobot` - convert episodes to a LeRobot dataset; :func:`plot_episode` - Fig. 5 panels.
@@ -10,6 +12,7 @@
 
 from .reader import Episode, EpisodeFileError, list_episodes, load_episode
 from .recorder import HDF5Recorder
+from .vector_recorder import VectorHDF5Recorder
 from .schema import FIELDS, FORMAT, SCHEMA_VERSION, schema_markdown
 from .validate import ValidationReport, validate_episode, validate_path
 
@@ -32,7 +35,7 @@ def plot_episode(*args, **kwargs):
     return impl(*args, **kwargs)
 
 
-__all__ = ["HDF5Recorder", "Episode", "EpisodeFileError", "load_episode", "list_episodes",
+__all__ = ["HDF5Recorder", "VectorHDF5Recorder", "Episode", "EpisodeFileError", "load_episode", "list_episodes",
            "validate_episode", "validate_path", "ValidationReport", "replay_episode", "to_lerobot",
            "plot_episode", "FIELDS", "FORMAT", "SCHEMA_VERSION", "schema_markdown"]
 

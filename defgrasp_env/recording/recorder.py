@@ -29,6 +29,34 @@ def _json(value, what: str) -> str:
         raise TypeError(f"{what} must be JSON-serialisable to be recorded for replay, got {value!r}") from exc
 
 
+def next_free_path(directory: pathlib.Path, name_template: str, index: int) -> tuple[pathlib.Path, int]:
+    """The first ``directory / name_template.format(index=i)`` with i >= index that does not exist, and i."""
+    while (path := directory / name_template.format(index=index)).exists():
+        index += 1
+    return path, index
+
+
+def write_buffer(path: pathlib.Path, buf: EpisodeBuffer, cfg: PickupConfig, *, env_id: str, object_name: str,
+                 replay: dict, versions_json: str, episode_index: int, reason: str, compression: str | None,
+                 extra_attrs: dict | None = None) -> pathlib.Path:
+    """Write one recorded episode (schema.py layout, attributes included) atomically to ``path``."""
+    arrays = buf.arrays()
+    attrs = {
+        "format": FORMAT, "schema_version": SCHEMA_VERSION, "env_id": env_id,
+        "config_json": config_to_json(cfg), "replay_json": _json(replay, "replay data"),
+        "versions_json": versions_json, "object_name": object_name,
+        "control_hz": float(cfg.control_hz), "dt": float(cfg.dt), "num_steps": len(buf),
+        "episode_index": episode_index, "terminated": bool(buf.terminated[-1]),
+        "truncated": bool(buf.truncated[-1]), "is_success": bool(arrays["steps/is_success"][-1]),
+        "end_reason": reason, **(extra_attrs or {}),
+    }
+    names = {"steps/action": ACTION_NAMES[cfg.action_mode],
+             "observations/agent_pos": list(AGENT_POS_NAMES),
+             "observations/environment_state": list(ENV_STATE_NAMES)}
+    names = {k: v for k, v in names.items() if k in arrays and arrays[k].shape[-1] == len(v)}
+    return write_episode(path, arrays, attrs, names, compression)
+
+
 class HDF5Recorder(gym.Wrapper):
     """Record every step of every episode of a ``DeformablePickup-v0`` env, one HDF5 file per episode.
 
@@ -150,29 +178,15 @@ class HDF5Recorder(gym.Wrapper):
         if self._next_name is not None:
             name, self._next_name = self._next_name, None
             return self.directory / name
-        while (path := self.directory / self.name_template.format(index=self.episode_index)).exists():
-            self.episode_index += 1
+        path, self.episode_index = next_free_path(self.directory, self.name_template, self.episode_index)
         return path
 
     def _write(self, reason: str) -> pathlib.Path:
         buf, uw = self._buffer, self.env.unwrapped
         self._buffer = None
-        arrays = buf.arrays()
-        cfg: PickupConfig = uw.config
-        attrs = {
-            "format": FORMAT, "schema_version": SCHEMA_VERSION, "env_id": self.env_id,
-            "config_json": config_to_json(cfg), "replay_json": _json(self._replay, "replay data"),
-            "versions_json": self._versions, "object_name": uw.scene.object_names[0],
-            "control_hz": float(cfg.control_hz), "dt": float(cfg.dt), "num_steps": len(buf),
-            "episode_index": self.episode_index, "terminated": bool(buf.terminated[-1]),
-            "truncated": bool(buf.truncated[-1]), "is_success": bool(arrays["steps/is_success"][-1]),
-            "end_reason": reason,
-        }
-        names = {"steps/action": ACTION_NAMES[cfg.action_mode],
-                 "observations/agent_pos": list(AGENT_POS_NAMES),
-                 "observations/environment_state": list(ENV_STATE_NAMES)}
-        names = {k: v for k, v in names.items() if k in arrays and arrays[k].shape[-1] == len(v)}
-        path = write_episode(self._next_path(), arrays, attrs, names, self.compression)
+        path = write_buffer(self._next_path(), buf, uw.config, env_id=self.env_id, object_name=uw.scene.object_names[0],
+                            replay=self._replay, versions_json=self._versions, episode_index=self.episode_index,
+                            reason=reason, compression=self.compression, extra_attrs={"world": 0})
         self.paths.append(path)
         self.episode_index += 1
         return path

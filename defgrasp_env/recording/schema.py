@@ -86,6 +86,7 @@ ROOT_ATTRS: dict[str, tuple[type, str]] = {
     "dt": (float, "control period, s"),
     "num_steps": (int, "T"),
     "episode_index": (int, "index of the episode in its recording session"),
+    "world": (int, "world of the env that ran the episode: 0 for a single env, 0..N-1 for the vector env"),
     "terminated": (bool, "the last step terminated the episode"),
     "truncated": (bool, "the last step truncated the episode"),
     "is_success": (bool, "info['is_success'] of the last step"),

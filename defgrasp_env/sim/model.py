@@ -157,8 +157,7 @@ def build_model(
                              "tets must be positively oriented with non-zero volume")
         vol = det / 6.0
         mu, lam = material.lame
-        m = np.zeros(len(x))
-        np.add.at(m, t.ravel(), np.repeat(material.density * vol / 4.0, 4))
+        m = lumped_masses(t, vol, material.density, len(x))
         positions.append(x)
         tets.append(t + node_start[-1])
         rest_inv.append(np.linalg.inv(dm))
@@ -213,6 +212,16 @@ def build_model(
     )
 
 
+def lumped_masses(tets: np.ndarray, volumes: np.ndarray, density: float, num_nodes: int) -> np.ndarray:
+    """Node masses (kg) [num_nodes]: a quarter of each tet's mass (tets [T, 4] local indices,
+    volumes [T] m^3) to each of its nodes. The volumes are rounded to float32 first, as the model
+    stores them, so that a material set later (``set_world_material``) gives the same bits."""
+    m = np.zeros(num_nodes)
+    vol = np.asarray(volumes, dtype=np.float32).astype(np.float64)
+    np.add.at(m, np.asarray(tets).ravel(), np.repeat(density * vol / 4.0, 4))
+    return m
+
+
 def set_world_material(model: Model, world: int, material: Material) -> None:
     """Replace the material of one world in place (mass and stiffness), e.g. on an env reset."""
     if not 0 <= world < model.num_worlds:
@@ -223,10 +232,8 @@ def set_world_material(model: Model, world: int, material: Material) -> None:
         host = array.numpy()
         host[sl] = value
         array.assign(host)
-    vol = model.tet_rest_volume.numpy()[sl].astype(np.float64)
     tets = model.tets.numpy()[sl] - nl.start
-    m = np.zeros(nl.stop - nl.start)
-    np.add.at(m, tets.ravel(), np.repeat(material.density * vol / 4.0, 4))
+    m = lumped_masses(tets, model.tet_rest_volume.numpy()[sl], material.density, nl.stop - nl.start)
     host = model.node_mass.numpy()
     host[nl] = m
     model.node_mass.assign(host)
