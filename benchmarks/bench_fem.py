@@ -39,7 +39,7 @@ from defgrasp_env.sim.meshing import make_object_mesh  # noqa: E402
 from defgrasp_env.sim.model import build_model  # noqa: E402
 from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig  # noqa: E402
 from defgrasp_env.sim.state import Control, State  # noqa: E402
-from machine import cpu_model as _cpu_model  # noqa: E402
+from machine import cpu_model, git_state  # noqa: E402
 
 OBJECTS = ("cuboid", "sphere", "torus", "cylinder", "rope")
 PAD_HALF = np.array([0.004, 0.01875, 0.011])
@@ -103,15 +103,11 @@ def run_case(name: str, scenario: str, worlds: int, device: str, config: SolverC
     }
 
 
-def cpu_model() -> str:
-    return _cpu_model("unknown CPU")
-
-
 def machine(device: str) -> str:
     dev = wp.get_device(device)
     name = dev.name if dev.is_cuda else "CPU"
-    return (f"{platform.platform()}, {cpu_model()}, {os.cpu_count()} logical CPUs, Python "
-            f"{platform.python_version()}, warp {wp.config.version}, device {device} ({name})")
+    return (f"{platform.platform()}, {cpu_model('unknown CPU')}, {os.cpu_count()} logical CPUs, Python "
+            f"{platform.python_version()}, warp {wp.config.version}, device {device} ({name}); commit {git_state()}")
 
 
 def main(argv=None) -> None:

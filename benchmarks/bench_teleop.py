@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
 
 import numpy as np  # noqa: E402
-from machine import cpu_model, host  # noqa: E402,F401
+from machine import git_state, host  # noqa: E402
 
 DATA = ROOT / "tests" / "data"
 STREAM = "human_pick_cuboid"
@@ -280,7 +280,7 @@ def main(argv=None) -> int:
     loops = [bench_loop(ik) for ik in iks]
     lats = [bench_latency(ik, args.latency_seconds) for ik in iks]
     machine = (f"{host()}, "
-               f"load average {load:.1f} at start; Python {platform.python_version()}; env on Warp CPU"
+               f"load average {load:.1f} at start; Python {platform.python_version()}; env on Warp CPU; commit {git_state()}"
                + (f"; {args.note}" if args.note else ""))
     best = max(loops, key=lambda r: r["loop_hz"])
     verdict = "met" if best["loop_hz"] >= 30 else (

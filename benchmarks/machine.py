@@ -9,6 +9,9 @@ from __future__ import annotations
 import os
 import pathlib
 import platform
+import subprocess
+
+_ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def cpu_model(unknown: str | None = None) -> str:
@@ -26,3 +29,18 @@ def cpu_model(unknown: str | None = None) -> str:
 def host(unknown: str | None = None, *, cores: str = "CPUs") -> str:
     """``"<CPU model>, <n> logical <cores>, <OS> <release>"``; ``unknown`` as for ``cpu_model``."""
     return f"{cpu_model(unknown)}, {os.cpu_count()} logical {cores}, {platform.system()} {platform.release()}"
+
+
+def git_state() -> str:
+    """Short commit of the checkout, plus any uncommitted or untracked files in the code folders."""
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=_ROOT, capture_output=True,
+                             text=True, check=True).stdout.strip()
+        status = subprocess.run(["git", "status", "--porcelain", "--", "defgrasp_env", "benchmarks"], cwd=_ROOT,
+                                capture_output=True, text=True, check=True).stdout.split("\n")
+        dirty = [d[3:] for d in status if d.strip() and not d.startswith("??")]
+        new = [d[3:] for d in status if d.startswith("??")]
+        return (rev + (f" + uncommitted changes in {', '.join(dirty)}" if dirty else "")
+                + (f" + untracked {', '.join(new)}" if new else ""))
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"

@@ -25,7 +25,6 @@ import datetime
 import multiprocessing as mp
 import os
 import pathlib
-import subprocess
 import sys
 import time
 from collections import Counter
@@ -35,7 +34,7 @@ os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
-from machine import host  # noqa: E402
+from machine import git_state, host  # noqa: E402
 
 OBJECTS = ("cuboid", "sphere", "torus", "cylinder", "rope")
 MODULI = (1e4, 1e5, 1e6, 1e7)
@@ -159,20 +158,6 @@ def format_report(results: list[dict], objects, moduli) -> str:
 
 def machine() -> str:
     return host("unknown CPU", cores="cores")
-
-
-def git_state() -> str:
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                             text=True, check=True).stdout.strip()
-        status = subprocess.run(["git", "status", "--porcelain", "--", "defgrasp_env", "benchmarks"], cwd=ROOT,
-                                capture_output=True, text=True, check=True).stdout.split("\n")
-        dirty = [d[3:] for d in status if d.strip() and not d.startswith("??")]
-        new = [d[3:] for d in status if d.startswith("??")]
-        return (rev + (f" + uncommitted changes in {', '.join(dirty)}" if dirty else "")
-                + (f" + untracked {', '.join(new)}" if new else ""))
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def main(argv=None) -> int:

@@ -36,7 +36,7 @@ from .retarget.offset import CALIBRATION_MODES, OffsetRetargeter
 from .retarget.pinch import PinchResult, PinchRetargeter
 from .retarget.smoothing import Command, CommandFilter, GateEvent, LossGate, RateLimits, WorkspaceBox
 from .se3 import check_rigid, matrix_to_quat, pose_to_matrix
-from .teleop_device import TeleopDevice, make_action, parse_agent_state
+from .teleop_device import MAX_GAP_M, TeleopDevice, make_action, parse_agent_state
 
 
 @dataclass(frozen=True)
@@ -202,11 +202,11 @@ class HumanTeleopAgent(TeleopDevice):
             return None
         from .retarget.gripper_ik import driver_angle_from_gap
 
-        return driver_angle_from_gap(float(np.clip(self._cmd.gap_m, 0.0, 0.085)))[0]
+        return driver_angle_from_gap(float(np.clip(self._cmd.gap_m, 0.0, MAX_GAP_M)))[0]
 
     @staticmethod
     def _action(cmd: Command) -> np.ndarray:
-        return make_action(cmd.position, cmd.quat_xyzw, float(np.clip(cmd.gap_m, 0.0, 0.085)))
+        return make_action(cmd.position, cmd.quat_xyzw, float(np.clip(cmd.gap_m, 0.0, MAX_GAP_M)))
 
     # haptics -----------------------------------------------------------------------------------------
     def send_feedback(self, feedback: dict) -> None:

@@ -21,6 +21,7 @@ from defgrasp_env.transforms import (  # noqa: F401  (re-exported)
     quat_normalize,
     quat_to_matrix,
 )
+from defgrasp_env.wrist.analytic import rot_x, rot_y, rot_z  # noqa: F401  (re-exported)
 
 from ._validate import check_array, check_number
 
@@ -50,21 +51,6 @@ def quat_slerp(a, b, t: float) -> np.ndarray:
         return quat_normalize(a + t * (b - a))
     theta = np.arccos(min(1.0, d))
     return quat_normalize((np.sin((1 - t) * theta) * a + np.sin(t * theta) * b) / np.sin(theta))
-
-
-def rot_x(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=np.float64)
-
-
-def rot_y(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], dtype=np.float64)
-
-
-def rot_z(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=np.float64)
 
 
 def homogeneous(R=None, p=None) -> np.ndarray:

@@ -119,8 +119,3 @@ def face_load(mesh: SimpleMesh, axis: int, value: float, traction, tol: float = 
     area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
     np.add.at(forces, tri[on].ravel(), np.repeat(area / 3.0, 3)[:, None] * np.asarray(traction, float))
     return forces
-
-
-def tet_volumes(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    x = nodes[tets]
-    return np.linalg.det(np.stack([x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]], axis=2)) / 6.0

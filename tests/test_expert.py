@@ -84,8 +84,9 @@ def test_batched_call_matches_single_calls():
     out = batched(stacked)
     assert out.shape == (2, 7)
     np.testing.assert_allclose(out, np.stack(singles), atol=1e-6)
+    batched.phase[:], batched.retries[:] = 3, 2  # both worlds somewhere else in the script
     batched.reset(np.array([True, False]))
-    assert batched.phase.tolist() == [0, batched.phase[1]]
+    assert batched.phase.tolist() == [0, 3] and batched.retries.tolist() == [0, 2]
 
 
 def test_invalid_inputs_raise():

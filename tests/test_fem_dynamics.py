@@ -154,5 +154,6 @@ DEFAULT_SOLVER_FAILS = {("torus", 1e7), ("rope", 1e6), ("rope", 1e4)}
 def test_drop_comes_to_rest_default_solver(name, e, request):
     if (name, e) in DEFAULT_SOLVER_FAILS:
         request.applymarker(pytest.mark.xfail(
-            reason="default SolverConfig: 4 Newton iterations do not converge this impact", strict=False))
+            reason="default SolverConfig: 4 Newton iterations do not converge this impact", strict=True,
+            raises=AssertionError))
     check_drop(name, e, SolverConfig())

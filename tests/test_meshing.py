@@ -122,7 +122,7 @@ def test_default_objects_are_small_and_fit_the_gripper(defaults):
         assert 300 <= m.num_tets <= 1600, name
         ext = m.nodes.max(axis=0) - m.nodes.min(axis=0)
         assert min(ext[0], ext[2]) <= 0.085, name  # fits the 85 mm stroke one way
-    assert m.nodes.dtype == np.float64 and m.tets.dtype == np.int32 and m.surface.dtype == np.int32
+        assert m.nodes.dtype == np.float64 and m.tets.dtype == np.int32 and m.surface.dtype == np.int32
 
 
 # ---------------------------------------------------------------- geometry vs analytic truth

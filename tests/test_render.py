@@ -251,11 +251,11 @@ def test_bad_inputs_are_rejected_with_clear_messages():
 
 
 def test_save_png_round_trip(tmp_path):
-    from defgrasp_env.render.image_io import _png_bytes
+    from defgrasp_env.render.image_io import png_bytes
 
     img = (np.arange(16 * 20 * 3) % 256).astype(np.uint8).reshape(16, 20, 3)
     path = save_png(tmp_path / "a" / "x.png", img)
-    (tmp_path / "raw.png").write_bytes(_png_bytes(img))
+    (tmp_path / "raw.png").write_bytes(png_bytes(img))
     PIL = pytest.importorskip("PIL.Image")
     assert np.array_equal(np.asarray(PIL.open(path)), img)
     assert np.array_equal(np.asarray(PIL.open(tmp_path / "raw.png")), img)

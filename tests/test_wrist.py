@@ -16,7 +16,7 @@ from defgrasp_env.wrist import (
     ik_analytic,
 )
 
-POS_TOL_M = 1e-3
+POS_TOL_M = 1e-3      # the acceptance bounds of eq. 3 in the teleop issue: < 1 mm and < 0.01 rad
 ROT_TOL_RAD = 1e-2
 
 

@@ -7,7 +7,7 @@ import numpy as np
 from ..sim.materials import Material
 from ..transforms import quat_normalize
 from .config import PickupConfig
-from .scene import PickupScene, WorldSetup
+from .scene import PAD_BOX_HALF_EXTENTS, PickupScene, WorldSetup
 from .task import REWARD_TERMS, PickupTask
 
 
@@ -94,8 +94,9 @@ class SceneCamera:
         name = scene.object_names[w]
         if w not in self._renderers or self._renderers[w][0] != name:
             mesh = scene.meshes[w]
-            self._renderers[w] = (name, SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2))
+            self._renderers[w] = (name, SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2,
+                                                      device=self.config.device))
         centers, quats = scene.pad_poses()
-        half = scene.model.pad_half_extents.numpy()[2 * w:2 * w + 2]
+        half = np.repeat(PAD_BOX_HALF_EXTENTS[None], 2, axis=0)
         return self._renderers[w][1].render(scene.node_positions(w), centers[w], quats[w], half,
                                             goal=np.asarray(self.config.goal, np.float32))

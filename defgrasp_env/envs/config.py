@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 from ..gripper import GripperConfig
 from ..render.camera import Camera
-from ..sim.materials import PAPER_YOUNGS_MODULI, Material, check_range
+from ..sim.materials import Material, check_range
 from ..sim.meshing import OBJECT_SHAPES
 from ..sim.model import ContactParams
 from ..sim.solver import SolverConfig
@@ -102,5 +102,3 @@ class PickupConfig:
     def object_names(self) -> tuple[str, ...]:
         return tuple(OBJECT_SHAPES) if self.object == RANDOM_OBJECT else (self.object,)
 
-
-PAPER_MODULI = PAPER_YOUNGS_MODULI

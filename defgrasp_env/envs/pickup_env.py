@@ -53,15 +53,16 @@ class DeformablePickupEnv(gym.Env):
 
     **Reward**: ``reach + grasp + lift + success`` (each also in ``info["reward_<term>"]``):
     reach = 0.5 (1 - tanh(10 |tcp - feature|)); grasp = 0.5 when both tip forces exceed 0.5 N;
-    lift = 2 grasp (1 - tanh(5 |feature - goal|)); success = 10 on the success step.
+    lift = 2 (1 - tanh(5 |feature - goal|)) while grasped; success = 10 on the success step.
 
     **Episode end**: terminated on success = feature point within ``success_tolerance`` (0.05 m) of
     the goal, grasped and not pierced (penetration < 5 mm), for ``success_hold_seconds`` (0.5 s);
     truncated after ``episode_seconds`` (15 s, via ``max_episode_steps``) or when the simulation
     diverges (``info["sim_diverged"]``: the state is then kept at its last finite value).
 
-    **Info**: ``is_success``, reward terms, tip forces (N), jaw gap (m), mean von Mises stress (Pa),
-    solver iterations/residual/penetration, ``sim_diverged``.
+    **Info**: ``is_success``, ``grasped``, ``pierced``, ``goal_distance`` (m), reward terms, tip
+    forces (N), jaw gap (m), mean von Mises stress (Pa), solver iterations/residual/penetration,
+    ``sim_diverged``; ``reset`` returns ``is_success``, ``object`` and ``youngs_modulus`` (Pa).
 
     **Arguments**: every field of ``PickupConfig`` as a keyword (``object``, ``youngs_modulus``
     (value or tuple to sample), ``poisson_ratio``, ``density``, ``ground_friction``,

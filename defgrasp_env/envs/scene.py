@@ -18,7 +18,7 @@ from ..sim.model import ContactParams, build_model, set_world_material
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
 from ..transforms import axis_angle_to_quat, quat_multiply, quat_normalize, quat_rotate, quat_to_matrix
-from ..wrist import JOINT_LOWER, JOINT_UPPER, fk_analytic, ik_analytic
+from ..wrist import clamp_joints, fk_analytic, ik_analytic
 from .config import PickupConfig
 
 #: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
@@ -90,9 +90,7 @@ class PickupScene:
         self.gap = np.full(w, GAP_MAX)
         self.tip_force = np.zeros((w, 2))
         self.grip_stiffness = np.zeros(w)  # N/m, the jaw driver's estimate (0: not gripping)
-        self.materials = [s.material for s in setups]
         self.setups = list(setups)  # the setup each world was last reset to (initial pose, material)
-        self.last_stats: SolveStats | None = None
         self.reset_worlds(np.ones(w, bool), setups)
 
     # -- resets ----------------------------------------------------------------------------
@@ -110,10 +108,9 @@ class PickupScene:
             local = self.meshes[w].nodes
             x[sl] = (local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32)
             v[sl] = 0.0
-            self.setups[w] = s
-            if s.material != self.materials[w]:
+            if s.material != self.setups[w].material:
                 set_world_material(m, w, s.material)
-                self.materials[w] = s.material
+            self.setups[w] = s
             self.q[w] = [s.position[0], START_FLANGE_HEIGHT, s.position[2], 0.0, 0.0, 0.0]
             self.gap[w] = GAP_MAX
             self.tip_force[w] = 0.0
@@ -136,6 +133,11 @@ class PickupScene:
             host = array.numpy()
             host[rows] = 0.0
             array.assign(host)
+
+    @property
+    def materials(self) -> list[Material]:
+        """The material of each world (that of its last reset)."""
+        return [s.material for s in self.setups]
 
     # -- kinematics ------------------------------------------------------------------------
     def flange_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -161,7 +163,7 @@ class PickupScene:
         lowest = corners[..., 1].reshape(len(q), -1).min(axis=1)
         lifted = q.copy()
         lifted[:, 1] += np.maximum(GROUND_CLEARANCE - lowest, 0.0)
-        lifted = np.clip(lifted, JOINT_LOWER, JOINT_UPPER)
+        lifted = clamp_joints(lifted)
         centers[..., 1] += (lifted[:, 1] - q[:, 1])[:, None]  # joint 1 is the world-y slide
         return lifted, centers, quats
 
@@ -201,7 +203,7 @@ class PickupScene:
         cfg = self.config
         active = np.ones(self.num_worlds, bool) if active is None else active
         q_start = self.q.copy()
-        q_move = np.clip(ik_analytic(target_pos, target_quat).q, JOINT_LOWER, JOINT_UPPER) - q_start
+        q_move = clamp_joints(ik_analytic(target_pos, target_quat).q) - q_start
         q_move[:, 3:] = (q_move[:, 3:] + np.pi) % (2 * np.pi) - np.pi  # shortest way round
         count = cfg.solver.substeps
         h = cfg.dt / count
@@ -210,14 +212,10 @@ class PickupScene:
             gap_before, force_before = self.gap, self.tip_force.mean(axis=1)
             gap = self.driver.step(target_gap, self.gap, h, self.tip_force[:, 0], self.tip_force[:, 1],
                                    self.grip_stiffness)
-            q, pos, quat = self._lift_above_ground(
-                np.clip(q_start + q_move * (k + 1) / count, JOINT_LOWER, JOINT_UPPER), gap)
-            if not active.all():
-                self.q = np.where(active[:, None], q, self.q)
-                self.gap = np.where(active, gap, self.gap)
-                pos, quat = self.pad_poses()
-            else:
-                self.q, self.gap = q, gap
+            q = np.where(active[:, None], clamp_joints(q_start + q_move * (k + 1) / count), self.q)
+            # an inactive world keeps q, already above the ground: the lift leaves it as it is
+            self.q, pos, quat = self._lift_above_ground(q, np.where(active, gap, self.gap))
+            self.gap = np.where(active, gap, self.gap)
             self.control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
             self.control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
             reports.append(self.solver.step(self.state, self.state, self.control, h))
@@ -232,7 +230,6 @@ class PickupScene:
             penetration=np.max([r.penetration for r in reports], axis=0),
             diverged=np.any([r.diverged for r in reports], axis=0),
         )
-        self.last_stats = stats
         return stats
 
     # -- readouts --------------------------------------------------------------------------

@@ -19,8 +19,8 @@ from .task import PickupTask, action_space, observation_spaces
 class DeformablePickupVectorEnv(VectorEnv):
     """``gym.make_vec("DeformablePickup-v0", num_envs=N, ...)``: N worlds stepped together.
 
-    Spaces, reward, observations and options are those of ``DeformablePickupEnv`` (batched on a
-    leading axis of N). World ``i`` reset with seed ``s + i`` draws exactly what a single env reset
+    Spaces, reward and observations are those of ``DeformablePickupEnv`` (batched on a leading axis
+    of N); the reset option is ``reset_mask`` (below). World ``i`` reset with seed ``s + i`` draws exactly what a single env reset
     with seed ``s + i`` draws, so the vector env equals N single envs on those seeds.
     Each world keeps the object it was built with (``object="random"`` draws it per world once, at
     construction); Young's modulus, pose noise and the rest are drawn per episode.
@@ -31,7 +31,7 @@ class DeformablePickupVectorEnv(VectorEnv):
     ``info["final_info"]``), ``DISABLED`` (reset with ``reset(options={"reset_mask": mask})``; other
     worlds stay bit-identical). ``info`` holds arrays [N] with ``_key`` masks.
     ``torch_outputs=True`` returns observations as torch tensors on the simulation device (they are
-    small and assembled on the host, so on CUDA they are one upload per step).
+    small and assembled on the host, so on CUDA they are one upload per observation key per step).
     ``full_state_torch()`` gives the complete FEM state as zero-copy torch views of the simulation's
     own arrays (on the GPU when ``device="cuda:0"``): node positions/velocities/forces [N, 3] and
     von Mises stress [T] of all worlds, with ``model.node_start`` / ``model.tet_start`` offsets.
@@ -69,6 +69,9 @@ class DeformablePickupVectorEnv(VectorEnv):
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
         mask = np.ones(self.num_envs, bool)
+        unknown = sorted(set(options or {}) - {"reset_mask"})
+        if unknown:
+            raise ValueError(f"vector reset options must be a subset of ['reset_mask'], got {unknown}")
         if options is not None and "reset_mask" in options:
             mask = np.asarray(options["reset_mask"])
             if mask.shape != (self.num_envs,) or mask.dtype != bool:

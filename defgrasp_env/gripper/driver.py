@@ -208,8 +208,3 @@ class GripperDriver:
     def step(self, cmd_gap, gap, dt: float, force_left, force_right, grip_stiffness=0.0) -> np.ndarray:
         """New gap (m) for each world; see :func:`driver_step` for shapes and rules."""
         return driver_step(self.config, cmd_gap, gap, dt, force_left, force_right, grip_stiffness)[0]
-
-    def step_with_status(self, cmd_gap, gap, dt: float, force_left, force_right,
-                         grip_stiffness=0.0) -> tuple[np.ndarray, np.ndarray]:
-        """``(new_gap, force_stopped)``; see :func:`driver_step`."""
-        return driver_step(self.config, cmd_gap, gap, dt, force_left, force_right, grip_stiffness)

@@ -1,7 +1,7 @@
 """Read what an episode file stores out of a ``PickupScene`` (one world), as numpy copies.
 
-Only copies are taken per step (no arithmetic): the sums and stacking happen once per episode in
-:class:`EpisodeBuffer`, which keeps the per-step overhead of recording small.
+Per step only copies are taken, plus the flange forward kinematics: the sums and stacking happen
+once per episode in :class:`EpisodeBuffer`, which keeps the per-step overhead of recording small.
 """
 
 from __future__ import annotations
@@ -9,11 +9,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..envs.scene import PickupScene
-
-#: What :func:`step_record` returns, in order.
-_STEP_KEYS = ("node_positions", "node_velocities", "elastic_forces", "contact_forces", "von_mises",
-              "mean_von_mises", "wrist_position", "wrist_orientation", "jaw_length", "tip_forces")
-
 
 def object_record(scene: PickupScene, w: int = 0) -> dict[str, np.ndarray]:
     """The ``object/`` group of world ``w``: initial pose, material and mesh (local node indices)."""
@@ -34,15 +29,25 @@ def object_record(scene: PickupScene, w: int = 0) -> dict[str, np.ndarray]:
     }
 
 
-def step_record(scene: PickupScene, w: int = 0) -> tuple:
-    """The raw per-step state of world ``w`` (order of ``_STEP_KEYS``)."""
+def step_records(scene: PickupScene, worlds) -> list[tuple]:
+    """The raw per-step state of each world in ``worlds``: node positions, velocities, elastic and
+    contact forces, von Mises stress, mean von Mises, flange position and orientation, jaw gap,
+    tip forces. Each simulation array is read from the device once for all the worlds."""
     m, s = scene.model, scene.state
-    nodes, tets = m.world_nodes(w), m.world_tets(w)
+    x, v, fe, fc = (a.numpy() for a in (s.positions, s.velocities, s.elastic_force, s.contact_force))
+    vm, mvm = s.von_mises.numpy(), s.mean_von_mises.numpy()
     pos, quat = scene.flange_pose()
-    return (s.positions.numpy()[nodes].copy(), s.velocities.numpy()[nodes].copy(),
-            s.elastic_force.numpy()[nodes].copy(), s.contact_force.numpy()[nodes].copy(),
-            s.von_mises.numpy()[tets].copy(), s.mean_von_mises.numpy()[w].copy(),
-            pos[w].copy(), quat[w].copy(), float(scene.gap[w]), scene.tip_force[w].copy())
+    rows = []
+    for w in worlds:
+        nodes, tets = m.world_nodes(w), m.world_tets(w)
+        rows.append((x[nodes].copy(), v[nodes].copy(), fe[nodes].copy(), fc[nodes].copy(), vm[tets].copy(),
+                     mvm[w].copy(), pos[w].copy(), quat[w].copy(), float(scene.gap[w]), scene.tip_force[w].copy()))
+    return rows
+
+
+def step_record(scene: PickupScene, w: int = 0) -> tuple:
+    """``step_records`` of one world."""
+    return step_records(scene, [w])[0]
 
 
 class EpisodeBuffer:

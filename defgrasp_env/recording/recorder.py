@@ -29,6 +29,19 @@ def _json(value, what: str) -> str:
         raise TypeError(f"{what} must be JSON-serialisable to be recorded for replay, got {value!r}") from exc
 
 
+def check_recorder_options(name_template: str, compression: str | None) -> None:
+    """Validate a recorder's file-name template and h5py compression."""
+    if "{index" not in name_template or not name_template.endswith(SUFFIX):
+        raise ValueError(f"name_template must contain '{{index}}' and end with {SUFFIX!r}, got {name_template!r}")
+    if compression not in (None, "gzip", "lzf"):
+        raise ValueError(f"compression must be None, 'gzip' or 'lzf', got {compression!r}")
+
+
+def draw_seed() -> int:
+    """A fresh seed, drawn as gym would draw one, so that an unseeded first reset can be recorded."""
+    return int(np.random.SeedSequence().generate_state(1)[0])
+
+
 def next_free_path(directory: pathlib.Path, name_template: str, index: int) -> tuple[pathlib.Path, int]:
     """The first ``directory / name_template.format(index=i)`` with i >= index that does not exist, and i."""
     while (path := directory / name_template.format(index=index)).exists():
@@ -86,10 +99,7 @@ class HDF5Recorder(gym.Wrapper):
         if not isinstance(getattr(uw, "config", None), PickupConfig) or not hasattr(uw, "scene"):
             raise TypeError(f"HDF5Recorder needs a DeformablePickup env (with .config and .scene), "
                             f"got {type(uw).__name__}")
-        if "{index" not in name_template or not name_template.endswith(SUFFIX):
-            raise ValueError(f"name_template must contain '{{index}}' and end with {SUFFIX!r}, got {name_template!r}")
-        if compression not in (None, "gzip", "lzf"):
-            raise ValueError(f"compression must be None, 'gzip' or 'lzf', got {compression!r}")
+        check_recorder_options(name_template, compression)
         pixels_in_obs = isinstance(env.observation_space, gym.spaces.Dict) and "pixels" in env.observation_space.spaces
         if record_frames and not pixels_in_obs and env.render_mode != "rgb_array":
             raise ValueError(f"record_frames=True needs render_mode='rgb_array', got {env.render_mode!r}")
@@ -124,8 +134,8 @@ class HDF5Recorder(gym.Wrapper):
         uw = self.env.unwrapped
         rng_state = None
         if seed is None:
-            if uw._np_random is None:  # draw the seed gym would draw, so that it can be recorded
-                seed = int(np.random.SeedSequence().generate_state(1)[0])
+            if uw._np_random is None:
+                seed = draw_seed()
             else:
                 rng_state = uw.np_random.bit_generator.state
         this = {"seed": seed, "rng_state": rng_state, "options": options}

@@ -85,7 +85,7 @@ ROOT_ATTRS: dict[str, tuple[type, str]] = {
     "control_hz": (float, "control rate, Hz (one row per control step)"),
     "dt": (float, "control period, s"),
     "num_steps": (int, "T"),
-    "episode_index": (int, "index of the episode in its recording session"),
+    "episode_index": (int, "the {index} of the file name (continues the numbering of the folder)"),
     "world": (int, "world of the env that ran the episode: 0 for a single env, 0..N-1 for the vector env"),
     "terminated": (bool, "the last step terminated the episode"),
     "truncated": (bool, "the last step truncated the episode"),
@@ -93,11 +93,6 @@ ROOT_ATTRS: dict[str, tuple[type, str]] = {
     "end_reason": (str, "'terminated', 'truncated', 'reset' or 'close' (what ended the recording)"),
     "created_utc": (str, "ISO 8601 time the file was written"),
 }
-
-#: Units of the per-column ``names`` of the mixed datasets (documentation only).
-MIXED_NOTE = ("`mixed` datasets carry a `names` attribute listing their columns; units follow the names "
-              "(positions m, quaternions xyzw, forces N, velocities m/s).")
-
 
 def shape_text(shape: tuple[str | int, ...]) -> str:
     return "scalar" if shape == () else "[" + ", ".join(str(d) for d in shape) + "]"

@@ -11,9 +11,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from ..envs.config import RANDOM_OBJECT
 from ..envs.vector_env import DeformablePickupVectorEnv
 from .atomic import check_writable_directory
-from .capture import EpisodeBuffer, object_record, step_record
+from .capture import EpisodeBuffer, object_record, step_records
 from .config_io import library_versions
-from .recorder import _json, next_free_path, write_buffer
+from .recorder import _json, check_recorder_options, draw_seed, next_free_path, write_buffer
 from .schema import SUFFIX
 
 
@@ -28,7 +28,7 @@ def _world_info(info: dict, w: int) -> dict:
     """World ``w``'s entries of a vector info dict (arrays [N] with ``_key`` masks) as scalars."""
     out = {}
     for key, value in info.items():
-        if key.startswith("_") or key.startswith("final_"):
+        if key.startswith("_"):
             continue
         mask = info.get(f"_{key}")
         if mask is not None and not mask[w]:
@@ -76,10 +76,7 @@ class VectorHDF5Recorder(VectorWrapper):
         if uw.autoreset_mode == AutoresetMode.SAME_STEP:
             raise ValueError("VectorHDF5Recorder supports autoreset_mode NEXT_STEP or DISABLED, got SAME_STEP "
                              "(the env resets an ended world inside the step, before its final state can be recorded)")
-        if "{index" not in name_template or not name_template.endswith(SUFFIX):
-            raise ValueError(f"name_template must contain '{{index}}' and end with {SUFFIX!r}, got {name_template!r}")
-        if compression not in (None, "gzip", "lzf"):
-            raise ValueError(f"compression must be None, 'gzip' or 'lzf', got {compression!r}")
+        check_recorder_options(name_template, compression)
         self.directory = check_writable_directory(directory)
         self.compression = compression
         self.name_template = name_template
@@ -101,17 +98,20 @@ class VectorHDF5Recorder(VectorWrapper):
         if options is not None and "reset_mask" in options:
             mask = np.asarray(options["reset_mask"], dtype=bool).reshape(n)
         seeds = list(seed) if isinstance(seed, (list, tuple)) else [None if seed is None else seed + i for i in range(n)]
+        if len(seeds) != n:  # checked before any unfinished episode is written out
+            raise ValueError(f"seed list must have {n} entries, got {len(seeds)}")
         built = uw.scene is None
-        if built:  # draw the seeds the env would draw, so that the builds can be recorded
-            seeds = [int(np.random.SeedSequence().generate_state(1)[0]) if s is None else s for s in seeds]
-        specs = {w: self._spec(w, seeds[w] if w < len(seeds) else None) for w in np.flatnonzero(mask)}
+        if built:
+            seeds = [draw_seed() if s is None else s for s in seeds]
+        specs = {w: self._spec(w, seeds[w]) for w in np.flatnonzero(mask)}
         for w in specs:
             self._finish(w, "reset")
         obs, info = self.env.reset(seed=seeds, options=options)
+        obs_np = {k: _numpy(v) for k, v in obs.items()}
         for w, spec in specs.items():
             if built:
                 self._origins[w] = spec
-            self._start(w, obs, spec, None if built else self._origins[w])
+            self._start(w, obs_np, spec, None if built else self._origins[w])
         return obs, info
 
     def step(self, actions):
@@ -120,16 +120,14 @@ class VectorHDF5Recorder(VectorWrapper):
                      else np.zeros(uw.num_envs, bool))
         specs = {w: self._spec(w, None) for w in np.flatnonzero(resetting)}  # their episodes were written
         obs, reward, terminated, truncated, info = self.env.step(actions)
-        acts = _numpy(actions)
-        for w in range(uw.num_envs):
-            if resetting[w]:
-                self._start(w, obs, specs[w], self._origins[w])
-                continue
-            buf = self._buffers[w]
-            if buf is None:  # DISABLED mode: the world ended and was not reset yet
-                continue
-            buf.append(step_record(uw.scene, w), acts[w], {k: _numpy(v)[w] for k, v in obs.items()},
-                       float(reward[w]), bool(terminated[w]), bool(truncated[w]), _world_info(info, w))
+        acts, obs_np = _numpy(actions), {k: _numpy(v) for k, v in obs.items()}
+        for w in specs:
+            self._start(w, obs_np, specs[w], self._origins[w])
+        # DISABLED mode: a world that ended and was not reset yet has no buffer
+        recording = [w for w in range(uw.num_envs) if not resetting[w] and self._buffers[w] is not None]
+        for w, row in zip(recording, step_records(uw.scene, recording)):
+            self._buffers[w].append(row, acts[w], {k: v[w] for k, v in obs_np.items()}, float(reward[w]),
+                                    bool(terminated[w]), bool(truncated[w]), _world_info(info, w))
             if terminated[w] or truncated[w]:
                 self._write(w, "terminated" if terminated[w] else "truncated")
         return obs, reward, terminated, truncated, info
@@ -151,10 +149,11 @@ class VectorHDF5Recorder(VectorWrapper):
             return {"seed": int(seed), "rng_state": None, "options": options}
         return {"seed": None, "rng_state": uw._rngs[w].bit_generator.state, "options": options}
 
-    def _start(self, w: int, obs: dict, spec: dict, scene_origin: dict | None) -> None:
+    def _start(self, w: int, obs_np: dict, spec: dict, scene_origin: dict | None) -> None:
+        """Open world w's next episode; ``obs_np``: the batched observation as numpy arrays."""
         uw = self.env.unwrapped
         self._replays[w] = {**spec, "scene_origin": scene_origin, "max_episode_steps": uw.max_episode_steps}
-        self._buffers[w] = EpisodeBuffer(object_record(uw.scene, w), {k: _numpy(v)[w] for k, v in obs.items()},
+        self._buffers[w] = EpisodeBuffer(object_record(uw.scene, w), {k: v[w] for k, v in obs_np.items()},
                                          uw.config.dt)
 
     def _finish(self, w: int, reason: str) -> None:

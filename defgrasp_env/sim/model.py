@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from ..transforms import quat_normalize, quat_to_matrix
 from .materials import Material, check_range
 
 
@@ -85,15 +86,6 @@ class Model:
         return slice(int(self.tet_start[w]), int(self.tet_start[w + 1]))
 
 
-def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    x, y, z, w = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 def _check_mesh(w: int, nodes: np.ndarray, tets: np.ndarray) -> None:
     if nodes.ndim != 2 or nodes.shape[1] != 3 or len(nodes) < 4:
         raise ValueError(f"world {w}: mesh nodes must have shape (N>=4, 3), got {nodes.shape}")
@@ -145,7 +137,7 @@ def build_model(
         nodes = np.asarray(mesh.nodes, dtype=np.float64)
         t = np.asarray(mesh.tets, dtype=np.int64)
         _check_mesh(w, nodes, t)
-        x = nodes @ _quat_to_matrix(np.asarray(quat, dtype=np.float64)).T + np.asarray(pos, dtype=np.float64)
+        x = nodes @ quat_to_matrix(quat_normalize(np.asarray(quat, dtype=np.float64))).T + np.asarray(pos, dtype=np.float64)
         # rest shape from the object-frame nodes, so the model does not depend on the initial pose
         dm = np.stack([nodes[t[:, 1]] - nodes[t[:, 0]], nodes[t[:, 2]] - nodes[t[:, 0]],
                        nodes[t[:, 3]] - nodes[t[:, 0]]], axis=2)
@@ -228,12 +220,8 @@ def set_world_material(model: Model, world: int, material: Material) -> None:
         raise ValueError(f"world must be in [0, {model.num_worlds - 1}], got {world}")
     sl, nl = model.world_tets(world), model.world_nodes(world)
     mu, lam = material.lame
-    for array, value in ((model.tet_mu, mu), (model.tet_lambda, lam)):
-        host = array.numpy()
-        host[sl] = value
-        array.assign(host)
-    tets = model.tets.numpy()[sl] - nl.start
-    m = lumped_masses(tets, model.tet_rest_volume.numpy()[sl], material.density, nl.stop - nl.start)
-    host = model.node_mass.numpy()
-    host[nl] = m
-    model.node_mass.assign(host)
+    model.tet_mu[sl].fill_(mu)
+    model.tet_lambda[sl].fill_(lam)
+    tets = model.tets[sl].numpy() - nl.start
+    m = lumped_masses(tets, model.tet_rest_volume[sl].numpy(), material.density, nl.stop - nl.start)
+    model.node_mass[nl].assign(m.astype(np.float32))

@@ -34,12 +34,14 @@ class SolverConfig:
             step (before the line search shortens it) is below this, m.
         cg_iterations: CG iterations per Newton iteration at most.
         cg_tolerance: CG stops once r.z falls below cg_tolerance^2 of its initial value.
-        cg_update_fraction: CG also stops after an iteration that moved no node by more than this
-            fraction of ``newton_tolerance`` (r.z alone cannot fall below float32 noise near a solution).
+        cg_update_fraction: CG also stops, from its 8th iteration on, after an iteration that moved no
+            node by more than this fraction of ``newton_tolerance`` (r.z alone cannot fall below
+            float32 noise near a solution).
         max_node_step: a Newton update longer than this (m) marks the world as diverged.
         line_search_steps: halvings of a Newton step at most while it raises the energy.
-        check_every: on the host, test every this many CG iterations whether all worlds are done
-            (0 = never: run the full iteration counts, as for CUDA graph capture).
+        check_every: on the host, test every this many CG iterations, and after every Newton
+            iteration and line-search trial, whether all worlds are done (0 = never: run the full
+            iteration counts, with no host round trip).
     """
 
     substeps: int = 2
@@ -120,8 +122,10 @@ class ImplicitSolver:
         self._wi = {k: wp.zeros(w, dtype=int, device=d) for k in (
             "newton_active", "cg_active", "newton_it", "cg_it", "cg_total", "diverged", "all_on", "searching")}
         self._wi["all_on"].fill_(1)
+        self._wf["step"].fill_(1.0)  # Newton step length: begin_line_search resets it, else it stays 1
         # coarse (rigid translation) correction: T_k = e_k masked by the free axes, A T_k, per-world 3x3
         free = model.free_axes.numpy()
+        self._all_free = bool(free.all())
         self._coarse_t = [wp.array(free * np.eye(3, dtype=np.float32)[k], dtype=wp.vec3, device=d) for k in range(3)]
         self._coarse_at = [vec(), vec(), vec()]
         self._coarse_m, self._coarse_inv = mat(w), mat(w)
@@ -196,7 +200,6 @@ class ImplicitSolver:
         The start energy is evaluated at the first Newton iteration of a substep; later ones start
         from the energy of the step accepted last (kept by ``end_line_search_trial``)."""
         cfg = self.config
-        self._wf["step"].fill_(1.0)
         if cfg.line_search_steps == 0:
             return
         if first:
@@ -263,9 +266,10 @@ class ImplicitSolver:
             if with_matrix:
                 cmds.append(rec(kn.coarse_clear, n, m.node_world, active, *at))
                 for k in range(3):
-                    cmds.append(rec(ke.hessian_product_tets, t, t_dirs[k], m.tets, m.tet_rest_inv, m.tet_rest_volume,
-                                    m.tet_mu, m.tet_lambda, self._cof, m.tet_world, active, at[k], self._tet_r,
-                                    self._tet_twist))
+                    if not self._all_free:  # a uniform translation does not strain a tet: K T_k = 0
+                        cmds.append(rec(ke.hessian_product_tets, t, t_dirs[k], m.tets, m.tet_rest_inv, m.tet_rest_volume,
+                                        m.tet_mu, m.tet_lambda, self._cof, m.tet_world, active, at[k],
+                                        self._tet_r, self._tet_twist))
                     cmds.append(rec(kn.cg_node_product, n, t_dirs[k], m.node_mass, self._contact_h, m.free_axes,
                                     m.node_world, active, 1.0 / (h * h), at[k], self._coarse_scratch))
             cmds += [

@@ -85,7 +85,6 @@ class StreamPlayer:
     def rewind(self) -> None:
         """Start again from the first sample."""
         self._i_tracker = self._i_glove = 0
-        self.stream_time_s = 0.0
 
     @property
     def finished(self) -> bool:
@@ -94,7 +93,6 @@ class StreamPlayer:
     def advance_to(self, t: float) -> int:
         """Send every sample with stream time <= ``t`` (s) not sent yet; returns how many."""
         n = 0
-        self.stream_time_s = float(t)
         while self._i_tracker < len(self.tracker) and self._t_tracker[self._i_tracker] <= t:
             s = self.tracker[self._i_tracker]
             t_send = self._clock()

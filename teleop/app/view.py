@@ -19,28 +19,18 @@ import logging
 import math
 import os
 import pathlib
-import struct
 import threading
-import zlib
 
 import numpy as np
+
+from defgrasp_env.render.image_io import png_bytes as encode_png
 
 log = logging.getLogger("teleop.app")
 
 
 def png_bytes(image: np.ndarray, level: int = 1) -> bytes:
-    """Encode an RGB uint8 [H, W, 3] image as PNG (zlib; ``level`` 1 = fast)."""
-    img = np.ascontiguousarray(image)
-    if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
-        raise ValueError(f"image must be uint8 with shape (H, W, 3), got {img.dtype} {img.shape}")
-    h, w, _ = img.shape
-    raw = np.concatenate([np.zeros((h, 1), np.uint8), img.reshape(h, w * 3)], axis=1).tobytes()
-
-    def chunk(tag: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
-
-    header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw, level)) + chunk(b"IEND", b"")
+    """Encode an RGB uint8 [H, W, 3] image as PNG, fast (zlib ``level`` 1) for the live view."""
+    return encode_png(image, level)
 
 
 def _json_safe(v):

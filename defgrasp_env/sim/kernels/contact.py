@@ -94,6 +94,14 @@ def lag_contacts(
 
 
 @wp.func
+def pad_slip(xi: wp.vec3, x_start: wp.vec3, pos0: wp.vec3, rot0: wp.quat, pos1: wp.vec3, rot1: wp.quat):
+    """Slip (m) of a node at ``xi`` relative to the pad's material point that held it at the
+    substep start (``x_start``, pad pose 0), carried to the pad's pose 1."""
+    anchor_local = wp.quat_rotate_inv(rot0, x_start - pos0)
+    return xi - (pos1 + wp.quat_rotate(rot1, anchor_local))
+
+
+@wp.func
 def friction_force(mu: float, normal_force: float, slip: wp.vec3, n: wp.vec3, eps: float):
     """Smoothed Coulomb force (N) for a slip (m) and normal n, and its Hessian (N/m)."""
     slip_t = slip - wp.dot(slip, n) * n
@@ -179,9 +187,7 @@ def evaluate_nodes(
                 wp.atomic_add(pad_normal_force, pad, stiffness * depth)
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
-            # slip relative to the pad's material point that held the node at the substep start
-            anchor_local = wp.quat_rotate_inv(pad_rot0[pad], x_start[i] - pad_pos0[pad])
-            slip = xi - (pad_pos1[pad] + wp.quat_rotate(rot1, anchor_local))
+            slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
             n_lag = wp.quat_rotate(rot1, lag_normal[i * slots + 1 + k])
             f_fric, h_fric = friction_force(pad_mu, lag_fn, slip, n_lag, eps)
             f_pad += f_fric

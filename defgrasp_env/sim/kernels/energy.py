@@ -8,7 +8,7 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 
 import warp as wp
 
-from .contact import box_penetration
+from .contact import box_penetration, pad_slip
 from .elastic import deformation_gradient, polar_rotation
 
 
@@ -90,8 +90,7 @@ def node_energy(
             e += 0.5 * stiffness * depth * depth
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
-            anchor_local = wp.quat_rotate_inv(pad_rot0[pad], x_start[i] - pad_pos0[pad])
-            slip = xi - (pad_pos1[pad] + wp.quat_rotate(rot1, anchor_local))
+            slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
             n_lag = wp.quat_rotate(rot1, lag_normal[i * slots + 1 + k])
             e += friction_potential(pad_mu, lag_fn, slip, n_lag, eps)
     wp.atomic_add(energy, w, wp.float64(e))

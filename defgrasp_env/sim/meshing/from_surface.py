@@ -34,7 +34,6 @@ class TrimeshImplicit(Implicit):
         self.hi = np.asarray(mesh.bounds[1], dtype=np.float64)
         self.origin = 0.5 * (self.lo + self.hi)
         self._tri = np.asarray(mesh.triangles, dtype=np.float64)
-        self._normal = np.cross(self._tri[:, 1] - self._tri[:, 0], self._tri[:, 2] - self._tri[:, 0])
 
     def classify(self, points: np.ndarray) -> np.ndarray:
         if len(points) == 0:

@@ -46,7 +46,6 @@ def sphere_tets(radius: float, resolution: float):
     """Ball of ``radius`` metres by isosurface stuffing on a BCC lattice with a node at the
     centre, so that the poles (0, 0, 0) and (0, 2 radius, 0) are nodes."""
     nodes, tets = stuff_implicit(sphere_implicit(radius), resolution * BCC_SPACING_PER_EDGE)
-    nodes = nodes.copy()
     nodes[:, 1] += radius  # centre at height radius; exact for the poles
     return nodes, tets
 

@@ -37,10 +37,6 @@ class Implicit(ABC):
     def crossings(self, inside: np.ndarray, outside: np.ndarray) -> np.ndarray:
         """[n,3] surface points on the segments inside[i] -> outside[i] (one crossing each)."""
 
-    def project(self, points: np.ndarray) -> np.ndarray:
-        """[n,3] points moved exactly onto the surface (identity unless a subclass knows better)."""
-        return points
-
 
 class AnalyticImplicit(Implicit):
     """Solid given by a signed distance function (negative inside) and a projection.
@@ -96,9 +92,6 @@ class AnalyticImplicit(Implicit):
                 break
         t = 0.5 * (a + b)
         return self._project(inside + t[:, None] * seg)
-
-    def project(self, points: np.ndarray) -> np.ndarray:
-        return self._project(points)
 
 
 def sphere_implicit(radius: float) -> AnalyticImplicit:
