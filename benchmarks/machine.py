@@ -36,7 +36,8 @@ def git_state() -> str:
     try:
         rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=_ROOT, capture_output=True,
                              text=True, check=True).stdout.strip()
-        status = subprocess.run(["git", "status", "--porcelain", "--", "defgrasp_env", "benchmarks", ":(exclude)benchmarks/RESULTS.md"], cwd=_ROOT,
+        code = ["defgrasp_env", "benchmarks", ":(exclude)benchmarks/RESULTS.md"]
+        status = subprocess.run(["git", "status", "--porcelain", "--", *code], cwd=_ROOT,
                                 capture_output=True, text=True, check=True).stdout.split("\n")
         dirty = [d[3:] for d in status if d.strip() and not d.startswith("??")]
         new = [d[3:] for d in status if d.startswith("??")]
