@@ -35,7 +35,7 @@ import defgrasp_env  # noqa: E402,F401
 from defgrasp_env.envs.config import PickupConfig  # noqa: E402
 from defgrasp_env.policies import ScriptedPickupExpert  # noqa: E402
 from defgrasp_env.sim.meshing import OBJECT_SHAPES  # noqa: E402
-from machine import git_state, host  # noqa: E402
+from machine import append_results, git_state, host  # noqa: E402
 
 GRIPPED_N = 0.5
 
@@ -94,8 +94,7 @@ def main(argv=None) -> int:
            f"of a pad over the steps where both pads read > {GRIPPED_N} N.\n\n{table(rows)}\n")
     print(out)
     if not args.no_append:
-        with open(ROOT / "benchmarks" / "RESULTS.md", "a", encoding="utf-8") as fh:
-            fh.write(out)
+        append_results(out)
     return 0
 
 

@@ -39,7 +39,7 @@ from defgrasp_env.sim.meshing import make_object_mesh  # noqa: E402
 from defgrasp_env.sim.model import build_model  # noqa: E402
 from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig  # noqa: E402
 from defgrasp_env.sim.state import Control, State  # noqa: E402
-from machine import cpu_model, git_state  # noqa: E402
+from machine import append_results, cpu_model, git_state  # noqa: E402
 
 OBJECTS = ("cuboid", "sphere", "torus", "cylinder", "rope")
 PAD_HALF = np.array([0.004, 0.01875, 0.011])
@@ -154,8 +154,7 @@ def main(argv=None) -> None:
             f"{table}\n")
     print(text)
     if not args.no_append:
-        with open(ROOT / "benchmarks" / "RESULTS.md", "a", encoding="utf-8") as f:
-            f.write(text)
+        append_results(text)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ from defgrasp_env.recording import HDF5Recorder  # noqa: E402
 from defgrasp_env.recording.atomic import write_episode  # noqa: E402
 from defgrasp_env.recording import load_episode  # noqa: E402
 from defgrasp_env.recording.capture import EpisodeBuffer, object_record, step_record  # noqa: E402
-from machine import host  # noqa: E402
+from machine import append_results, git_state, host  # noqa: E402
 
 
 def actions_for(steps: int, seed: int) -> np.ndarray:
@@ -133,10 +133,9 @@ def main(argv=None) -> int:
     print(header + "\n" + table)
     if not args.no_append:
         stamp = datetime.datetime.now().isoformat(timespec="seconds")
-        with open(ROOT / "benchmarks" / "RESULTS.md", "a") as f:
-            f.write(f"\n## Recording overhead (bench_recording.py), {stamp}\n\nMachine: {machine()}\n"
-                    f"(end-to-end numbers include the noise of other processes; the direct figure does not)\n\n"
-                    f"{header}\n{table}\n")
+        append_results(f"\n## Recording overhead (bench_recording.py), {stamp}\n\nMachine: {machine()}; commit "
+                       f"{git_state()}\n(end-to-end numbers include the noise of other processes; the direct "
+                       f"figure does not)\n\n{header}\n{table}\n")
     return 0
 
 

@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
 
 import numpy as np  # noqa: E402
-from machine import git_state, host  # noqa: E402
+from machine import append_results, git_state, host  # noqa: E402
 
 DATA = ROOT / "tests" / "data"
 STREAM = "human_pick_cuboid"
@@ -294,9 +294,7 @@ def main(argv=None) -> int:
            f"(shares are of the mean step; other processes on the machine add noise)\n\n{table(loops, lats)}\n")
     print(out)
     if not args.no_append:
-        with open(args.results, "a", encoding="utf-8") as fh:
-            fh.write(out)
-        print(f"appended to {args.results}")
+        append_results(out, args.results)
     return 0
 
 

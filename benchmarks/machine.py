@@ -45,3 +45,13 @@ def git_state() -> str:
                 + (f" + untracked {', '.join(new)}" if new else ""))
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
+
+
+RESULTS = _ROOT / "benchmarks" / "RESULTS.md"
+
+
+def append_results(text: str, path: str | os.PathLike = RESULTS) -> None:
+    """Append a benchmark's report to the results file (benchmarks/RESULTS.md by default)."""
+    with open(path, "a", encoding="utf-8") as fh:
+        fh.write(text)
+    print(f"appended to {path}")

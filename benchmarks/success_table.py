@@ -34,7 +34,7 @@ os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
-from machine import git_state, host  # noqa: E402
+from machine import append_results, git_state, host  # noqa: E402
 
 OBJECTS = ("cuboid", "sphere", "torus", "cylinder", "rope")
 MODULI = (1e4, 1e5, 1e6, 1e7)
@@ -219,9 +219,7 @@ def main(argv=None) -> int:
         if args.note:
             entry.append(f"- Note: {args.note}")
         entry += ["", report, ""]
-        with open(args.results, "a", encoding="utf-8") as f:
-            f.write("\n".join(entry) + "\n")
-        print(f"appended to {args.results}")
+        append_results("\n".join(entry) + "\n", args.results)
     return 0
 
 
