@@ -92,25 +92,19 @@ def _reset_policy(policy, seed: int) -> None:
         reset(seed=seed) if "seed" in params else reset()
 
 
-def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
-             device: str = "cpu", record_frames: bool = False, compression: str | None = None,
-             progress: bool = True) -> list[pathlib.Path]:
-    """Record every job whose file is missing; return the files of all jobs."""
+def record_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
+                device: str = "cpu", record_frames: bool = False, compression: str | None = None,
+                on_episode: Callable[[Job, bool], None] | None = None) -> None:
+    """Record ``jobs`` into ``out`` (one env per (object, E), the recorder named by the job);
+    ``on_episode(job, success)`` after each. The one place where the recorder is driven: the serial
+    run and each Ray task (``distributed.py``) call it."""
     import gymnasium as gym
 
     from .. import ENV_ID
-    from .atomic import check_writable_directory, remove_stale_temps
     from .recorder import HDF5Recorder
 
-    check_writable_directory(out)
-    remove_stale_temps(out)
-    todo = [j for j in jobs if not (out / j.name).exists()]
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), unit="episode", desc="defgrasp-generate")
     groups: dict[tuple[str, float], list[Job]] = {}
-    for j in todo:
+    for j in jobs:
         groups.setdefault((j.object, j.youngs_modulus), []).append(j)
     for (obj, e), group in groups.items():
         kwargs = {"object": obj, "youngs_modulus": e, "device": device}
@@ -130,13 +124,42 @@ def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: in
                 while not done:
                     obs, _, terminated, truncated, _ = env.step(policy(obs))
                     done = terminated or truncated
-                if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix_str(f"last: {job.name} {'success' if terminated else 'no success'}")
+                if on_episode is not None:
+                    on_episode(job, bool(terminated))
         finally:
             env.close()
-    if bar is not None:
-        bar.close()
+
+
+def progress_bar(total: int, finished: int, enabled: bool):
+    """A tqdm bar over episodes (None when disabled) and its per-episode callback."""
+    if not enabled:
+        return None, None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, initial=finished, unit="episode", desc="defgrasp-generate")
+
+    def on_episode(job: Job, success: bool) -> None:
+        bar.update(1)
+        bar.set_postfix_str(f"last: {job.name} {'success' if success else 'no success'}")
+
+    return bar, on_episode
+
+
+def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
+             device: str = "cpu", record_frames: bool = False, compression: str | None = None,
+             progress: bool = True) -> list[pathlib.Path]:
+    """Record every job whose file is missing, one after the other; return the files of all jobs."""
+    from .atomic import check_writable_directory, remove_stale_temps
+
+    check_writable_directory(out)
+    remove_stale_temps(out)
+    todo = [j for j in jobs if not (out / j.name).exists()]
+    bar, on_episode = progress_bar(len(jobs), len(jobs) - len(todo), progress)
+    try:
+        record_jobs(out, todo, policy_spec, max_steps, device, record_frames, compression, on_episode)
+    finally:
+        if bar is not None:
+            bar.close()
     return [out / j.name for j in jobs]
 
 
@@ -185,18 +208,31 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--compression", choices=["gzip", "lzf"], default=None)
     p.add_argument("--device", default="cpu")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="record on a Ray cluster: 'auto' (the one `ray start` made), an address, or no "
+                        "value for a local Ray on this machine (needs defgrasp[ray])")
+    p.add_argument("--workers", type=int, default=None,
+                   help="with --ray: episodes recorded at once (default: one per CPU, or per GPU with --device cuda)")
     args = p.parse_args(argv)
     default_caches()
     if args.episodes < 1 or (args.max_steps is not None and args.max_steps < 1):
         p.error("--episodes and --max-steps must be >= 1")
+    if args.workers is not None and (args.workers < 1 or args.ray is None):
+        p.error(f"--workers needs --ray and must be >= 1, got {args.workers}")
     jobs = plan_jobs([o for o in args.objects.split(",") if o], args.moduli, args.episodes, args.seed)
+    record = run_jobs
+    if args.ray is not None:
+        from functools import partial
+
+        from .distributed import run_jobs_ray
+        record = partial(run_jobs_ray, address=None if args.ray == "local" else args.ray, workers=args.workers)
     try:
-        paths = run_jobs(args.out, jobs, args.policy, args.max_steps, args.device, args.frames,
-                         args.compression, progress=not args.no_progress)
+        paths = record(args.out, jobs, args.policy, args.max_steps, args.device, args.frames,
+                       args.compression, progress=not args.no_progress)
     except KeyboardInterrupt:
         print("\ninterrupted: finished episodes are kept; run the same command again to resume", file=sys.stderr)
         return 130
-    except (OSError, ValueError, TypeError) as exc:
+    except (OSError, ValueError, TypeError, ImportError, RuntimeError) as exc:
         print(f"defgrasp-generate: error: {exc}", file=sys.stderr)
         return 2
     print(summary_table(paths))

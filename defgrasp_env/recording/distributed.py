@@ -1,0 +1,147 @@
+"""``defgrasp-generate --ray``: the same episodes as a serial run, recorded by the workers of a Ray cluster.
+
+One Ray task per episode file. Each task runs :func:`generate.record_jobs` for its one job in a Ray
+worker process (its own env; one CPU, or one GPU when ``device`` is CUDA), so every file is written
+by the same code, with the same seed, as in a serial run: the episode data are bit-identical on the
+CPU. Ray schedules the tasks on the cluster's resources and retries a task whose worker process or
+node died (``max_retries``); a task whose file exists already (a resumed run, or a retry after its
+file was published) returns at once. Files appear atomically (``atomic.py``): a worker killed at any
+moment leaves at most a hidden temp file, which the next run removes, and a re-run records only the
+missing files.
+
+The output folder must be one shared file system path on every node (NFS or similar) when the
+cluster has several machines. The driver ships its ``defgrasp_env`` package to the workers
+(``runtime_env`` ``py_modules``), so every node runs the driver's code; the dependencies
+(``pip install defgrasp[ray]``) must be installed on every node.
+
+A cluster of several machines (the same Python environment on each, OUT on a shared file system)::
+
+    head$   ray start --head --port=6379
+    node$   ray start --address=HEAD_IP:6379          # on every other machine
+    head$   defgrasp-generate OUT --objects cuboid,torus --moduli 1e4,1e5 --episodes 50 --ray auto
+    head$   ray stop                                   # on every machine, when done
+
+With ``--device cuda`` each worker gets one GPU (``ray start --num-gpus=N`` where Ray does not
+detect them). Without an address, ``--ray`` starts a local Ray on this machine (``--workers N``
+CPUs; default all).
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+
+from .generate import Job, progress_bar, record_jobs
+
+DEFAULT_MAX_RETRIES = 3
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError as exc:
+        raise ImportError("--ray needs the optional dependency ray: pip install 'defgrasp[ray]'") from exc
+    return ray
+
+
+def record_one(out: str, job: Job, policy_spec: str, max_steps: int | None, device: str,
+               record_frames: bool, compression: str | None) -> tuple[str, bool | None]:
+    """Body of one Ray task: record ``job`` into ``out`` unless its file exists; return
+    (file name, success), success None when the file was there already."""
+    from .cli import default_caches
+
+    default_caches()
+    path = pathlib.Path(out) / job.name
+    if path.exists():
+        return job.name, None
+    result: list[bool] = []
+    record_jobs(path.parent, [job], policy_spec, max_steps, device, record_frames, compression,
+                on_episode=lambda _job, success: result.append(success))
+    return job.name, result[0]
+
+
+def _worker_device(device: str) -> tuple[str, float]:
+    """The device a task uses and the GPUs it asks Ray for: Ray gives a CUDA task one GPU of its
+    own (``CUDA_VISIBLE_DEVICES``), which the task sees as ``cuda``."""
+    if device == "cpu":
+        return "cpu", 0.0
+    if device in ("cuda", "cuda:0"):
+        return "cuda", 1.0
+    raise ValueError(f"with --ray, --device must be 'cpu' or 'cuda' (Ray assigns each worker one GPU), got {device!r}")
+
+
+def _start_ray(ray, address: str | None, workers: int | None) -> bool:
+    """Connect to ``address`` (``auto``: the cluster started on this machine by ``ray start``) or
+    start a local one with ``workers`` CPUs; return whether this call started Ray."""
+    if ray.is_initialized():
+        return False
+    import defgrasp_env
+
+    runtime_env = {"py_modules": [str(pathlib.Path(defgrasp_env.__file__).parent)]}
+    if address is None:
+        ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False, runtime_env=runtime_env,
+                 log_to_driver=False)
+    else:
+        ray.init(address=address, runtime_env=runtime_env, log_to_driver=False)
+    return True
+
+
+def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
+                 device: str = "cpu", record_frames: bool = False, compression: str | None = None,
+                 progress: bool = True, *, address: str | None = None, workers: int | None = None,
+                 max_retries: int = DEFAULT_MAX_RETRIES) -> list[pathlib.Path]:
+    """Record every job whose file is missing on a Ray cluster; return the files of all jobs.
+
+    Args:
+        address: Ray cluster address (``auto``, ``HOST:6379``, ``ray://HOST:10001``); None starts a
+            local Ray with ``workers`` CPUs (all CPUs when None).
+        workers: at most this many episodes at once (None: as many as the cluster's CPUs or GPUs allow).
+        max_retries: times Ray re-runs an episode whose worker process or node died.
+    Raises:
+        the task's own exception (e.g. ``ValueError`` for a bad policy), or ``RuntimeError`` when a
+        task's worker died more than ``max_retries`` times; files finished before stay.
+    """
+    from .atomic import check_writable_directory, remove_stale_temps
+
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if max_retries < 0:
+        raise ValueError(f"max_retries must be >= 0, got {max_retries}")
+    task_device, gpus = _worker_device(device)
+    ray = _import_ray()
+    out = check_writable_directory(out)
+    remove_stale_temps(out)
+    todo = [j for j in jobs if not (out / j.name).exists()]
+    if not todo:
+        return [out / j.name for j in jobs]
+    started = _start_ray(ray, address, workers)
+    task = ray.remote(record_one).options(num_cpus=1, num_gpus=gpus, max_retries=max_retries,
+                                          retry_exceptions=False)
+    bar, on_episode = progress_bar(len(jobs), len(jobs) - len(todo), progress)
+    by_name = {j.name: j for j in todo}
+    queue, pending = list(reversed(todo)), []
+    limit = workers or len(todo)  # Ray's own pattern to bound pending tasks: ray.wait
+    try:
+        while queue or pending:
+            while queue and len(pending) < limit:
+                pending.append(task.remote(str(out.resolve()), queue.pop(), policy_spec, max_steps, task_device,
+                                           record_frames, compression))
+            done, pending = ray.wait(pending, num_returns=1)
+            try:
+                name, success = ray.get(done[0])
+            except ray.exceptions.RayTaskError:  # the task's own exception (also an instance of its class)
+                raise
+            except ray.exceptions.RayError as exc:  # worker or node lost more than max_retries times
+                raise RuntimeError(f"a Ray task failed after {max_retries} retries: {exc}") from exc
+            if on_episode is not None:
+                on_episode(by_name[name], bool(success))
+    except BaseException:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+        if started:
+            ray.shutdown()
+    return [out / j.name for j in jobs]

@@ -1,0 +1,142 @@
+"""defgrasp-generate on Ray (a local two-CPU cluster, real workers): the episode files equal a serial
+run's, a worker killed mid-episode is retried by Ray, and an interrupted run resumes to the full set."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from defgrasp_env.recording import list_episodes, replay_episode, validate_path
+from defgrasp_env.recording.generate import main as generate_main
+from defgrasp_env.recording.generate import plan_jobs
+
+ray = pytest.importorskip("ray")
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+# 2 moduli x 3 episodes of 6 steps: more jobs than workers, two env configurations per worker
+ARGS = ["--objects", "cuboid", "--moduli", "1e4,1e5", "--episodes", "3", "--max-steps", "6", "--no-progress"]
+NAMES = sorted(j.name for j in plan_jobs(["cuboid"], [1e4, 1e5], 3, 0))
+# Recorder bookkeeping that depends on which episodes the same env recorded before (as in a resumed
+# serial run): the episode's index in its recorder and the reset that built the env's scene.
+BOOKKEEPING = {"created_utc", "episode_index"}
+
+
+def _contents(path: pathlib.Path) -> tuple[dict, dict]:
+    data, attrs = {}, {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda k, v: data.__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
+        for k, v in f.attrs.items():
+            if k == "replay_json":
+                v = {key: val for key, val in json.loads(v).items() if key != "scene_origin"}
+            if k not in BOOKKEEPING:
+                attrs[k] = v
+    return data, attrs
+
+
+def assert_same_episodes(a: pathlib.Path, b: pathlib.Path) -> None:
+    """Every dataset bit-identical (values and dtype), every attribute equal but the bookkeeping."""
+    assert sorted(p.name for p in list_episodes(a)) == sorted(p.name for p in list_episodes(b)) == NAMES
+    for name in NAMES:
+        (da, aa), (db, ab) = _contents(a / name), _contents(b / name)
+        assert da.keys() == db.keys(), name
+        for k in da:
+            assert da[k].dtype == db[k].dtype and np.array_equal(da[k], db[k]), f"{name}: {k} differs"
+        assert aa == ab, name
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory) -> pathlib.Path:
+    out = tmp_path_factory.mktemp("serial")
+    assert generate_main([str(out), *ARGS, "--policy", "random"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def local_ray(tmp_path_factory):
+    """A local Ray with 2 CPUs whose workers import this checkout and the tests' crash policy."""
+    crash_dir = tmp_path_factory.mktemp("crash")
+    saved = {k: os.environ.get(k) for k in ("PYTHONPATH", "DEFGRASP_CRASH_DIR")}
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(ROOT / "tests")])
+    os.environ["DEFGRASP_CRASH_DIR"] = str(crash_dir)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield crash_dir
+    ray.shutdown()
+    for k, v in saved.items():
+        os.environ.pop(k) if v is None else os.environ.__setitem__(k, v)
+
+
+def _digests(d: pathlib.Path) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in list_episodes(d)}
+
+
+def test_two_workers_match_serial_and_resume(serial, local_ray, tmp_path):
+    assert generate_main([str(tmp_path), *ARGS, "--policy", "random", "--ray", "--workers", "2"]) == 0
+    assert_same_episodes(serial, tmp_path)
+    assert validate_path(tmp_path).ok
+    result = replay_episode(tmp_path / NAMES[-1])  # a file recorded by a Ray worker replays bit-exactly
+    assert result.bit_exact and result.num_steps == 6, result
+    before = _digests(tmp_path)
+    (tmp_path / NAMES[2]).unlink()                                         # as if never finished
+    (tmp_path / f".{NAMES[4]}.tmp-999999999").write_bytes(b"partial")      # a killed writer's leftover
+    assert generate_main([str(tmp_path), *ARGS, "--policy", "random", "--ray", "--workers", "2"]) == 0
+    after = _digests(tmp_path)
+    assert {k: v for k, v in after.items() if k != NAMES[2]} == {k: v for k, v in before.items() if k != NAMES[2]}
+    assert sorted(p.name for p in tmp_path.iterdir()) == NAMES                # temp removed, nothing else
+    assert_same_episodes(serial, tmp_path)
+
+
+def test_ray_retries_a_worker_killed_mid_episode(serial, local_ray, tmp_path):
+    assert generate_main([str(tmp_path), *ARGS, "--policy", "crash_policy:CrashOncePolicy", "--ray",
+                          "--workers", "2"]) == 0
+    assert (local_ray / "crashed").exists(), "no worker was killed: the test did not test a retry"
+    assert_same_episodes(serial, tmp_path)   # the retried episode equals the serial one
+    assert validate_path(tmp_path).ok
+
+
+def test_bad_arguments_are_reported_before_ray_starts(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        generate_main([str(tmp_path), *ARGS, "--workers", "2"])            # --workers without --ray
+    with pytest.raises(SystemExit):
+        generate_main([str(tmp_path), *ARGS, "--ray", "--workers", "0"])
+    assert generate_main([str(tmp_path), *ARGS, "--ray", "--device", "cuda:1"]) == 2
+    assert "--device must be 'cpu' or 'cuda'" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_interrupted_ray_run_resumes_to_the_full_set(serial, tmp_path):
+    """The CLI in its own process (it starts its own local Ray), interrupted by Ctrl-C after the
+    first file: the finished files are valid, and the same command completes the set."""
+    cmd = [sys.executable, "-m", "defgrasp_env.recording.generate", str(tmp_path), *ARGS, "--policy", "random",
+           "--ray", "--workers", "2"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not list_episodes(tmp_path) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert proc.poll() is None, f"run ended before it could be interrupted: {proc.communicate()}"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    finished = list_episodes(tmp_path)
+    assert 1 <= len(finished) < len(NAMES), finished
+    assert validate_path(tmp_path).ok
+    kept = _digests(tmp_path)
+    assert subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, timeout=600).returncode == 0
+    assert {k: v for k, v in _digests(tmp_path).items() if k in kept} == kept
+    assert_same_episodes(serial, tmp_path)
