@@ -172,7 +172,8 @@ def main(argv=None) -> None:
     for r in rows:
         lines.append(f"| {r['object']} | {r['scenario']} | {r['worlds']} | {r['tets']} | {r['nodes']} | "
                      f"{r['steps_per_s']:.1f} | {r['world_steps_per_s']:.1f} | {r['newton']:.0f} | "
-                     f"{r['cg']:.0f} | {r['start_speed_mm_s']:.2f} | {r['lowest_mm']:.1f} | {'yes' if r['diverged'] else 'no'} |")
+                     f"{r['cg']:.0f} | {r['start_speed_mm_s']:.2f} | {r['lowest_mm']:.1f} | "
+                     f"{'yes' if r['diverged'] else 'no'} |")
     table = "\n".join(lines)
     stamp = datetime.datetime.now().isoformat(timespec="seconds")
     text = (f"\n## FEM core throughput (bench_fem.py), {stamp}\n\n"

@@ -103,6 +103,13 @@ def test_ray_retries_a_worker_killed_mid_episode(serial, local_ray, tmp_path):
     assert validate_path(tmp_path).ok
 
 
+def test_a_failing_task_is_reported_cleanly(local_ray, tmp_path, capsys):
+    assert generate_main([str(tmp_path), *ARGS, "--policy", "nope:thing", "--ray", "--workers", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("defgrasp-generate: error: policy 'nope:thing' is not importable"), err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_bad_arguments_are_reported_before_ray_starts(tmp_path, capsys):
     with pytest.raises(SystemExit):
         generate_main([str(tmp_path), *ARGS, "--workers", "2"])            # --workers without --ray

@@ -2,17 +2,22 @@
 
 One Ray task per episode file. Each task runs :func:`generate.record_jobs` for its one job in a Ray
 worker process (its own env; one CPU, or one GPU when ``device`` is CUDA), so every file is written
-by the same code, with the same seed, as in a serial run: the episode data are bit-identical on the
-CPU. Ray schedules the tasks on the cluster's resources and retries a task whose worker process or
-node died (``max_retries``); a task whose file exists already (a resumed run, or a retry after its
-file was published) returns at once. Files appear atomically (``atomic.py``): a worker killed at any
-moment leaves at most a hidden temp file, which the next run removes, and a re-run records only the
-missing files.
+by the same code, with the same seed, as in a serial run: every dataset of every file is
+bit-identical on the CPU; only the recorder's bookkeeping differs: each task records in a fresh env
+(``episode_index`` 0, no ``scene_origin`` in the replay data), where a serial run records each
+(object, E) in one env, as a resumed serial run differs from an uninterrupted one.
+Ray schedules the tasks on the cluster's resources and retries a task whose worker process or node
+died (``max_retries``); a task whose file exists already (a resumed run, or a retry after its file
+was published) returns at once. Files appear atomically (``atomic.py``): a worker killed at any
+moment leaves at most a hidden temp file, which the next run removes (its writer's pid is checked on
+the driver's machine: run one command per folder at a time), and a re-run records only the missing
+files.
 
 The output folder must be one shared file system path on every node (NFS or similar) when the
 cluster has several machines. The driver ships its ``defgrasp_env`` package to the workers
-(``runtime_env`` ``py_modules``), so every node runs the driver's code; the dependencies
-(``pip install defgrasp[ray]``) must be installed on every node.
+(``runtime_env`` ``py_modules``; not when Ray was initialised in the process before), so every node
+runs the driver's code; the dependencies (``pip install defgrasp[ray]``) must be installed on every
+node.
 
 A cluster of several machines (the same Python environment on each, OUT on a shared file system)::
 
@@ -98,7 +103,7 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
         workers: at most this many episodes at once (None: as many as the cluster's CPUs or GPUs allow).
         max_retries: times Ray re-runs an episode whose worker process or node died.
     Raises:
-        the task's own exception (e.g. ``ValueError`` for a bad policy), or ``RuntimeError`` when a
+        the first failed task's own exception (e.g. ``ValueError`` for a bad policy), or ``RuntimeError`` when a
         task's worker died more than ``max_retries`` times; files finished before stay.
     """
     from .atomic import check_writable_directory, remove_stale_temps
@@ -129,8 +134,8 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
             done, pending = ray.wait(pending, num_returns=1)
             try:
                 name, success = ray.get(done[0])
-            except ray.exceptions.RayTaskError:  # the task's own exception (also an instance of its class)
-                raise
+            except ray.exceptions.RayTaskError as exc:  # the task's own exception, without Ray's wrapper
+                raise (exc.cause if isinstance(exc.cause, Exception) else exc) from exc
             except ray.exceptions.RayError as exc:  # worker or node lost more than max_retries times
                 raise RuntimeError(f"a Ray task failed after {max_retries} retries: {exc}") from exc
             if on_episode is not None:
