@@ -162,3 +162,11 @@ def test_ci_runs_exactly_the_readme_test_command():
     ci = (ROOT / ".ci" / "run").read_text()
     assert [ln for ln in ci.splitlines() if ln.startswith("exec")] == ['exec ./dev test "$@"']
     assert os.access(DEV, os.X_OK)
+
+
+def test_a_broken_venv_is_reported_not_deleted(tmp_path):
+    repo = _repo_with_venv(tmp_path, None)
+    (repo / ".venv" / "bin" / "python").unlink()          # e.g. an interrupted venv creation
+    r = _dev_test(repo)
+    assert r.returncode == 1 and "is not a working Python 3.12 venv" in r.stderr and "rm -rf .venv" in r.stderr
+    assert (repo / ".venv" / ".defgrasp-installed").exists()
