@@ -127,9 +127,9 @@ def read_checked(path: str | os.PathLike, keys: Iterable[str] | None = None,
 def load_episode(path: str | os.PathLike, keys: Iterable[str] | None = None, missing_ok: bool = False) -> Episode:
     """Load an episode file (all datasets, or only ``keys``, skipping absent ones if ``missing_ok``).
 
-    The file is checked first (root attributes, dtype/shape/units of every dataset, values of the
-    datasets read: see :mod:`.checks`); any problem raises ``EpisodeFileError`` with one line naming
-    the file, the dataset and what was expected.
+    The whole file is checked first, whatever ``keys`` asks for (root attributes; dtype, shape,
+    units and values of every dataset: see :mod:`.checks`); any problem raises ``EpisodeFileError``
+    with one line naming the file, the dataset and what was expected.
     """
     p = pathlib.Path(path)
     found = read_checked(p, keys, missing_ok)
