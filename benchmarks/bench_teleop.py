@@ -44,7 +44,7 @@ STREAM = "human_pick_cuboid"
 
 # timing proxies (the agent only sees PoseTracker / HapticGlove / solve / __call__) -----------------
 def timed_devices(tracker, glove, log: dict):
-    from teleop.devices.base import HapticGlove, PoseTracker
+    from teleop.sensors.base import HapticGlove, PoseTracker
 
     class TimedTracker(PoseTracker):
         def connect(self):
@@ -133,7 +133,7 @@ def make_setup(ik: str):
 
 def bench_loop(ik: str) -> dict:
     """Part 1: lock-step replay, unpaced; per-step component times."""
-    from teleop.app.udp_replay import StreamPlayer
+    from teleop.testing.udp_replay import StreamPlayer
 
     meta, env, dt, rt, rg, agent, log = make_setup(ik)
     player = StreamPlayer(DATA / f"{STREAM}_tracker.jsonl", DATA / f"{STREAM}_glove.jsonl",
@@ -175,7 +175,7 @@ def _bridge(tracker_address, glove_address, stop, results) -> None:
     real time, in a loop, and reports what it sent and the haptics it got back (host monotonic
     clock, shared by all processes on Linux)."""
     sys.path.insert(0, str(ROOT))
-    from teleop.app.udp_replay import StreamPlayer, run_realtime
+    from teleop.testing.udp_replay import StreamPlayer, run_realtime
 
     player = StreamPlayer(DATA / f"{STREAM}_tracker.jsonl", DATA / f"{STREAM}_glove.jsonl",
                           tracker_address=tracker_address, glove_address=glove_address)

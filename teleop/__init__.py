@@ -1,4 +1,4 @@
-"""defgrasp teleoperation: devices, retargeting (paper eq. 1-4), haptics and ``HumanTeleopAgent``.
+"""defgrasp teleoperation: sensors, TeleopDevices, retargeting (paper eq. 1-4), haptics and ``HumanTeleopAgent``.
 
     from teleop import HumanTeleopAgent, UdpGloveReceiver, OpenVRTracker
     agent = HumanTeleopAgent(OpenVRTracker(), UdpGloveReceiver())
@@ -9,10 +9,10 @@
 """
 
 from .agent import HumanTeleopAgent, HumanTeleopConfig
-from .devices import (
-    GloveSample, HapticGlove, KeyboardTeleop, OpenVRTracker, PoseTracker, ReplayGlove, ReplayTracker,
-    SpaceMouseTeleop, StreamRecorder, TrackerSample, UdpGloveReceiver, UdpGloveSender, UdpTrackerReceiver,
-    UdpTrackerSender, load_stream,
+from .devices import KeyboardTeleop, SpaceMouseTeleop
+from .sensors import (
+    GloveSample, HapticGlove, OpenVRTracker, PoseTracker, ReplayGlove, ReplayTracker, StreamRecorder, TrackerSample,
+    UdpGloveReceiver, UdpGloveSender, UdpTrackerReceiver, UdpTrackerSender, load_stream,
 )
 from .haptics import HapticCommand, HapticsConfig, HapticsMapper, force_to_feedback
 from .teleop_device import ACTION_NAMES, TeleopDevice, make_action

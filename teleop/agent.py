@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from ._validate import check_array, check_choice
-from .devices.base import GloveSample, HapticGlove, PoseTracker, TrackerSample
+from .sensors.base import GloveSample, HapticGlove, PoseTracker, TrackerSample
 from .haptics import HapticCommand, HapticsConfig, HapticsMapper
 from .retarget.offset import CALIBRATION_MODES, OffsetRetargeter
 from .retarget.pinch import PinchResult, PinchRetargeter

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import check_number
-from .devices.base import FINGERS, MAX_VIBRATION_S, N_FINGERS
+from .sensors.base import FINGERS, MAX_VIBRATION_S, N_FINGERS
 
 TIPS = ("left", "right")
 

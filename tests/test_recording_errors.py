@@ -4,6 +4,7 @@ naming the file and the problem; nothing already written is touched."""
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 
@@ -48,30 +49,131 @@ def test_missing_truncated_and_foreign_files(good, tmp_path):
     assert not report.ok and len(report.files) == 3
     text = report.text()
     for name in ("truncated.h5", "foreign.h5", "other.h5"):
-        assert f"INVALID  {tmp_path / name}" in text
+        assert f"INVALID  {tmp_path / name}: " in text
+
+
+def _replace(f, key, data):
+    attrs = dict(f[key].attrs)
+    del f[key]
+    f.create_dataset(key, data=data)
+    f[key].attrs.update(attrs)
 
 
 @pytest.mark.parametrize("change, message", [
-    (lambda f: f.__delitem__("steps/von_mises"), "steps/von_mises: required dataset is missing"),
-    (lambda f: f["steps/node_positions"].__setitem__((1, 3, 0), np.nan), "steps/node_positions: 1 NaN/inf"),
-    (lambda f: f["steps/jaw_length"].attrs.__setitem__("units", "mm"), "steps/jaw_length: units attribute 'mm'"),
-    (lambda f: (f.__delitem__("steps/reward"), f.create_dataset("steps/reward", data=np.zeros(4, np.float32))),
-     "steps/reward: dtype float32 != float64"),
-    (lambda f: (f.__delitem__("steps/time"), f.create_dataset("steps/time", data=np.zeros(3))),
-     "steps/time: dimension T is 3 here but 4 in the other datasets"),
+    (lambda f: f.__delitem__("steps/von_mises"),
+     "steps/von_mises: required dataset is missing (expected float32 [T, N2])"),
+    (lambda f: f["steps/node_positions"].__setitem__((1, 3, 0), np.nan),
+     "steps/node_positions: 1 NaN/inf value(s), first at index (1, 3, 0); expected finite"),
+    (lambda f: f["steps/jaw_length"].attrs.__setitem__("units", "mm"),
+     "steps/jaw_length: units attribute 'mm', expected 'm'"),
+    (lambda f: _replace(f, "steps/reward", np.zeros(4, np.float32)), "steps/reward: dtype float32, expected float64"),
+    (lambda f: _replace(f, "steps/time", np.arange(1, 4) * 0.05),
+     "steps/time: shape (3,), expected [T] = (4,) (T = 4)"),
+    (lambda f: _replace(f, "steps/node_positions", f["steps/node_positions"][..., :2]),
+     "steps/node_positions: shape (4, {n3}, 2), expected [T, N3, 3] = (4, {n3}, 3) (T = 4, N3 = {n3})"),
+    (lambda f: _replace(f, "steps/action", f["steps/action"][:3]),
+     "steps/action: shape (3, 7), expected [T, A] = (4, 7) (T = 4, A = 7)"),
     (lambda f: f["object/tetrahedra"].__setitem__((0, 0), 10_000), "object/tetrahedra: node indices span"),
-    (lambda f: f.attrs.__setitem__("num_steps", 9), "num_steps = 9 but datasets have T = 4"),
+    (lambda f: f.attrs.__setitem__("num_steps", 9), "root attribute 'num_steps' = 9, but the datasets have T = 4"),
     (lambda f: f.attrs.__delitem__("config_json"), "root attribute 'config_json' is missing"),
-    (lambda f: f["steps/wrist_orientation"].__setitem__((0, 0), 2.0), "unit norm"),
+    (lambda f: f["steps/wrist_orientation"].__setitem__((0, 0), 2.0), "steps/wrist_orientation: quaternions off unit norm"),
 ])
 def test_validate_names_the_problem(good, tmp_path, change, message, capsys):
     p = _copy(good, tmp_path)
     with h5py.File(p, "r+") as f:
+        n3 = f["object/rest_nodes"].shape[0]
         change(f)
+    message = message.format(n3=n3)
     report = validate_episode(p)
     assert not report.ok and any(message in e for e in report.errors), report.errors
     assert dataset_cli(["validate", str(p)]) == 1
-    assert message in capsys.readouterr().out
+    assert f"INVALID  {p}: {message}" in capsys.readouterr().out
+    with pytest.raises(EpisodeFileError) as exc:
+        load_episode(p)
+    assert str(exc.value).startswith(f"{p}: ") and "\n" not in str(exc.value)
+
+
+MALFORMED = {  # name -> (change, the dataset the one-line error must name)
+    "node_positions_2d": (lambda f: _replace(f, "steps/node_positions", f["steps/node_positions"][..., :2]),
+                          "steps/node_positions"),
+    "short_action": (lambda f: _replace(f, "steps/action", f["steps/action"][:-1]), "steps/action"),
+    "missing_dataset": (lambda f: f.__delitem__("steps/jaw_length"), "steps/jaw_length"),
+    "nan": (lambda f: f["steps/node_positions"].__setitem__((2, 0, 1), np.nan), "steps/node_positions"),
+    "wrong_dtype": (lambda f: _replace(f, "steps/wrist_position", f["steps/wrist_position"][()].astype(np.float32)),
+                    "steps/wrist_position"),
+}
+
+
+def _fingerprint(p):
+    return hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_mtime_ns, p.stat().st_size
+
+
+@pytest.fixture(scope="module")
+def malformed(good, tmp_path_factory):
+    d = tmp_path_factory.mktemp("malformed")
+    out = {}
+    for name, (change, dataset) in MALFORMED.items():
+        p = _copy(good, d, f"{name}.h5")
+        with h5py.File(p, "r+") as f:
+            change(f)
+        os.utime(p, ns=(1_000_000_000_000_000_000, 1_000_000_000_000_000_000))   # a mtime no tool would write
+        out[name] = (p, dataset)
+    return out
+
+
+@pytest.mark.parametrize("tool", ["validate", "plot", "replay", "to-lerobot"])
+@pytest.mark.parametrize("case", sorted(MALFORMED))
+def test_every_tool_rejects_a_malformed_file_in_one_line(malformed, tmp_path, capsys, tool, case):
+    """Each dataset tool reads through the validating reader: one line naming the file, the dataset
+    and what was expected, a non-zero exit, no output written, and the input byte-for-byte untouched."""
+    p, dataset = malformed[case]
+    before = _fingerprint(p)
+    argv = {"validate": [str(p)], "plot": [str(p), "-o", str(tmp_path / "out.png")], "replay": [str(p)],
+            "to-lerobot": [str(p), str(tmp_path / "lerobot")]}[tool]
+    code = dataset_cli([tool, *argv])
+    captured = capsys.readouterr()
+    assert code != 0
+    if tool == "validate":
+        lines = [ln for ln in captured.out.splitlines() if ln.startswith("INVALID")]
+    else:
+        lines = captured.err.splitlines()
+        assert captured.out == "" or "bit-exact" not in captured.out
+    assert len(lines) == 1, captured
+    assert str(p) in lines[0] and f"{dataset}: " in lines[0] and "expected" in lines[0], lines[0]
+    assert "Traceback" not in captured.err
+    assert _fingerprint(p) == before
+    assert not (tmp_path / "out.png").exists() and not (tmp_path / "lerobot").exists()
+
+
+def test_validate_takes_several_paths(good, malformed, tmp_path, capsys):
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    _copy(good, folder, "a.h5")
+    bad = malformed["nan"][0]
+    assert dataset_cli(["validate", str(good), str(folder), str(bad), str(tmp_path / "absent")]) == 1
+    out = capsys.readouterr().out
+    assert f"OK       {good} (4 steps)" in out and f"OK       {folder / 'a.h5'} (4 steps)" in out
+    assert f"INVALID  {bad}: steps/node_positions" in out
+    assert f"INVALID  {tmp_path / 'absent'}: no such episode file or directory" in out
+    assert out.rstrip().endswith("2/4 file(s) valid")
+    assert dataset_cli(["validate", str(good), str(folder)]) == 0
+    assert capsys.readouterr().out.rstrip().endswith("2/2 file(s) valid")
+
+
+def test_a_mesh_missing_on_this_machine_is_a_warning_not_an_error(good, tmp_path):
+    """An episode of a mesh-file object is valid elsewhere; only replay needs the mesh itself."""
+    p = _copy(good, tmp_path)
+    with h5py.File(p, "r+") as f:
+        config = json.loads(f.attrs["config_json"])
+        f.attrs["config_json"] = json.dumps({**config, "object": "/nowhere/part.stl"})
+    report = validate_episode(p)
+    assert report.ok and any("object mesh '/nowhere/part.stl' not found here" in w for w in report.warnings)
+    with pytest.raises(EpisodeFileError, match=r"ep.h5: root attribute 'config_json': .*part.stl"):
+        load_episode(p).config
+    q = _copy(good, tmp_path, "typo.h5")
+    with h5py.File(q, "r+") as f:
+        f.attrs["config_json"] = json.dumps({**config, "object": "cubiod"})
+    assert any("'cubiod'" in e for e in validate_episode(q).errors)
 
 
 def test_wrong_schema_version_and_missing_dataset_on_load(good, tmp_path):
@@ -83,7 +185,7 @@ def test_wrong_schema_version_and_missing_dataset_on_load(good, tmp_path):
     q = _copy(good, tmp_path, "q.h5")
     with h5py.File(q, "r+") as f:
         del f["object/density"]
-    with pytest.raises(EpisodeFileError, match=r"q.h5: missing dataset\(s\) \['object/density'\]"):
+    with pytest.raises(EpisodeFileError, match=r"q.h5: object/density: required dataset is missing \(expected float64 scalar\)$"):
         load_episode(q)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 
 import h5py
@@ -26,7 +27,7 @@ def test_replay_is_bit_exact_for_every_episode_of_a_session(tmp_path):
     for ep in (first, second):
         result = replay_episode(ep.path)
         assert result.bit_exact, result.text()
-        assert result.num_steps == 8 and result.max_position_error == 0.0
+        assert result.num_steps == result.replayed_steps == 8 and result.max_position_error == 0.0
 
 
 def test_replay_reports_a_tampered_episode(tmp_path, capsys):
@@ -49,4 +50,25 @@ def test_replay_reports_a_tampered_episode(tmp_path, capsys):
     assert dataset_cli(["replay", str(env.paths[0])]) == 0
     assert "bit-exact" in capsys.readouterr().out
     assert dataset_cli(["replay", str(tampered)]) == 1
-    assert "DIFFERS from step 2" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "DIFFER from step 2" in out and "NOT exact" in out and "bit-exact" not in out
+
+
+def test_a_partial_replay_is_never_bit_exact(tmp_path, capsys):
+    """The recording says the episode may run 6 steps; a replay env limited to 3 ends early. Every
+    replayed step matches, yet the replay is partial: not bit-exact, and the text says so."""
+    env = make_recorder(tmp_path / "a", steps=6)
+    run_episode(env, seed=4, steps=6)
+    env.close()
+    short = tmp_path / "short_limit.h5"
+    shutil.copy(env.paths[0], short)
+    with h5py.File(short, "r+") as f:
+        replay = json.loads(f.attrs["replay_json"])
+        replay["max_episode_steps"] = 3
+        f.attrs["replay_json"] = json.dumps(replay)
+    result = replay_episode(short)
+    assert result.replayed_steps == 3 and result.num_steps == 6 and not result.complete
+    assert result.first_mismatch_step is None and not result.bit_exact
+    assert dataset_cli(["replay", str(short)]) == 1
+    out = capsys.readouterr().out
+    assert "PARTIAL replay: 3 of 6 steps replayed" in out and "bit-exact" not in out

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from teleop import HumanTeleopAgent, HumanTeleopConfig
-from teleop.devices import (
+from teleop.sensors import (
     GloveSample, ReplayGlove, ReplayTracker, TrackerSample, UdpGloveReceiver, UdpGloveSender, UdpTrackerReceiver,
     UdpTrackerSender,
 )

@@ -6,10 +6,8 @@ import sys
 import numpy as np
 import pytest
 
-from teleop.devices import (
-    GloveSample, KeyboardTeleop, OpenVRTracker, SpaceMouseTeleop, TrackerSample, key_velocity,
-    openvr_matrix_to_pose, spacemouse_velocity,
-)
+from teleop.devices import KeyboardTeleop, SpaceMouseTeleop, key_velocity, spacemouse_velocity
+from teleop.sensors import GloveSample, OpenVRTracker, SpaceMouse, TrackerSample, openvr_matrix_to_pose
 from teleop.devices.velocity import VelocityTeleopConfig
 from teleop.retarget import WorkspaceBox
 from teleop.se3 import quat_angle, rot_z
@@ -78,6 +76,41 @@ def test_spacemouse_missing_package_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "pyspacemouse", None)  # simulates an absent package
     with pytest.raises(ImportError, match="pip install pyspacemouse"):
         SpaceMouseTeleop().connect()
+
+
+def test_spacemouse_teleop_reads_through_its_sensor(monkeypatch):
+    """The TeleopDevice turns the SpaceMouse sensor's raw state into actions; the sensor (with a
+    stand-in ``pyspacemouse`` module, no hardware here) only reads."""
+    import types
+
+    class State:
+        x, y, z, roll, pitch, yaw = 0.0, 1.0, 0.0, 0.0, 0.0, 0.0   # full forward
+        buttons = [0, 0]
+
+    class Handle:
+        closed = False
+
+        def read(self):
+            return State()
+
+        def close(self):
+            Handle.closed = True
+
+    fake = types.ModuleType("pyspacemouse")
+    fake.open = lambda device=None: Handle()
+    monkeypatch.setitem(sys.modules, "pyspacemouse", fake)
+    sensor = SpaceMouse()
+    with pytest.raises(RuntimeError, match="connect"):
+        sensor.read()
+    teleop = SpaceMouseTeleop(deadzone=0.0)
+    teleop.connect()
+    assert teleop.is_connected and teleop.mouse.is_connected
+    obs = {"agent_pos": np.array([0.0, 0.3, 0.0, 0.0, 0.0, 0.0, 1.0, 0.05, 0.0, 0.0], np.float32)}
+    a = teleop.act(obs)
+    dt, speed = teleop.config.dt, teleop.config.linear_speed_m_s
+    np.testing.assert_allclose(a[:3], [0.0, 0.3, -speed * dt], atol=1e-7)   # device forward = world -z
+    teleop.disconnect()
+    assert Handle.closed and not teleop.is_connected
 
 
 def test_openvr_missing_package_error(monkeypatch):

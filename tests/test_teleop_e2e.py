@@ -2,7 +2,7 @@
 drives ``HumanTeleopAgent`` -> ``DeformablePickup-v0`` (absolute actions) to success, and the
 haptic commands come back to the sending side.
 
-The stream (``tests/data/human_pick_cuboid_*.jsonl``, made by ``python -m teleop.app.synth``) is
+The stream (``tests/data/human_pick_cuboid_*.jsonl``, made by ``python -m teleop.testing.synth``) is
 the scripted expert's pick of the cuboid (seed 0) retargeted backwards - tracker poses through the
 inverse of the calibrated offset (eq. 1-2), glove joint angles through the inverse pinch map and
 the finger FK (eq. 4) - with hand drift and tremor, tracker jitter, glove noise, sample-time jitter,
@@ -30,7 +30,7 @@ def meta():
 
 
 def test_stream_files_are_small_and_valid(meta):
-    from teleop.devices import load_stream
+    from teleop.sensors import load_stream
 
     tr, gl = load_stream(DATA / f"{STREAM}_tracker.jsonl"), load_stream(DATA / f"{STREAM}_glove.jsonl")
     assert tr.kind == "tracker" and gl.kind == "glove"
@@ -47,7 +47,7 @@ def test_udp_operator_stream_picks_the_object(meta):
 
     import defgrasp_env  # noqa: F401
     from teleop import HumanTeleopAgent, HumanTeleopConfig, UdpGloveReceiver, UdpTrackerReceiver
-    from teleop.app.udp_replay import StreamPlayer
+    from teleop.testing.udp_replay import StreamPlayer
     from teleop.retarget import RateLimits
 
     env = gym.make("DeformablePickup-v0", action_mode="absolute", **meta["env_kwargs"])
@@ -123,7 +123,7 @@ def test_synthetic_operator_inverts_the_retargeting():
     trajectory they were made from (inverse of eq. 1-2 and of the pinch map + finger FK, eq. 4)."""
     from teleop import HumanTeleopAgent, HumanTeleopConfig, ReplayGlove, ReplayTracker
     from teleop.app.session import SimClock
-    from teleop.app.synth import GripperTrajectory, OperatorModel, PinchPath, distance_for_gap, synthesize_streams
+    from teleop.testing.synth import GripperTrajectory, OperatorModel, PinchPath, distance_for_gap, synthesize_streams
     from teleop.retarget import PinchGapMap, RateLimits
     from teleop.se3 import pose_to_matrix, quat_angle, rotvec_to_quat
 

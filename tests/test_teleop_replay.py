@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from teleop.devices import (
+from teleop.sensors import (
     GloveSample, RecordingGlove, RecordingTracker, ReplayGlove, ReplayTracker, StreamRecorder, TrackerSample,
     UdpGloveReceiver, UdpGloveSender, load_stream,
 )

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from teleop.devices import GloveSample
+from teleop.sensors import GloveSample
 from teleop.retarget import (
     FingerGeometry, FingerKinematics, HandGeometry, OffsetRetargeter, PinchGapMap, PinchRetargeter,
     compose_slave_pose, hand_urdf, pinch_distance,

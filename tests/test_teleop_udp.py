@@ -8,8 +8,8 @@ import zlib
 import numpy as np
 import pytest
 
-from teleop.devices import UdpGloveReceiver, UdpGloveSender, UdpTrackerReceiver, UdpTrackerSender
-from teleop.devices import wire
+from teleop.sensors import UdpGloveReceiver, UdpGloveSender, UdpTrackerReceiver, UdpTrackerSender
+from teleop.sensors import wire
 from teleop.se3 import pose_to_matrix, rotvec_to_quat
 
 RNG = np.random.default_rng(0)

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from teleop import HapticsConfig, HumanTeleopConfig, make_action
-from teleop.devices import (
-    KeyboardTeleop, OpenVRTracker, ReplayGlove, UdpGloveReceiver, UdpGloveSender, UdpTrackerReceiver,
-    UdpTrackerSender,
+from teleop.devices import KeyboardTeleop
+from teleop.sensors import (
+    OpenVRTracker, ReplayGlove, UdpGloveReceiver, UdpGloveSender, UdpTrackerReceiver, UdpTrackerSender,
 )
-from teleop.devices.base import GloveSample, check_haptics
+from teleop.sensors.base import GloveSample, check_haptics
 from teleop.devices.velocity import VelocityTeleopConfig
 from teleop.haptics import force_to_feedback
 from teleop.retarget import (

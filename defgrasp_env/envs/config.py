@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import functools
 import math
+import pathlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -10,6 +12,7 @@ from ..gripper import GripperConfig
 from ..render.camera import Camera
 from ..sim.materials import Material, check_range
 from ..sim.meshing import OBJECT_SHAPES
+from ..sim.meshing.from_surface import load_surface
 from ..sim.model import ContactParams
 from ..sim.solver import SolverConfig
 
@@ -24,12 +27,43 @@ def _check_choice(name: str, value, choices: Sequence[str]) -> str:
     return value
 
 
+@functools.lru_cache(maxsize=32)
+def _surface_problem(path: str, mtime_ns: int, size: int) -> str | None:
+    """Why the surface file at ``path`` cannot be meshed (None: it can); cached per file version."""
+    try:
+        load_surface(path)
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types for unreadable files; all are reported
+        return f"{type(exc).__name__}: {exc}"
+    return None
+
+
+def check_object(name: str) -> str:
+    """``name`` if it is a registered shape, ``"random"``, or an existing watertight surface mesh
+    file; else ``ValueError`` listing the valid names (a mesh path must exist) or naming the file."""
+    if not isinstance(name, str):
+        raise TypeError(f"object must be a str (one of {sorted(OBJECT_SHAPES)}, {RANDOM_OBJECT!r} or a mesh path), "
+                        f"got {type(name).__name__}")
+    if name in OBJECT_SHAPES or name == RANDOM_OBJECT:
+        return name
+    path = pathlib.Path(name)
+    if not path.is_file():
+        raise ValueError(f"object must be one of {sorted(OBJECT_SHAPES)}, {RANDOM_OBJECT!r}, or the path of an "
+                         f"existing watertight surface mesh file (STL, OBJ, PLY, ...); got {name!r}, which is "
+                         "neither a known name nor an existing file")
+    stat = path.stat()
+    problem = _surface_problem(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    if problem is not None:
+        raise ValueError(f"object mesh file {name!r} cannot be used: {problem}")
+    return name
+
+
 @dataclass(frozen=True)
 class PickupConfig:
     """Everything that defines a DeformablePickup task; see ``DeformablePickupEnv`` for the meaning.
 
     ``object`` is a name of ``OBJECT_SHAPES``, ``"random"`` (sampled per episode among the five), or
-    a path to a watertight surface mesh. ``youngs_modulus`` is a value in Pa or a tuple of values
+    a path to a watertight surface mesh (checked here: it must exist and load as a watertight
+    surface, so a bad name or file fails at ``gym.make``, not at ``reset``). ``youngs_modulus`` is a value in Pa or a tuple of values
     to sample from per episode (e.g. the paper's (1e4, 1e5, 1e6, 1e7)).
     """
 
@@ -58,9 +92,6 @@ class PickupConfig:
     device: str = "cpu"
 
     def __post_init__(self) -> None:
-        if not isinstance(self.object, str):
-            raise TypeError(f"object must be a str (one of {sorted(OBJECT_SHAPES)}, 'random' or a mesh path), "
-                            f"got {type(self.object).__name__}")
         if self.object_resolution is not None:
             check_range("object_resolution", self.object_resolution, 0.0, 0.1, "m", high_open=False)
         moduli = self.youngs_modulus if isinstance(self.youngs_modulus, tuple) else (self.youngs_modulus,)
@@ -84,6 +115,7 @@ class PickupConfig:
         for name, cls in (("gripper", GripperConfig), ("solver", SolverConfig), ("camera", Camera)):
             if not isinstance(getattr(self, name), cls):
                 raise TypeError(f"{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
+        check_object(self.object)  # last: loads a mesh file, after the cheap checks
 
     @property
     def dt(self) -> float:

@@ -13,6 +13,7 @@ from .common import SceneCamera, check_actions, draw_setup, observations, step_i
 from .config import PickupConfig
 from .pickup_env import make_config
 from .scene import PickupScene
+from .seeds import world_seeds
 from .task import PickupTask, action_space, observation_spaces
 
 
@@ -77,10 +78,7 @@ class DeformablePickupVectorEnv(VectorEnv):
             if mask.shape != (self.num_envs,) or mask.dtype != bool:
                 raise ValueError(f"reset_mask must be a bool array of shape ({self.num_envs},), "
                                  f"got {mask.dtype} {mask.shape}")
-        seeds = seed if isinstance(seed, (list, tuple)) else [None if seed is None else seed + i
-                                                               for i in range(self.num_envs)]
-        if len(seeds) != self.num_envs:
-            raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seeds)}")
+        seeds = world_seeds(seed, self.num_envs)
         for i in np.flatnonzero(mask):
             if seeds[i] is not None or self.scene is None:
                 self._rngs[i] = seeding.np_random(seeds[i])[0]

@@ -1,9 +1,9 @@
 """``defgrasp-dataset``: validate, convert, plot and replay recorded episodes.
 
-    defgrasp-dataset validate PATH            # file or folder; exit 1 if any file is invalid
+    defgrasp-dataset validate PATH [PATH ...] # files or folders; exit 1 if any file is invalid
     defgrasp-dataset to-lerobot SRC DST       # new LeRobot v3.0 dataset at DST
     defgrasp-dataset plot EPISODE [-o PNG]    # the paper's Fig. 5 panels
-    defgrasp-dataset replay EPISODE           # re-simulate; exit 1 unless bit-exact
+    defgrasp-dataset replay EPISODE           # re-simulate; exit 1 unless every step is bit-exact
     defgrasp-dataset schema                   # the schema table (Markdown)
 """
 
@@ -27,7 +27,7 @@ def default_caches() -> None:
 def _validate(args) -> int:
     from .validate import validate_path
 
-    report = validate_path(args.path)
+    report = validate_path(*args.paths)
     print(report.text())
     return 0 if report.ok else 1
 
@@ -64,30 +64,50 @@ def _schema(args) -> int:
     return 0
 
 
+def _validate_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("paths", nargs="+", metavar="PATH", help="episode file or folder of episode files")
+
+
+def _to_lerobot_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("src", help="episode file or folder")
+    p.add_argument("dst", help="new LeRobot dataset folder (must not exist)")
+    p.add_argument("--repo-id", default=None, help="LeRobot repo id (default defgrasp/<dst name>)")
+    p.add_argument("--task", default=None, help="task string (default: per episode, from object and E)")
+    p.add_argument("--videos", action="store_true", help="store camera frames as MP4 instead of PNG")
+
+
+def _plot_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("episode")
+    p.add_argument("-o", "--output", default=None, help="PNG path (default: episode path with .png)")
+
+
+def _replay_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("episode")
+    p.add_argument("--device", default=None, help="Warp device (default: the recorded one)")
+
+
+def _no_args(p: argparse.ArgumentParser) -> None:
+    pass
+
+
+#: The subcommands: name -> (help, add_arguments(parser), run(args) -> exit code). Add a row to extend.
+COMMANDS = {
+    "validate": ("check episode files against the schema", _validate_args, _validate),
+    "to-lerobot": ("convert episodes to a LeRobot dataset", _to_lerobot_args, _to_lerobot),
+    "plot": ("draw the paper's Fig. 5 panels of one episode", _plot_args, _plot),
+    "replay": ("re-simulate an episode and compare node positions bit for bit", _replay_args, _replay),
+    "schema": ("print the episode schema table", _no_args, _schema),
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="defgrasp-dataset", description=__doc__.split("\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True)
-    v = sub.add_parser("validate", help="check episode files against the schema")
-    v.add_argument("path", help="episode file or folder of episode files")
-    v.set_defaults(func=_validate)
-    c = sub.add_parser("to-lerobot", help="convert episodes to a LeRobot dataset")
-    c.add_argument("src", help="episode file or folder")
-    c.add_argument("dst", help="new LeRobot dataset folder (must not exist)")
-    c.add_argument("--repo-id", default=None, help="LeRobot repo id (default defgrasp/<dst name>)")
-    c.add_argument("--task", default=None, help="task string (default: per episode, from object and E)")
-    c.add_argument("--videos", action="store_true", help="store camera frames as MP4 instead of PNG")
-    c.set_defaults(func=_to_lerobot)
-    g = sub.add_parser("plot", help="draw the paper's Fig. 5 panels of one episode")
-    g.add_argument("episode")
-    g.add_argument("-o", "--output", default=None, help="PNG path (default: episode path with .png)")
-    g.set_defaults(func=_plot)
-    r = sub.add_parser("replay", help="re-simulate an episode and compare node positions bit for bit")
-    r.add_argument("episode")
-    r.add_argument("--device", default=None, help="Warp device (default: the recorded one)")
-    r.set_defaults(func=_replay)
-    s = sub.add_parser("schema", help="print the episode schema table")
-    s.set_defaults(func=_schema)
+    for name, (help_text, add_arguments, run) in COMMANDS.items():
+        c = sub.add_parser(name, help=help_text)
+        add_arguments(c)
+        c.set_defaults(func=run)
     return p
 
 
@@ -97,7 +117,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except (OSError, ValueError, TypeError, KeyError) as exc:
-        print(f"defgrasp-dataset {args.command}: error: {exc}", file=sys.stderr)
+        message = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        print(f"defgrasp-dataset {args.command}: error: {' '.join(str(message).split())}", file=sys.stderr)
         return 2
 
 

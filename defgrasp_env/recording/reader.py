@@ -1,4 +1,6 @@
-"""Reading episode files, with errors that name the file and the problem."""
+"""Reading episode files through the schema checks: every dataset tool (validate, plot, replay,
+to-lerobot) reads here, and a malformed file gives one line naming the file, the dataset and what
+was expected (:class:`EpisodeFileError`). Files are opened read-only: nothing is ever written."""
 
 from __future__ import annotations
 
@@ -11,7 +13,8 @@ from dataclasses import dataclass, field
 import h5py
 import numpy as np
 
-from .schema import FIELDS, FORMAT, SCHEMA_VERSION, SUFFIX
+from .checks import Inspection, attr_value, inspect_file
+from .schema import FORMAT, SCHEMA_VERSION, SUFFIX
 
 
 class EpisodeFileError(ValueError):
@@ -51,24 +54,16 @@ def open_checked(path: str | os.PathLike) -> h5py.File:
         f = h5py.File(p, "r")
     except OSError as exc:
         raise EpisodeFileError(f"{p}: corrupt or truncated HDF5 file ({exc})") from exc
-    fmt = _attr(f.attrs.get("format"))
+    fmt = attr_value(f.attrs.get("format"))
     if fmt != FORMAT:
         f.close()
         raise EpisodeFileError(f"{p}: not a defgrasp episode (root attribute 'format' is {fmt!r}, "
                                f"expected {FORMAT!r})")
-    version = _attr(f.attrs.get("schema_version"))
+    version = attr_value(f.attrs.get("schema_version"))
     if not isinstance(version, int) or isinstance(version, bool) or not 1 <= version <= SCHEMA_VERSION:
         f.close()
         raise EpisodeFileError(f"{p}: unsupported schema_version {version!r} (this library reads 1..{SCHEMA_VERSION})")
     return f
-
-
-def _attr(value):
-    if isinstance(value, bytes):
-        return value.decode()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
 
 
 @dataclass
@@ -99,36 +94,45 @@ class Episode:
 
     @property
     def config(self):
+        """The recorded ``PickupConfig``; ``EpisodeFileError`` naming the file if it is not valid
+        here (e.g. its mesh file does not exist on this machine)."""
         from .config_io import config_from_json
-        return config_from_json(self.attrs["config_json"])
+        try:
+            return config_from_json(self.attrs["config_json"])
+        except (ValueError, TypeError) as exc:
+            raise EpisodeFileError(f"{self.path}: root attribute 'config_json': {exc}") from exc
 
     def feature_points(self) -> np.ndarray:
         """Object feature point P_feature (mean node position, paper eq. 5) per step [T,3], m."""
         return self["steps/node_positions"].astype(np.float64).mean(axis=1)
 
 
+def problem_line(path: pathlib.Path, problems: list[str]) -> str:
+    """One line: the file, its first problem, and how many more ``validate`` would list."""
+    more = f" (+{len(problems) - 1} more problem(s): defgrasp-dataset validate {path})" if len(problems) > 1 else ""
+    return f"{path}: {problems[0]}{more}"
+
+
+def read_checked(path: str | os.PathLike, keys: Iterable[str] | None = None,
+                 missing_ok: bool = False) -> Inspection:
+    """Open ``path`` read-only, check it against the schema and read ``keys`` (default: all).
+
+    Raises ``EpisodeFileError`` (or ``FileNotFoundError``/``IsADirectoryError``) only when the file
+    cannot be opened as a defgrasp episode; schema problems come back in ``Inspection.errors``.
+    """
+    with open_checked(path) as f:
+        return inspect_file(f, keys, missing_ok)
+
+
 def load_episode(path: str | os.PathLike, keys: Iterable[str] | None = None, missing_ok: bool = False) -> Episode:
-    """Load an episode file (all datasets, or only ``keys``, skipping absent ones if ``missing_ok``);
-    raises ``EpisodeFileError`` naming the file and the problem for foreign, truncated or incomplete files."""
+    """Load an episode file (all datasets, or only ``keys``, skipping absent ones if ``missing_ok``).
+
+    The whole file is checked first, whatever ``keys`` asks for (root attributes; dtype, shape,
+    units and values of every dataset: see :mod:`.checks`); any problem raises ``EpisodeFileError``
+    with one line naming the file, the dataset and what was expected.
+    """
     p = pathlib.Path(path)
-    with open_checked(p) as f:
-        attrs = {k: _attr(v) for k, v in f.attrs.items()}
-        present: list[str] = []
-        f.visit(lambda name: present.append(name) if isinstance(f[name], h5py.Dataset) else None)
-        missing = [k for k, fld in FIELDS.items() if fld.required and k not in present]
-        if missing:
-            raise EpisodeFileError(f"{p}: missing dataset(s) {missing}")
-        wanted = present if keys is None else list(keys)
-        data, names = {}, {}
-        for k in wanted:
-            if k not in f:
-                if missing_ok:
-                    continue
-                raise EpisodeFileError(f"{p}: no dataset {k!r}")
-            try:
-                data[k] = f[k][()]
-            except OSError as exc:
-                raise EpisodeFileError(f"{p}: dataset {k!r} cannot be read ({exc})") from exc
-            if "names" in f[k].attrs:
-                names[k] = [_attr(n) for n in f[k].attrs["names"]]
-    return Episode(p, attrs, data, names)
+    found = read_checked(p, keys, missing_ok)
+    if found.errors:
+        raise EpisodeFileError(problem_line(p, found.errors))
+    return Episode(p, found.attrs, found.data, found.names)

@@ -19,21 +19,32 @@ from .reader import Episode, EpisodeFileError, load_episode
 
 @dataclass
 class ReplayResult:
-    """Outcome of a replay; ``bit_exact``: every node position, reward and flag matches exactly."""
+    """Outcome of a replay. ``bit_exact``: every recorded step was replayed and every node position,
+    reward and flag matches exactly; a replay that ends before the recording is never bit-exact."""
 
     path: str
-    num_steps: int
+    num_steps: int                             # steps in the recording
+    replayed_steps: int                        # steps the replay ran (fewer if the env ended first)
     bit_exact: bool
-    max_position_error: float                  # m, over all steps and nodes
-    first_mismatch_step: int | None
+    max_position_error: float                  # m, over all replayed steps and nodes
+    first_mismatch_step: int | None            # first step whose node positions differ
     flags_match: bool                          # rewards, terminated and truncated all equal
     warnings: list[str] = field(default_factory=list)
 
+    @property
+    def complete(self) -> bool:
+        return self.replayed_steps == self.num_steps
+
     def text(self) -> str:
-        verdict = "bit-exact" if self.bit_exact else (
-            f"DIFFERS from step {self.first_mismatch_step} (max node position error {self.max_position_error:.3e} m)")
-        lines = [f"{self.path}: {self.num_steps} steps replayed, node positions {verdict}; "
-                 f"rewards/flags {'match' if self.flags_match else 'DIFFER'}"]
+        if self.first_mismatch_step is not None:
+            positions = (f"DIFFER from step {self.first_mismatch_step} "
+                         f"(max node position error {self.max_position_error:.3e} m)")
+        else:
+            positions = "match bit for bit" if self.complete else "match bit for bit so far"
+        head = "" if self.complete else "PARTIAL replay: "
+        verdict = "bit-exact" if self.bit_exact else "NOT exact"
+        lines = [f"{self.path}: {head}{self.replayed_steps} of {self.num_steps} steps replayed; node positions "
+                 f"{positions}; rewards/flags {'match' if self.flags_match else 'DIFFER'}; {verdict}"]
         return "\n".join(lines + [f"  warning: {w}" for w in self.warnings])
 
 
@@ -81,21 +92,22 @@ def replay_episode(path: str | os.PathLike | Episode, device: str | None = None)
                                    f"recorded {ep['object/initial_position'].tolist()}")
         recorded = ep["steps/node_positions"]
         actions = ep["steps/action"]
-        max_err, first, flags_ok = 0.0, None, True
+        max_err, first, flags_ok, replayed = 0.0, None, True, 0
         for k, action in enumerate(actions):
             _, reward, terminated, truncated, _ = env.step(action)
+            replayed = k + 1
             scene = env.unwrapped.scene
             x = scene.state.positions.numpy()[scene.model.world_nodes(0)]
             if not np.array_equal(x, recorded[k]):
                 first = k if first is None else first
                 max_err = max(max_err, float(np.nanmax(np.abs(x.astype(np.float64) - recorded[k]))))
-            flags_ok &= (reward == ep["steps/reward"][k] and terminated == ep["steps/terminated"][k]
-                         and truncated == ep["steps/truncated"][k])
+            flags_ok &= bool(reward == ep["steps/reward"][k] and terminated == ep["steps/terminated"][k]
+                             and truncated == ep["steps/truncated"][k])
             if (terminated or truncated) and k < len(actions) - 1:
-                warnings.append(f"the replay ended at step {k}, the recording had {len(actions)} steps")
-                flags_ok = False
+                warnings.append(f"the replayed episode ended at step {k}, the recording has {len(actions)} steps")
                 break
     finally:
         env.close()
-    return ReplayResult(str(ep.path), len(actions), bool(first is None and flags_ok), max_err, first,
-                        bool(flags_ok), warnings)
+    complete = replayed == len(actions)
+    return ReplayResult(str(ep.path), len(actions), replayed, bool(complete and first is None and flags_ok),
+                        max_err, first, bool(flags_ok), warnings)

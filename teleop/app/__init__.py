@@ -5,9 +5,9 @@
   recording through ``HDF5Recorder``, live view, Ctrl-C safety);
 * ``control``: the episode flow as a pure state machine; ``keys``: the pure key -> command map and
   key sources (pynput, terminal, none, scripted);
-* ``devices``: ``--tracker``/``--glove`` specs -> a ``TeleopDevice``; ``view``: PNG / HTTP live view;
-* ``synth`` and ``udp_replay``: synthetic operator streams (the retargeting inverted) and playing
-  recorded streams into the UDP receivers (tests, benchmark, trying the app without hardware).
+* ``devices``: ``--tracker``/``--glove`` specs -> a ``TeleopDevice``; ``view``: PNG / HTTP live view.
+
+Synthetic operator streams and playing recorded streams over UDP live in ``teleop.testing``.
 
 Importing this package does not import the simulator; the submodules that need it do so lazily.
 """

@@ -89,8 +89,8 @@ def run(args: argparse.Namespace, *, say=None):
     from .session import CollectionSession, SessionConfig, SimClock, make_env_stack
     from .view import LiveView
     from ..agent import HumanTeleopConfig
-    from ..devices.udp_glove import DEFAULT_GLOVE_PORT
-    from ..devices.udp_tracker import DEFAULT_TRACKER_PORT
+    from ..sensors.udp_glove import DEFAULT_GLOVE_PORT
+    from ..sensors.udp_tracker import DEFAULT_TRACKER_PORT
     from ..retarget.smoothing import RateLimits
 
     tell = say or print

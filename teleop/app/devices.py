@@ -28,13 +28,13 @@ from typing import Callable, Mapping
 import numpy as np
 
 from ..agent import HumanTeleopAgent, HumanTeleopConfig
-from ..devices.base import GloveSample, HapticGlove, PoseTracker, require_connected
+from ..sensors.base import GloveSample, HapticGlove, PoseTracker, require_connected
 from ..devices.keyboard import DEFAULT_KEY_BINDINGS, KeyboardTeleop
-from ..devices.openvr_tracker import OpenVRTracker
-from ..devices.replay import ReplayGlove, ReplayTracker
+from ..sensors.openvr_tracker import OpenVRTracker
+from ..sensors.replay import ReplayGlove, ReplayTracker
 from ..devices.spacemouse import SpaceMouseTeleop
-from ..devices.udp_glove import DEFAULT_GLOVE_PORT, UdpGloveReceiver
-from ..devices.udp_tracker import DEFAULT_TRACKER_PORT, UdpTrackerReceiver
+from ..sensors.udp_glove import DEFAULT_GLOVE_PORT, UdpGloveReceiver
+from ..sensors.udp_tracker import DEFAULT_TRACKER_PORT, UdpTrackerReceiver
 from ..devices.velocity import VelocityTeleopConfig
 from ..retarget.pinch import PinchGapMap, PinchRetargeter
 from ..retarget.smoothing import RateLimits

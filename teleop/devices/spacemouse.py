@@ -1,4 +1,4 @@
-"""3Dconnexion SpaceMouse teleoperation (optional ``pyspacemouse``, imported on connect()).
+"""3Dconnexion SpaceMouse teleoperation: the ``SpaceMouse`` sensor's state -> velocity commands.
 
 pyspacemouse's state has x, y, z, roll, pitch, yaw in [-1, 1] and ``buttons``. Device axes: x right,
 y forward (away from the user), z up. World (y up, -z forward): v = (x, z, -y), w = (pitch, yaw,
@@ -8,15 +8,13 @@ y forward (away from the user), z up. World (y up, -z forward): v = (x, z, -y), 
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 import numpy as np
 
 from .._validate import check_array, check_number
+from ..sensors.spacemouse import SpaceMouse
 from .velocity import VelocityTeleop, VelocityTeleopConfig
-
-INSTALL_HINT = "pip install pyspacemouse (and the hidapi system library)"
 
 
 def spacemouse_velocity(
@@ -58,32 +56,21 @@ class SpaceMouseTeleop(VelocityTeleop):
         self.device = device
         self.deadzone = check_number("deadzone", deadzone, 0.0, 1.0, hi_open=True)
         self.axis_signs = tuple(check_array("axis_signs", axis_signs, (6,)).tolist())
-        self._mouse = None
+        self.mouse = SpaceMouse(device)
 
     @property
     def is_connected(self) -> bool:
-        return self._mouse is not None
+        return self.mouse.is_connected
 
     def connect(self, calibrate: bool = True) -> None:
-        if self._mouse is not None:
-            return
-        try:
-            sm = importlib.import_module("pyspacemouse")
-        except ImportError as exc:
-            raise ImportError(f"SpaceMouseTeleop needs the optional 'pyspacemouse' package: {INSTALL_HINT}") from exc
-        mouse = sm.open(device=self.device) if self.device else sm.open()
-        if not mouse:
-            raise RuntimeError(f"pyspacemouse could not open a SpaceMouse (device={self.device!r}); is it plugged in and readable?")
-        self._mouse = mouse if hasattr(mouse, "read") else sm
+        self.mouse.connect()
 
     def disconnect(self) -> None:
-        if self._mouse is not None:
-            self._mouse.close()
-            self._mouse = None
+        self.mouse.disconnect()
 
     def read_velocity(self):
         c = self.config
         return spacemouse_velocity(
-            self._mouse.read(), linear_speed_m_s=c.linear_speed_m_s, angular_speed_rad_s=c.angular_speed_rad_s,
+            self.mouse.read(), linear_speed_m_s=c.linear_speed_m_s, angular_speed_rad_s=c.angular_speed_rad_s,
             gap_speed_m_s=c.gap_speed_m_s, deadzone=self.deadzone, axis_signs=self.axis_signs,
         )

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validate import check_array
-from ..devices.base import FINGERS, JOINTS_PER_FINGER
+from ..sensors.base import FINGERS, JOINTS_PER_FINGER
 
 ROOT_LINK = "glove"
 Z, Y = (0.0, 0.0, 1.0), (0.0, 1.0, 0.0)

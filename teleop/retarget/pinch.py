@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validate import check_array, check_choice, check_number
-from ..devices.base import FINGERS, JOINTS_PER_FINGER, GloveSample
+from ..sensors.base import FINGERS, JOINTS_PER_FINGER, GloveSample
 from .hand_urdf import HandGeometry, hand_urdf, joint_name, tip_link
 
 #: smallest accepted calibrated pinch span D_open - D_closed (m)

@@ -22,7 +22,7 @@ from .sdf import Implicit
 from .stuffing import stuff_implicit
 from .tetmesh import TetMesh, finalize_mesh
 
-__all__ = ["mesh_from_surface", "TrimeshImplicit"]
+__all__ = ["mesh_from_surface", "load_surface", "TrimeshImplicit"]
 
 
 class TrimeshImplicit(Implicit):
@@ -90,7 +90,9 @@ class TrimeshImplicit(Implicit):
         return t[rows, best], score[rows, best] > -1e-9
 
 
-def _load(source: str | os.PathLike | trimesh.Trimesh) -> trimesh.Trimesh:
+def load_surface(source: str | os.PathLike | trimesh.Trimesh) -> trimesh.Trimesh:
+    """The checked surface :func:`mesh_from_surface` meshes: loaded, non-empty, finite, watertight,
+    consistently wound, outward (inverted if needed). Raises as :func:`mesh_from_surface` does."""
     if isinstance(source, trimesh.Trimesh):
         mesh = trimesh.Trimesh(
             vertices=np.array(source.vertices, dtype=np.float64),
@@ -143,7 +145,7 @@ def mesh_from_surface(source: str | os.PathLike | trimesh.Trimesh, resolution: f
         ValueError: empty / non-watertight surface, resolution out of range, non-manifold or
             degenerate result.
     """
-    mesh = _load(source)
+    mesh = load_surface(source)
     extent = float(np.min(mesh.extents))
     res = checked_resolution(resolution, extent, "this surface", "its smallest bounding-box extent")
     nodes, tets = stuff_implicit(TrimeshImplicit(mesh), res * BCC_SPACING_PER_EDGE)

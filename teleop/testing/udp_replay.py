@@ -12,7 +12,7 @@ it:
 * ``run_realtime`` / the CLI: stream time = wall time since start (optionally looped), for trying
   ``defgrasp-teleop --tracker udp --glove udp`` without hardware:
 
-      python -m teleop.app.udp_replay --tracker tests/data/human_pick_cuboid_tracker.jsonl \\
+      python -m teleop.testing.udp_replay --tracker tests/data/human_pick_cuboid_tracker.jsonl \\
           --glove tests/data/human_pick_cuboid_glove.jsonl
 """
 
@@ -26,10 +26,10 @@ from typing import Callable
 
 import numpy as np
 
-from ..devices.base import GloveSample, TrackerSample
-from ..devices.recorder import load_stream
-from ..devices.udp_glove import DEFAULT_GLOVE_PORT, HapticsCommand, UdpGloveSender
-from ..devices.udp_tracker import DEFAULT_TRACKER_PORT, UdpTrackerSender
+from ..sensors.base import GloveSample, TrackerSample
+from ..sensors.recorder import load_stream
+from ..sensors.udp_glove import DEFAULT_GLOVE_PORT, HapticsCommand, UdpGloveSender
+from ..sensors.udp_tracker import DEFAULT_TRACKER_PORT, UdpTrackerSender
 
 #: entries kept in ``StreamPlayer.sent_log`` and ``.haptics`` (the newest)
 LOG_LENGTH = 200_000
@@ -152,7 +152,7 @@ def run_realtime(player: StreamPlayer, *, loop: bool = False, speed: float = 1.0
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m teleop.app.udp_replay",
+    p = argparse.ArgumentParser(prog="python -m teleop.testing.udp_replay",
                                 description="Stream recorded tracker/glove files to defgrasp's UDP receivers in real time.")
     p.add_argument("--tracker", help="tracker stream (.jsonl/.npz)")
     p.add_argument("--glove", help="glove stream (.jsonl/.npz)")

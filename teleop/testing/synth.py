@@ -20,7 +20,7 @@ Used to make the recorded operator streams in ``tests/data`` (end-to-end test, b
      (samples with ``valid = False``) during which the operator, seeing the gripper stop, waits
      (the trajectory's clock stands still and resumes after it).
 
-Regenerate the test data with ``python -m teleop.app.synth --out tests/data`` (runs the env once).
+Regenerate the test data with ``python -m teleop.testing.synth --out tests/data`` (runs the env once).
 """
 
 from __future__ import annotations
@@ -33,8 +33,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .._validate import check_array, check_number
-from ..devices.base import GloveSample, TrackerSample
-from ..devices.recorder import StreamRecorder
+from ..sensors.base import GloveSample, TrackerSample
+from ..sensors.recorder import StreamRecorder
 from ..retarget.pinch import INDEX, THUMB, PinchGapMap
 from ..se3 import invert, pose_to_matrix, quat_slerp, rotvec_to_quat
 
@@ -305,7 +305,7 @@ def write_streams(directory, name: str, traj: GripperTrajectory, model: Operator
     op["gap_map"] = asdict(model.gap_map)
     meta = {
         "description": "synthetic operator (scripted expert retargeted backwards, human-like noise); "
-                       "made by python -m teleop.app.synth",
+                       "made by python -m teleop.testing.synth",
         "seed": traj.seed, "env_kwargs": traj.env_kwargs, "dt": traj.dt,
         "duration_s": max(trackers[-1].timestamp_s, gloves[-1].timestamp_s),
         "expert_success_time_s": None if traj.success_step is None else traj.success_step * traj.dt,
@@ -317,7 +317,7 @@ def write_streams(directory, name: str, traj: GripperTrajectory, model: Operator
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m teleop.app.synth", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m teleop.testing.synth", description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="tests/data", help="output folder (default tests/data)")
     p.add_argument("--name", default="human_pick_cuboid", help="file name stem")
     p.add_argument("--object", default="cuboid")
