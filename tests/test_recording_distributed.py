@@ -23,8 +23,10 @@ from defgrasp_env.recording.generate import plan_jobs
 ray = pytest.importorskip("ray")
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-# 2 moduli x 3 episodes of 6 steps: more jobs than workers, two env configurations per worker
+
+
 def _args(max_steps: int) -> list[str]:
+    """2 moduli x 3 episodes: more jobs than workers, two env configurations per worker."""
     return ["--objects", "cuboid", "--moduli", "1e4,1e5", "--episodes", "3", "--max-steps", str(max_steps),
             "--no-progress"]
 
@@ -32,7 +34,7 @@ def _args(max_steps: int) -> list[str]:
 ARGS = _args(6)
 NAMES = sorted(j.name for j in plan_jobs(["cuboid"], [1e4, 1e5], 3, 0))
 # Recorder bookkeeping that depends on which episodes the same env recorded before (as in a resumed
-# serial run): the episode's index in its recorder and the reset that built the env's scene.
+# serial run): the episode's index in its recorder and (in replay_json) the reset that built the scene.
 BOOKKEEPING = {"created_utc", "episode_index"}
 
 
