@@ -16,18 +16,25 @@ import h5py
 import numpy as np
 import pytest
 
-from defgrasp_env.recording import list_episodes, replay_episode, validate_path
+from defgrasp_env.recording import list_episodes, load_episode, replay_episode, validate_path
 from defgrasp_env.recording.generate import main as generate_main
 from defgrasp_env.recording.generate import plan_jobs
 
 ray = pytest.importorskip("ray")
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-# 2 moduli x 3 episodes of 6 steps: more jobs than workers, two env configurations per worker
-ARGS = ["--objects", "cuboid", "--moduli", "1e4,1e5", "--episodes", "3", "--max-steps", "6", "--no-progress"]
+
+
+def _args(max_steps: int) -> list[str]:
+    """2 moduli x 3 episodes: more jobs than workers, two env configurations per worker."""
+    return ["--objects", "cuboid", "--moduli", "1e4,1e5", "--episodes", "3", "--max-steps", str(max_steps),
+            "--no-progress"]
+
+
+ARGS = _args(6)
 NAMES = sorted(j.name for j in plan_jobs(["cuboid"], [1e4, 1e5], 3, 0))
 # Recorder bookkeeping that depends on which episodes the same env recorded before (as in a resumed
-# serial run): the episode's index in its recorder and the reset that built the env's scene.
+# serial run): the episode's index in its recorder and (in replay_json) the reset that built the scene.
 BOOKKEEPING = {"created_utc", "episode_index"}
 
 
@@ -121,10 +128,11 @@ def test_bad_arguments_are_reported_before_ray_starts(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_interrupted_ray_run_resumes_to_the_full_set(serial, tmp_path):
+def test_interrupted_ray_run_resumes_to_the_full_set(tmp_path):
     """The CLI in its own process (it starts its own local Ray), interrupted by Ctrl-C after the
-    first file: the finished files are valid, and the same command completes the set."""
-    cmd = [sys.executable, "-m", "defgrasp_env.recording.generate", str(tmp_path), *ARGS, "--policy", "random",
+    first file: the finished files are valid and kept, and the same command completes the set.
+    Episodes of 40 steps, so that the run is far from done when the first file appears."""
+    cmd = [sys.executable, "-m", "defgrasp_env.recording.generate", str(tmp_path), *_args(40), "--policy", "random",
            "--ray", "--workers", "2"]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -134,16 +142,21 @@ def test_interrupted_ray_run_resumes_to_the_full_set(serial, tmp_path):
             time.sleep(0.05)
         assert proc.poll() is None, f"run ended before it could be interrupted: {proc.communicate()}"
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=120)
+        out, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 130, err
+    assert proc.returncode == 130, (out, err)
     finished = list_episodes(tmp_path)
     assert 1 <= len(finished) < len(NAMES), finished
     assert validate_path(tmp_path).ok
     kept = _digests(tmp_path)
     assert subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, timeout=600).returncode == 0
     assert {k: v for k, v in _digests(tmp_path).items() if k in kept} == kept
-    assert_same_episodes(serial, tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == NAMES
+    assert validate_path(tmp_path).ok
+    jobs = {j.name: j for j in plan_jobs(["cuboid"], [1e4, 1e5], 3, 0)}
+    for name in NAMES:
+        ep = load_episode(tmp_path / name)
+        assert ep.replay["seed"] == jobs[name].seed and ep.num_steps == 40, name
