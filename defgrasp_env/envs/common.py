@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..layout import ABSOLUTE_ACTION
 from ..sim.materials import Material
 from ..transforms import quat_normalize
 from .config import PickupConfig
@@ -38,12 +39,12 @@ def targets(scene: PickupScene, actions: np.ndarray, mode: str):
     """Flange position/orientation and jaw-gap targets [W,...] for batched actions [W, A]."""
     if mode == "delta":
         return scene.wrist_targets_from_delta(actions)
-    quat = actions[:, 3:7]
+    quat = ABSOLUTE_ACTION.get(actions, "orientation")
     norm = np.linalg.norm(quat, axis=1)
     if np.any(norm < 1e-6):
         raise ValueError(f"absolute action quaternion must be non-zero, got {quat[norm < 1e-6][0].tolist()}")
-    pos, q = scene.rate_limited(actions[:, :3], quat_normalize(quat))
-    return pos, q, actions[:, 7]
+    pos, q = scene.rate_limited(ABSOLUTE_ACTION.get(actions, "position"), quat_normalize(quat))
+    return pos, q, ABSOLUTE_ACTION.get(actions, "gap")[:, 0]
 
 
 def observations(config: PickupConfig, scene: PickupScene, task: PickupTask, pixels=None) -> dict[str, np.ndarray]:

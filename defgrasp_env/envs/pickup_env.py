@@ -35,18 +35,21 @@ class DeformablePickupEnv(gym.Env):
     joints, ``defgrasp_env/assets/wrist_6dof.urdf``); its pads are kinematic boxes with Coulomb
     friction. One step is one control period (default 1/20 s).
 
-    **Action space** (``action_mode``):
-      * ``"delta"`` (default): Box [-1, 1]^7 = flange linear velocity (3) x ``max_linear_speed``
-        (m/s, world frame), flange angular velocity (3, axis-angle rate) x ``max_angular_speed``
-        (rad/s, world frame), jaw command (1): -1 fully open (86 mm) ... +1 fully closed; the jaw
-        moves toward it at the gripper's closing speed and holds the grip force at its force limit.
-      * ``"absolute"``: Box [8] = target flange position (3, m), orientation quaternion xyzw (4),
-        jaw gap (1, m); reached at most at the speed limits (used by teleoperation).
+    **Action space** (``action_mode``; names, slices, units and bounds in ``defgrasp_env.layout``):
+      * ``"delta"`` (default, ``DELTA_ACTION``): Box [-1, 1]^7 = flange linear velocity (3) x
+        ``max_linear_speed`` (m/s, world frame), flange angular velocity (3, axis-angle rate) x
+        ``max_angular_speed`` (rad/s, world frame), jaw command (1): -1 fully open (85 mm, the
+        2F-85 stroke) ... +1 fully closed (1.5 mm); the jaw moves toward it at the gripper's closing
+        speed and holds the grip force at its force limit.
+      * ``"absolute"`` (``ABSOLUTE_ACTION``): Box [8] = target flange position (3, m), orientation
+        quaternion xyzw (4), jaw gap (1, m, [0, 0.085]); reached at most at the speed limits (used
+        by teleoperation).
       Out-of-range values are clipped to the box; NaN/inf or a wrong shape raise ``ValueError``.
 
-    **Observation space** (Dict, float32 unless noted; LeRobot's sim-env keys):
+    **Observation space** (Dict, float32 unless noted; LeRobot's sim-env keys; ``AGENT_POS`` and
+    ``ENV_STATE`` of ``defgrasp_env.layout``):
       * ``agent_pos`` [10]: flange position (3, m, world), flange quaternion xyzw (4), jaw gap
-        (1, m), left and right tip normal force (2, N).
+        (1, m, [0.0015, 0.085]), left and right tip normal force (2, N, >= 0).
       * ``environment_state`` [33] (``obs_type="state"``): object feature point = mean node position
         (3, m), its velocity (3, m/s), goal (3, m), 8 fixed surface keypoints (24, m, world).
       * ``pixels`` [H, W, 3] uint8 (``obs_type`` "pixels" or "pixels_agent_pos"): camera image.

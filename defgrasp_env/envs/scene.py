@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..gripper import GAP_MAX, GAP_MIN, GripperDriver, pad_boxes, update_grip_stiffness
+from ..layout import DELTA_ACTION, NUM_KEYPOINTS, jaw_command_to_gap
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.model import ContactParams, build_model, set_world_material
@@ -24,8 +25,6 @@ from .config import PickupConfig
 #: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
 #: can never push a node through itself; the inner face stays where the linkage puts it.
 PAD_BACKING = 0.01
-#: Number of object surface keypoints in the observation.
-NUM_KEYPOINTS = 8
 #: Start height of the flange above the ground (m) and pad clearance kept above the ground (m).
 START_FLANGE_HEIGHT = 0.30
 GROUND_CLEARANCE = 0.001
@@ -171,10 +170,10 @@ class PickupScene:
         """Target flange pos [W,3], quat [W,4] and gap [W] for normalised delta actions [W,7]."""
         cfg = self.config
         pos, quat = self.flange_pose()
-        target_pos = pos + action[:, :3] * cfg.max_linear_speed * cfg.dt
-        dq = axis_angle_to_quat(action[:, 3:6] * cfg.max_angular_speed * cfg.dt)
+        target_pos = pos + DELTA_ACTION.get(action, "linear_velocity") * cfg.max_linear_speed * cfg.dt
+        dq = axis_angle_to_quat(DELTA_ACTION.get(action, "angular_velocity") * cfg.max_angular_speed * cfg.dt)
         target_quat = quat_normalize(quat_multiply(dq, quat))
-        target_gap = GAP_MAX + (GAP_MIN - GAP_MAX) * (action[:, 6] + 1.0) / 2.0
+        target_gap = jaw_command_to_gap(DELTA_ACTION.get(action, "jaw")[:, 0])
         return target_pos, target_quat, target_gap
 
     def rate_limited(self, target_pos, target_quat) -> tuple[np.ndarray, np.ndarray]:

@@ -10,16 +10,14 @@ import gymnasium as gym
 import numpy as np
 
 from ..envs.config import PickupConfig
-from ..envs.task import AGENT_POS_NAMES, ENV_STATE_NAMES
+from ..layout import ACTION_LAYOUTS, AGENT_POS, ENV_STATE
 from .atomic import check_writable_directory, write_episode
 from .capture import EpisodeBuffer, object_record, step_record
 from .config_io import config_to_json, library_versions
 from .schema import FORMAT, SCHEMA_VERSION, SUFFIX
 
-ACTION_NAMES = {
-    "delta": ["vx", "vy", "vz", "wx", "wy", "wz", "jaw"],
-    "absolute": ["x", "y", "z", "qx", "qy", "qz", "qw", "gap"],
-}
+#: Column names of ``steps/action`` per action mode (``defgrasp_env.layout``).
+ACTION_NAMES = {mode: list(layout.names) for mode, layout in ACTION_LAYOUTS.items()}
 
 
 def _json(value, what: str) -> str:
@@ -64,8 +62,8 @@ def write_buffer(path: pathlib.Path, buf: EpisodeBuffer, cfg: PickupConfig, *, e
         "end_reason": reason, **(extra_attrs or {}),
     }
     names = {"steps/action": ACTION_NAMES[cfg.action_mode],
-             "observations/agent_pos": list(AGENT_POS_NAMES),
-             "observations/environment_state": list(ENV_STATE_NAMES)}
+             "observations/agent_pos": list(AGENT_POS.names),
+             "observations/environment_state": list(ENV_STATE.names)}
     names = {k: v for k, v in names.items() if k in arrays and arrays[k].shape[-1] == len(v)}
     return write_episode(path, arrays, attrs, names, compression)
 
