@@ -164,7 +164,7 @@ def test_stiff_object_is_held_at_the_grip_force_limit(name):
         if PHASE_NAMES[expert.phase[0]] == "lift":
             action[DELTA_ACTION.slice("jaw")] = 1.0
         obs, _, terminated, truncated, info = env.step(action)
-        grip.append(env.unwrapped.scene.tip_force[0].mean())
+        grip.append(env.unwrapped.scene.gripper.tip_force[0].mean())
         if terminated or truncated:
             break
     env.close()

@@ -71,7 +71,7 @@ def test_env_spaces_and_observations_follow_the_layout(mode):
     assert env.observation_space["environment_state"].shape == (ENV_STATE.size,)
     obs, _ = env.reset(seed=1)
     assert AGENT_POS.get(obs["agent_pos"], "jaw_gap")[0] == np.float32(JAW_GAP_MAX)  # starts open
-    flange, quat = env.unwrapped.scene.flange_pose()
+    flange, quat = env.unwrapped.scene.gripper.flange_pose()
     np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"), flange[0], atol=1e-7)
     np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_quat"), quat[0], atol=1e-7)
     np.testing.assert_array_equal(ENV_STATE.get(obs["environment_state"], "goal"), np.float32([0, 0.6, 0]))
@@ -110,7 +110,7 @@ def _numeric_slices(path: pathlib.Path) -> list[str]:
 
 
 def test_consumers_slice_by_layout_names_not_numbers():
-    files = [ROOT / "defgrasp_env/policies/scripted_expert.py", ROOT / "defgrasp_env/envs/common.py",
+    files = [ROOT / "defgrasp_env/policies/scripted_expert.py", ROOT / "defgrasp_env/envs/actions.py",
              ROOT / "teleop/teleop_device.py"]
     assert [f for f in files if not f.exists()] == []
     assert sum((_numeric_slices(f) for f in files), []) == []

@@ -1,14 +1,13 @@
-"""Helpers shared by the single and the vector env: episode draws, action checks, observations, info."""
+"""Helpers shared by the single and the vector env: episode draws, observations, info, camera."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..layout import ABSOLUTE_ACTION
+from ..gripper import Gripper
 from ..sim.materials import Material
-from ..transforms import quat_normalize
 from .config import PickupConfig
-from .scene import PAD_BOX_HALF_EXTENTS, PickupScene, WorldSetup
+from .scene import PickupScene, WorldSetup
 from .task import REWARD_TERMS, PickupTask
 
 
@@ -22,29 +21,6 @@ def draw_setup(config: PickupConfig, rng: np.random.Generator, object_name: str 
     quat = np.array([0.0, np.sin(yaw / 2), 0.0, np.cos(yaw / 2)])
     return WorldSetup(name, Material(config.density, float(e), config.poisson_ratio),
                       np.array([xz[0], 0.0, xz[1]]), quat)
-
-
-def check_actions(actions, expected_shape: tuple[int, ...], space_low, space_high) -> np.ndarray:
-    """Validate (shape, finiteness) and clip to the action space; returns float64 [W, A]."""
-    a = np.asarray(actions, dtype=np.float64)
-    if a.shape != expected_shape:
-        raise ValueError(f"action must have shape {expected_shape}, got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"action must be finite, got {a.reshape(-1)[~np.isfinite(a.reshape(-1))][:3]} "
-                         f"in {a.tolist()}")
-    return np.clip(a, space_low, space_high)
-
-
-def targets(scene: PickupScene, actions: np.ndarray, mode: str):
-    """Flange position/orientation and jaw-gap targets [W,...] for batched actions [W, A]."""
-    if mode == "delta":
-        return scene.wrist_targets_from_delta(actions)
-    quat = ABSOLUTE_ACTION.get(actions, "orientation")
-    norm = np.linalg.norm(quat, axis=1)
-    if np.any(norm < 1e-6):
-        raise ValueError(f"absolute action quaternion must be non-zero, got {quat[norm < 1e-6][0].tolist()}")
-    pos, q = scene.rate_limited(ABSOLUTE_ACTION.get(actions, "position"), quat_normalize(quat))
-    return pos, q, ABSOLUTE_ACTION.get(actions, "gap")[:, 0]
 
 
 def observations(config: PickupConfig, scene: PickupScene, task: PickupTask, pixels=None) -> dict[str, np.ndarray]:
@@ -67,9 +43,9 @@ def step_infos(scene: PickupScene, result: dict, stats, diverged: np.ndarray) ->
         grasped=result["grasped"].copy(),
         pierced=result["pierced"].copy(),
         goal_distance=result["goal_distance"].copy(),
-        left_tip_normal_force=scene.tip_force[:, 0].copy(),
-        right_tip_normal_force=scene.tip_force[:, 1].copy(),
-        jaw_gap=scene.gap.copy(),
+        left_tip_normal_force=scene.gripper.tip_force[:, 0].copy(),
+        right_tip_normal_force=scene.gripper.tip_force[:, 1].copy(),
+        jaw_gap=scene.gripper.gap.copy(),
         mean_von_mises=scene.state.mean_von_mises.numpy().astype(np.float64),
         sim_diverged=diverged.copy(),
         newton_iterations=stats.newton_iterations.copy(),
@@ -94,10 +70,10 @@ class SceneCamera:
 
         name = scene.object_names[w]
         if w not in self._renderers or self._renderers[w][0] != name:
-            mesh = scene.meshes[w]
+            mesh = scene.mesh(w)
             self._renderers[w] = (name, SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2,
                                                       device=self.config.device))
-        centers, quats = scene.pad_poses()
-        half = np.repeat(PAD_BOX_HALF_EXTENTS[None], 2, axis=0)
+        centers, quats = scene.gripper.pad_poses()
+        half = np.repeat(Gripper.pad_half_extents[None], 2, axis=0)
         return self._renderers[w][1].render(scene.node_positions(w), centers[w], quats[w], half,
                                             goal=np.asarray(self.config.goal, np.float32))

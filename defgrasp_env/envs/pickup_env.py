@@ -8,7 +8,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from .common import SceneCamera, check_actions, draw_setup, observations, step_infos, targets
+from .actions import check_actions, targets
+from .common import SceneCamera, draw_setup, observations, step_infos
 from .config import PickupConfig
 from .scene import PickupScene
 from .task import PickupTask, action_space, observation_spaces
@@ -117,7 +118,7 @@ class DeformablePickupEnv(gym.Env):
         if self.scene is None:
             raise RuntimeError("call reset() before step()")
         a = check_actions(action, self.action_space.shape, self.action_space.low, self.action_space.high)[None]
-        stats = self.scene.step(*targets(self.scene, a, self.config.action_mode))
+        stats = self.scene.step(*targets(self.scene.gripper, self.config, a))
         diverged = stats.diverged | ~self.scene.finite()
         result = self.task.evaluate(self.scene, stats, ~diverged)
         info = {k: v[0].item() for k, v in step_infos(self.scene, result, stats, diverged).items()}

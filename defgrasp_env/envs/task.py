@@ -56,9 +56,10 @@ class PickupTask:
         self.elapsed[mask] = 0
 
     def agent_pos(self, scene: PickupScene) -> np.ndarray:
-        pos, quat = scene.flange_pose()
-        return AGENT_POS.pack(wrist_position=pos, wrist_quat=quat, jaw_gap=scene.gap[:, None],
-                              tip_normal_force=scene.tip_force).astype(np.float32)
+        gripper = scene.gripper
+        pos, quat = gripper.flange_pose()
+        return AGENT_POS.pack(wrist_position=pos, wrist_quat=quat, jaw_gap=gripper.gap[:, None],
+                              tip_normal_force=gripper.tip_force).astype(np.float32)
 
     def environment_state(self, scene: PickupScene) -> np.ndarray:
         feat, vel = scene.feature_points()
@@ -69,10 +70,10 @@ class PickupTask:
     def evaluate(self, scene: PickupScene, stats, valid: np.ndarray) -> dict[str, np.ndarray]:
         """Reward terms [W] each, total reward, success/termination flags, after a step."""
         feat, _ = scene.feature_points()
-        tcp = scene.tcp_positions()
+        tcp = scene.gripper.tcp_positions()
         reach_dist = np.linalg.norm(tcp - feat, axis=1)
         goal_dist = np.linalg.norm(feat - self.goal, axis=1)
-        grasped = np.all(scene.tip_force > GRASP_FORCE, axis=1)
+        grasped = np.all(scene.gripper.tip_force > GRASP_FORCE, axis=1)
         pierced = stats.penetration > PIERCE_DEPTH
         at_goal = (goal_dist < self.config.success_tolerance) & grasped & ~pierced & valid
         self.held = np.where(at_goal, self.held + 1, 0)

@@ -9,7 +9,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .common import SceneCamera, check_actions, draw_setup, observations, step_infos, targets
+from .actions import check_actions, targets
+from .common import SceneCamera, draw_setup, observations, step_infos
 from .config import PickupConfig
 from .pickup_env import make_config
 from .scene import PickupScene
@@ -95,7 +96,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         a = check_actions(actions, (n,) + self.single_action_space.shape, self.single_action_space.low,
                           self.single_action_space.high)
         resetting = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
-        stats = self.scene.step(*targets(self.scene, a, self.config.action_mode), active=~resetting)
+        stats = self.scene.step(*targets(self.scene.gripper, self.config, a), active=~resetting)
         diverged = (stats.diverged | ~self.scene.finite()) & ~resetting
         result = self.task.evaluate(self.scene, stats, ~diverged & ~resetting)
         terminated = result["is_success"] & ~resetting

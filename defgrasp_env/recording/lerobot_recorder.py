@@ -12,7 +12,6 @@ import os
 import pathlib
 
 import gymnasium as gym
-import numpy as np
 
 from ..layout import AGENT_POS, ENV_STATE
 from .lerobot_export import ROBOT_TYPE, FrameShape, lerobot_features, lerobot_frame
