@@ -1,4 +1,5 @@
-"""Helpers shared by the single and the vector env: episode draws, observations, info, camera."""
+"""Helpers shared by the single and the vector env: episode draws and their replay specs,
+observations, info, camera."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import numpy as np
 from ..gripper import Gripper
 from ..sim.materials import Material
 from .config import PickupConfig
+from .replay_spec import ReplaySpec
 from .scene import PickupScene, WorldSetup
 from .task import REWARD_TERMS, PickupTask
 
@@ -21,6 +23,19 @@ def draw_setup(config: PickupConfig, rng: np.random.Generator, object_name: str 
     quat = np.array([0.0, np.sin(yaw / 2), 0.0, np.cos(yaw / 2)])
     return WorldSetup(name, Material(config.density, float(e), config.poisson_ratio),
                       np.array([xz[0], 0.0, xz[1]]), quat)
+
+
+def draw_world(config: PickupConfig, rng: np.random.Generator, seed: int | None, object_name: str | None = None,
+               options: dict | None = None) -> tuple[WorldSetup, ReplaySpec]:
+    """One world's episode start drawn from ``rng`` (just seeded with ``seed``, or continuing when
+    ``seed`` is None), and the spec that repeats it in a single env (no ``scene_origin`` yet):
+    ``options`` are the single-env reset options giving the same draws."""
+    rng_state = None if seed is not None else rng.bit_generator.state
+    setup = draw_setup(config, rng, object_name)
+    spec = ReplaySpec(None if seed is None else int(seed), rng_state, None if options is None else dict(options),
+                      setup.object_name, setup.material, tuple(float(v) for v in setup.position),
+                      tuple(float(v) for v in setup.quat))
+    return setup, spec
 
 
 def observations(config: PickupConfig, scene: PickupScene, task: PickupTask, pixels=None) -> dict[str, np.ndarray]:

@@ -9,8 +9,9 @@ import gymnasium as gym
 import numpy as np
 
 from .actions import check_actions, targets
-from .common import SceneCamera, draw_setup, observations, step_infos
+from .common import SceneCamera, draw_world, observations, step_infos
 from .config import PickupConfig
+from .replay_spec import ReplaySpec
 from .scene import PickupScene
 from .task import PickupTask, action_space, observation_spaces
 
@@ -25,6 +26,17 @@ def make_config(config: PickupConfig | None, kwargs: dict[str, Any]) -> PickupCo
     if isinstance(kwargs.get("youngs_modulus"), list):
         kwargs = {**kwargs, "youngs_modulus": tuple(kwargs["youngs_modulus"])}
     return dataclasses.replace(base, **kwargs)
+
+
+def parse_reset_options(config: PickupConfig, options: dict | None) -> str | None:
+    """The episode's object from the reset ``options`` (None: drawn), after checking them."""
+    unknown = sorted(set(options or {}) - {"object"})
+    if unknown:
+        raise ValueError(f"reset options must be a subset of ['object'], got {unknown}")
+    name = (options or {}).get("object")
+    if name is not None and name not in config.object_names:
+        raise ValueError(f"reset option object must be one of {list(config.object_names)}, got {name!r}")
+    return name
 
 
 class DeformablePickupEnv(gym.Env):
@@ -66,7 +78,9 @@ class DeformablePickupEnv(gym.Env):
 
     **Info**: ``is_success``, ``grasped``, ``pierced``, ``goal_distance`` (m), reward terms, tip
     forces (N), jaw gap (m), mean von Mises stress (Pa), solver iterations/residual/penetration,
-    ``sim_diverged``; ``reset`` returns ``is_success``, ``object`` and ``youngs_modulus`` (Pa).
+    ``sim_diverged``; ``reset`` returns ``is_success``, ``object``, ``youngs_modulus`` (Pa) and
+    ``replay_spec`` (a ``ReplaySpec``: seed or RNG state, options, object, material, initial pose
+    and the reset that built the simulation; ``spec.reset(env)`` repeats the reset bit for bit).
 
     **Arguments**: every field of ``PickupConfig`` as a keyword (``object``, ``youngs_modulus``
     (value or tuple to sample), ``poisson_ratio``, ``density``, ``ground_friction``,
@@ -93,26 +107,24 @@ class DeformablePickupEnv(gym.Env):
         self.observation_space = observation_spaces(self.config)
         self.action_space = action_space(self.config)
         self.scene: PickupScene | None = None
+        self._scene_origin: ReplaySpec | None = None  # the reset that built ``scene``
         self.task = PickupTask(self.config, 1)
         self._camera = SceneCamera(self.config)
 
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        unknown = sorted(set(options or {}) - {"object"})
-        if unknown:
-            raise ValueError(f"reset options must be a subset of ['object'], got {unknown}")
-        name = (options or {}).get("object")
-        if name is not None and name not in self.config.object_names:
-            raise ValueError(f"reset option object must be one of {list(self.config.object_names)}, got {name!r}")
-        setup = draw_setup(self.config, self.np_random, name)
+        name = parse_reset_options(self.config, options)
+        setup, spec = draw_world(self.config, self.np_random, seed, name, options)
         if self.scene is None or self.scene.object_names[0] != setup.object_name:
             self.scene = PickupScene(self.config, [setup])
+            self._scene_origin = spec
         else:
             self.scene.reset_worlds(np.ones(1, bool), [setup])
+            spec = dataclasses.replace(spec, scene_origin=self._scene_origin)
         self.task.reset(np.ones(1, bool))
         return self._obs(), {"is_success": False, "object": setup.object_name,
-                             "youngs_modulus": setup.material.youngs_modulus}
+                             "youngs_modulus": setup.material.youngs_modulus, "replay_spec": spec}
 
     def step(self, action):
         if self.scene is None:

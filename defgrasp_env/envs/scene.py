@@ -182,7 +182,7 @@ class PickupScene:
     # -- readouts --------------------------------------------------------------------------
     def node_positions(self, w: int) -> np.ndarray:
         """Node positions [N_w, 3] (m, world) of world ``w``'s object (a copy)."""
-        return self.state.positions.numpy()[self.model.world_nodes(w)]
+        return self.state.positions.numpy()[self.model.world_nodes(w)].copy()
 
     def feature_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Object feature point (mean node position, paper eq. 5) [W,3] m and its velocity [W,3] m/s."""
