@@ -4,17 +4,25 @@ env bit for bit, for single-env resets (seeded or continuing the RNG) and for ve
 
 from __future__ import annotations
 
+import ast
 import json
+import pathlib
+import sys
 
 import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
-import defgrasp_env  # noqa: F401
+import defgrasp_env
+from defgrasp_env.envs.pickup_env import DeformablePickupEnv
 from defgrasp_env.envs.replay_spec import ReplaySpec
+from defgrasp_env.envs.vector_env import DeformablePickupVectorEnv
+from defgrasp_env.recording import HDF5Recorder, load_episode, replay_episode
+from defgrasp_env.recording.vector_recorder import VectorHDF5Recorder
 
 ENV_ID = "DeformablePickup-v0"
+RECORDING = pathlib.Path(defgrasp_env.__file__).parent / "recording"
 
 
 def _actions(n: int, steps: int, seed: int = 0) -> np.ndarray:
@@ -106,3 +114,66 @@ def test_partial_reset_emits_specs_only_for_the_reset_worlds():
     assert info["replay_spec"][1].seed is None and info["replay_spec"][1].scene_origin.seed is None
     assert info["replay_spec"][1].scene_origin.rng_state is not None  # the unseeded build is replayable too
     venv.close()
+
+
+def _private_reads(path: pathlib.Path) -> list[str]:
+    """``x._name`` where x is not ``self`` (reading another object's private attribute)."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")
+                and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"))):
+            out.append(f"{path.name}: {ast.unparse(node)}")
+    return out
+
+
+def test_recorders_read_no_private_attribute_and_no_seed_rule():
+    files = [RECORDING / n for n in ("recorder.py", "vector_recorder.py", "lerobot_recorder.py", "capture.py",
+                                     "writer.py", "lerobot_export.py")]
+    assert sum((_private_reads(f) for f in files), []) == []
+    for f in files:
+        assert "seed + " not in f.read_text(), f"{f.name} repeats the env's seed rule"
+
+
+class _Guard:
+    """Mixin: reading the env privates that recorders used to read, from recording code, fails."""
+
+    GUARDED = ("_np_random", "_needs_reset", "_rngs")
+
+    def __getattribute__(self, name):
+        if name in _Guard.GUARDED:
+            caller = sys._getframe(1).f_globals.get("__name__", "")
+            if caller.startswith("defgrasp_env.recording"):
+                raise AttributeError(f"{caller} read the env's private {name}")
+        return object.__getattribute__(self, name)
+
+
+class GuardedVectorEnv(_Guard, DeformablePickupVectorEnv):
+    pass
+
+
+class GuardedEnv(_Guard, DeformablePickupEnv):
+    pass
+
+
+def test_recorders_work_on_envs_that_hide_their_privates(tmp_path):
+    venv = VectorHDF5Recorder(GuardedVectorEnv(num_envs=2, max_episode_steps=2), tmp_path / "vec")
+    venv.reset()  # unseeded: the env's spec holds the RNG state
+    for a in _actions(2, 4):
+        venv.step(a)
+    venv.close()
+    assert len(venv.paths) == 4  # 2 truncated + 2 cut short by close
+    env = HDF5Recorder(GuardedEnv(), tmp_path / "single")
+    env.reset()
+    for a in _actions(1, 2)[:, 0]:
+        env.step(a)
+    env.close()
+    for path in venv.paths[:2] + env.paths:
+        ep = load_episode(path)
+        assert ep.replay["seed"] is None and ep.replay["rng_state"] is not None
+    # replay needs the registered env id (the guarded classes are not registered): rewrite it
+    import h5py
+
+    for path in venv.paths[:1] + env.paths:
+        with h5py.File(path, "r+") as f:
+            f.attrs["env_id"] = ENV_ID
+        assert replay_episode(path).bit_exact
