@@ -52,7 +52,7 @@ def run_episode(name: str, substeps: int, seed: int) -> dict:
             t0 = time.perf_counter()
             obs, _, terminated, truncated, info = env.step(action)
             times.append(time.perf_counter() - t0)
-            tips.append(env.unwrapped.scene.tip_force[0].copy())
+            tips.append(env.unwrapped.scene.gripper.tip_force[0].copy())
             if terminated or truncated:
                 break
     finally:

@@ -81,9 +81,8 @@ def main(argv=None) -> int:
     plain = gym.make("DeformablePickup-v0", **kwargs)
     with tempfile.TemporaryDirectory() as tmp:
         recorded = HDF5Recorder(gym.make("DeformablePickup-v0", **kwargs), tmp, compression=args.compression)
-        recorded.save_unfinished = False  # the warm-up episode is cut short: not written inside a timed reset
         run_lockstep(plain, recorded, 0, actions_for(3, 0))            # warm up kernels and caches
-        recorded.save_unfinished = True
+        recorded.discard()  # the warm-up episode is cut short: not written inside a timed reset
         t_plain, t_rec = [], []
         for ep in range(args.episodes):
             a, b = run_lockstep(plain, recorded, ep, actions_for(args.steps, ep))

@@ -13,8 +13,10 @@ in the same loop as a learned policy:
         obs, reward, term, trunc, info = env.step(action)
         teleop.send_feedback(info)
 
-Action ("absolute" mode of DeformablePickup-v0): float32 [8] = flange position [3] m (world,
-y up), flange orientation quaternion (x, y, z, w) [4], jaw gap [1] m in [0, 0.085].
+Action ("absolute" mode of DeformablePickup-v0, ``defgrasp_env.layout.ABSOLUTE_ACTION``): float32
+[8] = flange position [3] m (world, y up), flange orientation quaternion (x, y, z, w) [4], jaw gap
+[1] m in [0, ``MAX_GAP_M``] (0.085 m, the 2F-85 stroke). ``ACTION_NAMES`` are LeRobot's flat keys
+of those entries, in the layout's order.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from defgrasp_env.layout import ABSOLUTE_ACTION, AGENT_POS, JAW_GAP_MAX
+
 from ._validate import check_array, check_number
 from .se3 import quat_normalize
 
@@ -32,9 +36,12 @@ ACTION_NAMES = (
     "wrist.quat.x", "wrist.quat.y", "wrist.quat.z", "wrist.quat.w",
     "jaw.gap",
 )
-ACTION_DIM = 8
-FEEDBACK_NAMES = ("left_tip_normal_force", "right_tip_normal_force")
-MAX_GAP_M = 0.085
+ACTION_DIM = ABSOLUTE_ACTION.size
+FEEDBACK_NAMES = AGENT_POS.field("tip_normal_force").components
+#: Widest jaw gap (m) an action may ask for: the layout's (the 2F-85's 85 mm stroke).
+MAX_GAP_M = float(JAW_GAP_MAX)
+#: the leading entries of ``agent_pos`` that a teleop device reads: wrist pose and jaw gap
+_AGENT_HEAD = slice(0, AGENT_POS.slice("jaw_gap").stop)
 #: bound on any position coordinate accepted from an observation (m)
 MAX_POSITION_M = 100.0
 
@@ -55,20 +62,22 @@ def action_to_dict(action) -> dict[str, float]:
 
 def parse_agent_state(obs) -> tuple[np.ndarray, np.ndarray, float]:
     """(wrist position [3] m, quaternion (x, y, z, w), jaw gap m) from an observation dict with
-    ``agent_pos`` (or the ``agent_pos`` array itself), whose first 8 entries are those values."""
+    ``agent_pos`` (or the ``agent_pos`` array itself), in the layout ``defgrasp_env.layout.AGENT_POS``;
+    only its leading wrist pose and jaw gap are read."""
     if isinstance(obs, dict):
         if "agent_pos" not in obs:
             raise ValueError(f"observation must have an 'agent_pos' entry, got keys {sorted(obs)}")
         obs = obs["agent_pos"]
     a = np.asarray(obs, dtype=np.float64).ravel()
-    if a.size < ACTION_DIM:
-        raise ValueError(f"agent_pos must have at least {ACTION_DIM} entries (pos 3, quat xyzw 4, gap 1), got {a.size}")
-    head = check_array("agent_pos[:8]", a[:ACTION_DIM], (ACTION_DIM,))
-    q = head[3:7]
+    n = _AGENT_HEAD.stop
+    if a.size < n:
+        raise ValueError(f"agent_pos must have at least {n} entries ({', '.join(AGENT_POS.names[:n])}), got {a.size}")
+    head = check_array(f"agent_pos[:{n}]", a[:n], (n,))
+    q = head[AGENT_POS.slice("wrist_quat")]
     if abs(np.linalg.norm(q) - 1.0) > 1e-3:
-        raise ValueError(f"agent_pos[3:7] must be a unit quaternion (x, y, z, w), got {q.tolist()}")
-    gap = float(np.clip(head[7], 0.0, MAX_GAP_M))
-    return head[:3].copy(), quat_normalize(q), gap
+        raise ValueError(f"agent_pos wrist_quat must be a unit quaternion (x, y, z, w), got {q.tolist()}")
+    gap = float(np.clip(head[AGENT_POS.slice("jaw_gap")][0], 0.0, MAX_GAP_M))
+    return head[AGENT_POS.slice("wrist_position")].copy(), quat_normalize(q), gap
 
 
 class TeleopDevice(abc.ABC):

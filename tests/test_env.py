@@ -84,12 +84,12 @@ def test_partial_reset_leaves_other_worlds_bit_identical():
         venv.step(a)
     scene = venv.unwrapped.scene
     before = scene.state.positions.numpy().copy()
-    q_before = scene.q.copy()
+    q_before = scene.gripper.q.copy()
     venv.reset(options={"reset_mask": np.array([True, False])})
     after = scene.state.positions.numpy()
     other = scene.model.world_nodes(1)
     assert np.array_equal(before[other], after[other])
-    assert np.array_equal(q_before[1], scene.q[1])
+    assert np.array_equal(q_before[1], scene.gripper.q[1])
     first = scene.model.world_nodes(0)
     assert not np.array_equal(before[first], after[first])
 

@@ -10,6 +10,7 @@ from defgrasp_env.gripper import (
     GAP_MIN,
     PAD_HALF_EXTENTS,
     THETA_MAX,
+    THETA_MIN,
     GripperConfig,
     GripperDriver,
     driver_step,
@@ -53,22 +54,26 @@ def test_closed_form_constants():
 
 
 def test_known_values():
-    assert gap_from_theta(0.0) == pytest.approx(0.0860, abs=1e-4)
+    # open = the 2F-85's 85 mm stroke, reached by limiting the driver angle (the URDF's theta = 0
+    # would open the pads to 86.01 mm, wider than the gripper we model)
+    assert GAP_MAX == 0.085
+    assert gap_from_theta(THETA_MIN) == pytest.approx(0.085, abs=1e-15)
+    assert 2 * (0.0054058 + 0.0376 * np.cos(0.0) - 0.0430 * np.sin(0.0)) == pytest.approx(0.0860, abs=1e-4)
+    assert 0.0 < THETA_MIN < 0.02
     assert gap_from_theta(0.8) == pytest.approx(0.0015, abs=1e-4)
-    assert GAP_MAX == pytest.approx(gap_from_theta(0.0), abs=1e-15)
     assert GAP_MIN == pytest.approx(gap_from_theta(THETA_MAX), abs=1e-15)
     # the formula from REFERENCE.md
-    t = np.linspace(0, 0.8, 9)
+    t = np.linspace(THETA_MIN, 0.8, 9)
     np.testing.assert_allclose(gap_from_theta(t), 2 * (0.0054058 + 0.0376 * np.cos(t) - 0.0430 * np.sin(t)), atol=1e-7)
 
 
 def test_gap_strictly_decreasing():
-    g = gap_from_theta(np.linspace(0.0, 0.8, 10001))
+    g = gap_from_theta(np.linspace(THETA_MIN, 0.8, 10001))
     assert np.all(np.diff(g) < 0)
 
 
 def test_round_trips():
-    theta = np.linspace(0.0, 0.8, 4001)
+    theta = np.linspace(THETA_MIN, 0.8, 4001)
     assert np.max(np.abs(theta_from_gap(gap_from_theta(theta)) - theta)) < 1e-6
     gap = np.linspace(GAP_MIN, GAP_MAX, 4001)
     assert np.max(np.abs(gap_from_theta(theta_from_gap(gap)) - gap)) < 1e-4  # 0.1 mm
@@ -76,7 +81,7 @@ def test_round_trips():
 
 
 def test_pads_match_urdf_chain():
-    for theta in np.linspace(0, 0.8, 17):
+    for theta in np.linspace(THETA_MIN, 0.8, 17):
         p_b, R_b = _urdf_left_pad_centre(theta)
         np.testing.assert_allclose(R_b, _rz(math.pi), atol=1e-12)  # parallelogram: pad never rotates
         # base axes -> G: x_G = -y_b, y_G = -z_b, z_G = x_b
@@ -89,7 +94,7 @@ def test_pads_match_urdf_chain():
 
 
 def test_pad_geometry_and_arc():
-    theta = np.linspace(0, 0.8, 50)
+    theta = np.linspace(THETA_MIN, 0.8, 50)
     c = pad_centers(theta)
     assert c.shape == (50, 2, 3)
     np.testing.assert_allclose(c[:, 1], c[:, 0] * [-1, 1, 1])  # mirrored in x
@@ -105,8 +110,10 @@ def test_pad_geometry_and_arc():
 
 
 def test_tcp_offset():
-    np.testing.assert_allclose(tcp_offset(theta=0.0), [0, -(0.054904 + 0.0430 + 0.03242), 0], atol=1e-12)
-    t = np.linspace(0, 0.8, 9)
+    down = 0.054904 + 0.03242 + 0.0376 * np.sin(THETA_MIN) + 0.0430 * np.cos(THETA_MIN)
+    np.testing.assert_allclose(tcp_offset(theta=THETA_MIN), [0, -down, 0], atol=1e-12)
+    np.testing.assert_allclose(tcp_offset(gap=GAP_MAX), tcp_offset(theta=THETA_MIN), atol=1e-12)
+    t = np.linspace(THETA_MIN, 0.8, 9)
     np.testing.assert_allclose(tcp_offset(theta=t), pad_centers(t).mean(axis=-2))
     np.testing.assert_allclose(tcp_offset(gap=GAP_MIN), tcp_offset(theta=0.8), atol=1e-12)
     with pytest.raises(TypeError, match="exactly one"):
@@ -118,9 +125,9 @@ def test_tcp_offset():
 @pytest.mark.parametrize(
     "call, match",
     [
-        (lambda: gap_from_theta(0.9), r"theta must be in \[0, 0.8\] rad, got 0.9"),
-        (lambda: gap_from_theta(-0.1), r"theta must be in \[0, 0.8\] rad, got -0.1"),
-        (lambda: theta_from_gap(0.09), r"gap must be in \[0.00151123139, 0.0860115107\] m, got 0.09"),
+        (lambda: gap_from_theta(0.9), r"theta must be in \[0.0117021481, 0.8\] rad, got 0.9"),
+        (lambda: gap_from_theta(0.0), r"theta must be in \[0.0117021481, 0.8\] rad, got 0"),
+        (lambda: theta_from_gap(0.086), r"gap must be in \[0.00151123139, 0.085\] m, got 0.086"),
         (lambda: theta_from_gap(np.nan), "gap must be finite"),
     ],
 )
@@ -205,7 +212,7 @@ def test_driver_scalar_and_broadcast():
     [
         (dict(dt=0.0), ValueError, r"dt must be in \(0, inf\) s, got 0"),
         (dict(dt=-1.0), ValueError, r"dt must be in \(0, inf\) s, got -1"),
-        (dict(gap=0.2), ValueError, r"gap must be in \[0.00151123139, 0.0860115107\] m, got 0.2"),
+        (dict(gap=0.2), ValueError, r"gap must be in \[0.00151123139, 0.085\] m, got 0.2"),
         (dict(force_left=-1.0), ValueError, r"force_left must be in \[0, inf\) N, got -1"),
         (dict(grip_stiffness=-5.0), ValueError, r"grip_stiffness must be in \[0, inf\) N/m, got -5"),
         (dict(cmd_gap=np.nan), ValueError, "cmd_gap must be finite"),

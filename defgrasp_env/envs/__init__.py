@@ -2,5 +2,6 @@
 
 from .config import PickupConfig
 from .pickup_env import DeformablePickupEnv
+from .replay_spec import ReplaySpec
 
-__all__ = ["DeformablePickupEnv", "PickupConfig"]
+__all__ = ["DeformablePickupEnv", "PickupConfig", "ReplaySpec"]

@@ -1,13 +1,15 @@
-"""Helpers shared by the single and the vector env: episode draws, action checks, observations, info."""
+"""Helpers shared by the single and the vector env: episode draws and their replay specs,
+observations, info, camera."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..gripper import Gripper
 from ..sim.materials import Material
-from ..transforms import quat_normalize
 from .config import PickupConfig
-from .scene import PAD_BOX_HALF_EXTENTS, PickupScene, WorldSetup
+from .replay_spec import ReplaySpec
+from .scene import PickupScene, WorldSetup
 from .task import REWARD_TERMS, PickupTask
 
 
@@ -23,27 +25,17 @@ def draw_setup(config: PickupConfig, rng: np.random.Generator, object_name: str 
                       np.array([xz[0], 0.0, xz[1]]), quat)
 
 
-def check_actions(actions, expected_shape: tuple[int, ...], space_low, space_high) -> np.ndarray:
-    """Validate (shape, finiteness) and clip to the action space; returns float64 [W, A]."""
-    a = np.asarray(actions, dtype=np.float64)
-    if a.shape != expected_shape:
-        raise ValueError(f"action must have shape {expected_shape}, got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"action must be finite, got {a.reshape(-1)[~np.isfinite(a.reshape(-1))][:3]} "
-                         f"in {a.tolist()}")
-    return np.clip(a, space_low, space_high)
-
-
-def targets(scene: PickupScene, actions: np.ndarray, mode: str):
-    """Flange position/orientation and jaw-gap targets [W,...] for batched actions [W, A]."""
-    if mode == "delta":
-        return scene.wrist_targets_from_delta(actions)
-    quat = actions[:, 3:7]
-    norm = np.linalg.norm(quat, axis=1)
-    if np.any(norm < 1e-6):
-        raise ValueError(f"absolute action quaternion must be non-zero, got {quat[norm < 1e-6][0].tolist()}")
-    pos, q = scene.rate_limited(actions[:, :3], quat_normalize(quat))
-    return pos, q, actions[:, 7]
+def draw_world(config: PickupConfig, rng: np.random.Generator, seed: int | None, object_name: str | None = None,
+               options: dict | None = None) -> tuple[WorldSetup, ReplaySpec]:
+    """One world's episode start drawn from ``rng`` (just seeded with ``seed``, or continuing when
+    ``seed`` is None), and the spec that repeats it in a single env (no ``scene_origin`` yet):
+    ``options`` are the single-env reset options giving the same draws."""
+    rng_state = None if seed is not None else rng.bit_generator.state
+    setup = draw_setup(config, rng, object_name)
+    spec = ReplaySpec(None if seed is None else int(seed), rng_state, None if options is None else dict(options),
+                      setup.object_name, setup.material, tuple(float(v) for v in setup.position),
+                      tuple(float(v) for v in setup.quat))
+    return setup, spec
 
 
 def observations(config: PickupConfig, scene: PickupScene, task: PickupTask, pixels=None) -> dict[str, np.ndarray]:
@@ -66,9 +58,9 @@ def step_infos(scene: PickupScene, result: dict, stats, diverged: np.ndarray) ->
         grasped=result["grasped"].copy(),
         pierced=result["pierced"].copy(),
         goal_distance=result["goal_distance"].copy(),
-        left_tip_normal_force=scene.tip_force[:, 0].copy(),
-        right_tip_normal_force=scene.tip_force[:, 1].copy(),
-        jaw_gap=scene.gap.copy(),
+        left_tip_normal_force=scene.gripper.tip_force[:, 0].copy(),
+        right_tip_normal_force=scene.gripper.tip_force[:, 1].copy(),
+        jaw_gap=scene.gripper.gap.copy(),
         mean_von_mises=scene.state.mean_von_mises.numpy().astype(np.float64),
         sim_diverged=diverged.copy(),
         newton_iterations=stats.newton_iterations.copy(),
@@ -93,10 +85,10 @@ class SceneCamera:
 
         name = scene.object_names[w]
         if w not in self._renderers or self._renderers[w][0] != name:
-            mesh = scene.meshes[w]
+            mesh = scene.mesh(w)
             self._renderers[w] = (name, SceneRenderer(self.config.camera, mesh.surface, len(mesh.nodes), 2,
                                                       device=self.config.device))
-        centers, quats = scene.pad_poses()
-        half = np.repeat(PAD_BOX_HALF_EXTENTS[None], 2, axis=0)
+        centers, quats = scene.gripper.pad_poses()
+        half = np.repeat(Gripper.pad_half_extents[None], 2, axis=0)
         return self._renderers[w][1].render(scene.node_positions(w), centers[w], quats[w], half,
                                             goal=np.asarray(self.config.goal, np.float32))

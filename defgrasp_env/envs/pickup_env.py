@@ -8,8 +8,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from .common import SceneCamera, check_actions, draw_setup, observations, step_infos, targets
+from .actions import check_actions, targets
+from .common import SceneCamera, draw_world, observations, step_infos
 from .config import PickupConfig
+from .replay_spec import ReplaySpec
 from .scene import PickupScene
 from .task import PickupTask, action_space, observation_spaces
 
@@ -26,6 +28,17 @@ def make_config(config: PickupConfig | None, kwargs: dict[str, Any]) -> PickupCo
     return dataclasses.replace(base, **kwargs)
 
 
+def parse_reset_options(config: PickupConfig, options: dict | None) -> str | None:
+    """The episode's object from the reset ``options`` (None: drawn), after checking them."""
+    unknown = sorted(set(options or {}) - {"object"})
+    if unknown:
+        raise ValueError(f"reset options must be a subset of ['object'], got {unknown}")
+    name = (options or {}).get("object")
+    if name is not None and name not in config.object_names:
+        raise ValueError(f"reset option object must be one of {list(config.object_names)}, got {name!r}")
+    return name
+
+
 class DeformablePickupEnv(gym.Env):
     """Pick up a deformable object with a Robotiq 2F-85-like gripper and lift it to a goal.
 
@@ -35,18 +48,21 @@ class DeformablePickupEnv(gym.Env):
     joints, ``defgrasp_env/assets/wrist_6dof.urdf``); its pads are kinematic boxes with Coulomb
     friction. One step is one control period (default 1/20 s).
 
-    **Action space** (``action_mode``):
-      * ``"delta"`` (default): Box [-1, 1]^7 = flange linear velocity (3) x ``max_linear_speed``
-        (m/s, world frame), flange angular velocity (3, axis-angle rate) x ``max_angular_speed``
-        (rad/s, world frame), jaw command (1): -1 fully open (86 mm) ... +1 fully closed; the jaw
-        moves toward it at the gripper's closing speed and holds the grip force at its force limit.
-      * ``"absolute"``: Box [8] = target flange position (3, m), orientation quaternion xyzw (4),
-        jaw gap (1, m); reached at most at the speed limits (used by teleoperation).
+    **Action space** (``action_mode``; names, slices, units and bounds in ``defgrasp_env.layout``):
+      * ``"delta"`` (default, ``DELTA_ACTION``): Box [-1, 1]^7 = flange linear velocity (3) x
+        ``max_linear_speed`` (m/s, world frame), flange angular velocity (3, axis-angle rate) x
+        ``max_angular_speed`` (rad/s, world frame), jaw command (1): -1 fully open (85 mm, the
+        2F-85 stroke) ... +1 fully closed (1.5 mm); the jaw moves toward it at the gripper's closing
+        speed and holds the grip force at its force limit.
+      * ``"absolute"`` (``ABSOLUTE_ACTION``): Box [8] = target flange position (3, m), orientation
+        quaternion xyzw (4), jaw gap (1, m, [0, 0.085]); reached at most at the speed limits (used
+        by teleoperation).
       Out-of-range values are clipped to the box; NaN/inf or a wrong shape raise ``ValueError``.
 
-    **Observation space** (Dict, float32 unless noted; LeRobot's sim-env keys):
+    **Observation space** (Dict, float32 unless noted; LeRobot's sim-env keys; ``AGENT_POS`` and
+    ``ENV_STATE`` of ``defgrasp_env.layout``):
       * ``agent_pos`` [10]: flange position (3, m, world), flange quaternion xyzw (4), jaw gap
-        (1, m), left and right tip normal force (2, N).
+        (1, m, [0.0015, 0.085]), left and right tip normal force (2, N, >= 0).
       * ``environment_state`` [33] (``obs_type="state"``): object feature point = mean node position
         (3, m), its velocity (3, m/s), goal (3, m), 8 fixed surface keypoints (24, m, world).
       * ``pixels`` [H, W, 3] uint8 (``obs_type`` "pixels" or "pixels_agent_pos"): camera image.
@@ -62,7 +78,9 @@ class DeformablePickupEnv(gym.Env):
 
     **Info**: ``is_success``, ``grasped``, ``pierced``, ``goal_distance`` (m), reward terms, tip
     forces (N), jaw gap (m), mean von Mises stress (Pa), solver iterations/residual/penetration,
-    ``sim_diverged``; ``reset`` returns ``is_success``, ``object`` and ``youngs_modulus`` (Pa).
+    ``sim_diverged``; ``reset`` returns ``is_success``, ``object``, ``youngs_modulus`` (Pa) and
+    ``replay_spec`` (a ``ReplaySpec``: seed or RNG state, options, object, material, initial pose
+    and the reset that built the simulation; ``spec.reset(env)`` repeats the reset bit for bit).
 
     **Arguments**: every field of ``PickupConfig`` as a keyword (``object``, ``youngs_modulus``
     (value or tuple to sample), ``poisson_ratio``, ``density``, ``ground_friction``,
@@ -89,32 +107,30 @@ class DeformablePickupEnv(gym.Env):
         self.observation_space = observation_spaces(self.config)
         self.action_space = action_space(self.config)
         self.scene: PickupScene | None = None
+        self._scene_origin: ReplaySpec | None = None  # the reset that built ``scene``
         self.task = PickupTask(self.config, 1)
         self._camera = SceneCamera(self.config)
 
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        unknown = sorted(set(options or {}) - {"object"})
-        if unknown:
-            raise ValueError(f"reset options must be a subset of ['object'], got {unknown}")
-        name = (options or {}).get("object")
-        if name is not None and name not in self.config.object_names:
-            raise ValueError(f"reset option object must be one of {list(self.config.object_names)}, got {name!r}")
-        setup = draw_setup(self.config, self.np_random, name)
+        name = parse_reset_options(self.config, options)
+        setup, spec = draw_world(self.config, self.np_random, seed, name, options)
         if self.scene is None or self.scene.object_names[0] != setup.object_name:
             self.scene = PickupScene(self.config, [setup])
+            self._scene_origin = spec
         else:
             self.scene.reset_worlds(np.ones(1, bool), [setup])
+            spec = dataclasses.replace(spec, scene_origin=self._scene_origin)
         self.task.reset(np.ones(1, bool))
         return self._obs(), {"is_success": False, "object": setup.object_name,
-                             "youngs_modulus": setup.material.youngs_modulus}
+                             "youngs_modulus": setup.material.youngs_modulus, "replay_spec": spec}
 
     def step(self, action):
         if self.scene is None:
             raise RuntimeError("call reset() before step()")
         a = check_actions(action, self.action_space.shape, self.action_space.low, self.action_space.high)[None]
-        stats = self.scene.step(*targets(self.scene, a, self.config.action_mode))
+        stats = self.scene.step(*targets(self.scene.gripper, self.config, a))
         diverged = stats.diverged | ~self.scene.finite()
         result = self.task.evaluate(self.scene, stats, ~diverged)
         info = {k: v[0].item() for k, v in step_infos(self.scene, result, stats, diverged).items()}

@@ -5,15 +5,10 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from ..gripper import GAP_MAX
+from ..layout import ACTION_LAYOUTS, AGENT_POS, ENV_STATE, VectorLayout
 from .config import PickupConfig
-from .scene import NUM_KEYPOINTS, PickupScene
+from .scene import PickupScene
 
-AGENT_POS_NAMES = ("wrist_x", "wrist_y", "wrist_z", "wrist_qx", "wrist_qy", "wrist_qz", "wrist_qw",
-                   "jaw_gap", "left_tip_normal_force", "right_tip_normal_force")
-ENV_STATE_NAMES = (("feature_x", "feature_y", "feature_z", "feature_vx", "feature_vy", "feature_vz",
-                    "goal_x", "goal_y", "goal_z")
-                   + tuple(f"keypoint{k}_{a}" for k in range(NUM_KEYPOINTS) for a in "xyz"))
 REWARD_TERMS = ("reach", "grasp", "lift", "success")
 #: Both tip normal forces above this (N) count as a grasp.
 GRASP_FORCE = 0.5
@@ -21,14 +16,19 @@ GRASP_FORCE = 0.5
 PIERCE_DEPTH = 0.005
 
 
+def _box(layout: VectorLayout) -> spaces.Box:
+    """float32 Box of a layout's bounds."""
+    low, high = layout.bounds()
+    return spaces.Box(low.astype(np.float32), high.astype(np.float32), (layout.size,), np.float32)
+
+
 def observation_spaces(config: PickupConfig) -> spaces.Dict:
-    """Observation space of one world."""
-    inf = np.inf
+    """Observation space of one world (bounds from ``defgrasp_env.layout``)."""
     entries = {}
     if config.obs_type in ("state", "pixels_agent_pos"):
-        entries["agent_pos"] = spaces.Box(-inf, inf, (len(AGENT_POS_NAMES),), np.float32)
+        entries["agent_pos"] = _box(AGENT_POS)
     if config.obs_type == "state":
-        entries["environment_state"] = spaces.Box(-inf, inf, (len(ENV_STATE_NAMES),), np.float32)
+        entries["environment_state"] = _box(ENV_STATE)
     if config.obs_type in ("pixels", "pixels_agent_pos"):
         cam = config.camera
         entries["pixels"] = spaces.Box(0, 255, (cam.height, cam.width, 3), np.uint8)
@@ -36,12 +36,9 @@ def observation_spaces(config: PickupConfig) -> spaces.Dict:
 
 
 def action_space(config: PickupConfig) -> spaces.Box:
-    """Action space of one world: delta mode [-1, 1]^7; absolute mode pos(3) m, quat xyzw(4), gap(1) m."""
-    if config.action_mode == "delta":
-        return spaces.Box(-1.0, 1.0, (7,), np.float32)
-    low = np.array([-0.4, 0.0, -0.4, -1, -1, -1, -1, 0.0], np.float32)
-    high = np.array([0.4, 1.0, 0.4, 1, 1, 1, 1, GAP_MAX], np.float32)
-    return spaces.Box(low, high, (8,), np.float32)
+    """Action space of one world: ``DELTA_ACTION`` [-1, 1]^7 or ``ABSOLUTE_ACTION`` (pos(3) m, quat
+    xyzw(4), gap(1) m), see ``defgrasp_env.layout``."""
+    return _box(ACTION_LAYOUTS[config.action_mode])
 
 
 class PickupTask:
@@ -59,22 +56,24 @@ class PickupTask:
         self.elapsed[mask] = 0
 
     def agent_pos(self, scene: PickupScene) -> np.ndarray:
-        pos, quat = scene.flange_pose()
-        return np.concatenate([pos, quat, scene.gap[:, None], scene.tip_force], axis=1).astype(np.float32)
+        gripper = scene.gripper
+        pos, quat = gripper.flange_pose()
+        return AGENT_POS.pack(wrist_position=pos, wrist_quat=quat, jaw_gap=gripper.gap[:, None],
+                              tip_normal_force=gripper.tip_force).astype(np.float32)
 
     def environment_state(self, scene: PickupScene) -> np.ndarray:
         feat, vel = scene.feature_points()
         goal = np.broadcast_to(self.goal, feat.shape)
         keys = scene.keypoint_positions().reshape(scene.num_worlds, -1)
-        return np.concatenate([feat, vel, goal, keys], axis=1).astype(np.float32)
+        return ENV_STATE.pack(feature_position=feat, feature_velocity=vel, goal=goal, keypoints=keys).astype(np.float32)
 
     def evaluate(self, scene: PickupScene, stats, valid: np.ndarray) -> dict[str, np.ndarray]:
         """Reward terms [W] each, total reward, success/termination flags, after a step."""
         feat, _ = scene.feature_points()
-        tcp = scene.tcp_positions()
+        tcp = scene.gripper.tcp_positions()
         reach_dist = np.linalg.norm(tcp - feat, axis=1)
         goal_dist = np.linalg.norm(feat - self.goal, axis=1)
-        grasped = np.all(scene.tip_force > GRASP_FORCE, axis=1)
+        grasped = np.all(scene.gripper.tip_force > GRASP_FORCE, axis=1)
         pierced = stats.penetration > PIERCE_DEPTH
         at_goal = (goal_dist < self.config.success_tolerance) & grasped & ~pierced & valid
         self.held = np.where(at_goal, self.held + 1, 0)

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 from typing import Any
 
+import dataclasses
+
 import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .common import SceneCamera, check_actions, draw_setup, observations, step_infos, targets
-from .config import PickupConfig
+from .actions import check_actions, targets
+from .common import SceneCamera, draw_world, observations, step_infos
+from .config import RANDOM_OBJECT, PickupConfig
 from .pickup_env import make_config
 from .scene import PickupScene
 from .seeds import world_seeds
@@ -31,6 +34,9 @@ class DeformablePickupVectorEnv(VectorEnv):
     inside the ending step; its last observation and info go to ``info["final_obs"]`` and
     ``info["final_info"]``), ``DISABLED`` (reset with ``reset(options={"reset_mask": mask})``; other
     worlds stay bit-identical). ``info`` holds arrays [N] with ``_key`` masks.
+    Every world (re)set by ``reset`` or by an autoreset in ``step`` gets a ``ReplaySpec`` in
+    ``info["replay_spec"]`` (object array [N], mask ``info["_replay_spec"]``): the seed or RNG state,
+    options, object, material and pose with which a single env repeats that world's episode start.
     ``torch_outputs=True`` returns observations as torch tensors on the simulation device (they are
     small and assembled on the host, so on CUDA they are one upload per observation key per step).
     ``full_state_torch()`` gives the complete FEM state as zero-copy torch views of the simulation's
@@ -65,6 +71,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         self.scene: PickupScene | None = None
         self.task = PickupTask(self.config, num_envs)
         self._needs_reset = np.zeros(num_envs, bool)
+        self._origins = [None] * num_envs  # each world's ReplaySpec of the reset that built the scene
         self._camera = SceneCamera(self.config)
 
     # -- gym API ---------------------------------------------------------------------------
@@ -82,8 +89,9 @@ class DeformablePickupVectorEnv(VectorEnv):
         for i in np.flatnonzero(mask):
             if seeds[i] is not None or self.scene is None:
                 self._rngs[i] = seeding.np_random(seeds[i])[0]
-        self._reset_worlds(mask)
-        info = {"is_success": np.zeros(self.num_envs, bool), "_is_success": mask.copy()}
+        specs = self._reset_worlds(mask, seeds)
+        info = {"is_success": np.zeros(self.num_envs, bool), "_is_success": mask.copy(),
+                "replay_spec": specs, "_replay_spec": np.array([spec is not None for spec in specs])}
         return self._obs(), info
 
     def step(self, actions):
@@ -93,7 +101,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         a = check_actions(actions, (n,) + self.single_action_space.shape, self.single_action_space.low,
                           self.single_action_space.high)
         resetting = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
-        stats = self.scene.step(*targets(self.scene, a, self.config.action_mode), active=~resetting)
+        stats = self.scene.step(*targets(self.scene.gripper, self.config, a), active=~resetting)
         diverged = (stats.diverged | ~self.scene.finite()) & ~resetting
         result = self.task.evaluate(self.scene, stats, ~diverged & ~resetting)
         terminated = result["is_success"] & ~resetting
@@ -106,7 +114,8 @@ class DeformablePickupVectorEnv(VectorEnv):
         if resetting.any():
             # after the step: the worlds' frozen-gripper step is discarded, and their first
             # observation is the state the reset sets, as a single env's reset returns it
-            self._reset_worlds(resetting)
+            specs = self._reset_worlds(resetting)
+            info.update(replay_spec=specs, _replay_spec=resetting.copy())
         obs = self._obs()
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self._needs_reset = done
@@ -115,7 +124,8 @@ class DeformablePickupVectorEnv(VectorEnv):
             info["final_info"] = {k: v.copy() for k, v in info.items() if k not in ("final_obs",)}
             info["_final_obs"] = done.copy()
             info["_final_info"] = done.copy()
-            self._reset_worlds(done)
+            specs = self._reset_worlds(done)
+            info.update(replay_spec=specs, _replay_spec=done.copy())
             obs = self._obs()
         return obs, reward, terminated, truncated, info
 
@@ -141,16 +151,31 @@ class DeformablePickupVectorEnv(VectorEnv):
         self._camera = SceneCamera(self.config)
 
     # -- internals -------------------------------------------------------------------------
-    def _reset_worlds(self, mask: np.ndarray) -> None:
-        if self.scene is None:
-            setups = [draw_setup(self.config, rng) for rng in self._rngs]
+    def _reset_worlds(self, mask: np.ndarray, seeds: list | None = None) -> np.ndarray:
+        """Reset the worlds in ``mask`` (all of them when the scene is built) from their RNGs, just
+        seeded with ``seeds[w]`` where that is not None. Returns the ReplaySpec of each reset world
+        (object array [N], None elsewhere)."""
+        seeds = seeds if seeds is not None else [None] * self.num_envs
+        built = self.scene is None
+        reset = np.ones(self.num_envs, bool) if built else mask
+        specs = np.full(self.num_envs, None, dtype=object)
+        setups = [None] * self.num_envs
+        for w in np.flatnonzero(reset):
+            name = None if built else self.scene.object_names[w]
+            # a world outside the mask is drawn (at the build) from an RNG that was not reseeded
+            setups[w], spec = draw_world(self.config, self._rngs[w], seeds[w] if mask[w] else None, name)
+            if self.config.object == RANDOM_OBJECT:  # the world keeps its object: a single env must pick it
+                spec = dataclasses.replace(spec, options={"object": setups[w].object_name})
+            if built:
+                self._origins[w] = spec
+            specs[w] = dataclasses.replace(spec, scene_origin=None if built else self._origins[w])
+        if built:
             self.scene = PickupScene(self.config, setups)
         else:
-            setups = [draw_setup(self.config, self._rngs[w], self.scene.object_names[w]) if mask[w] else None
-                      for w in range(self.num_envs)]
             self.scene.reset_worlds(mask, setups)
         self.task.reset(mask)
         self._needs_reset[mask] = False
+        return specs
 
     def _obs(self):
         pixels = None

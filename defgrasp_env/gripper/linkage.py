@@ -4,8 +4,8 @@ Model
 -----
 Derived from the link offsets of the ros-industrial ``robotiq_arg2f_85_model_macro.xacro`` URDF.
 Each finger is a parallelogram driven by ``finger_joint`` (angle ``theta`` in
-``[THETA_MIN, THETA_MAX] = [0, 0.8]`` rad, 0 = open): the pad translates without rotating on a
-circle of radius ``ARC_RADIUS = hypot(0.0376, 0.0430)`` m. The URDF offsets used:
+``[THETA_MIN, THETA_MAX] = [0.011702, 0.8]`` rad, THETA_MIN = open): the pad translates without
+rotating on a circle of radius ``ARC_RADIUS = hypot(0.0376, 0.0430)`` m. The URDF offsets used:
 
 ==========================  ===========================  =================================
 offset                      lateral (closing axis) / m   along the approach axis / m
@@ -28,11 +28,13 @@ Gap between the pad inner faces::
 
 Gap limits (decision)
 ---------------------
-The gap range is the linkage's own: ``GAP_MIN = g(0.8) = 1.511 mm`` (closed) to
-``GAP_MAX = g(0) = 86.012 mm`` (open). The datasheet stroke is 85 mm; this URDF-derived model
-opens 1 mm wider, and we keep the model's value rather than clamping to 85 mm so that
-gap <-> theta stays a bijection on the whole joint range. (MuJoCo Menagerie's closed-loop model
-differs by up to 4 mm; we simulate this one.)
+``GAP_MIN = g(0.8) = 1.511 mm`` (closed, the URDF's upper joint limit) to ``GAP_MAX = 85 mm``
+(open): the 2F-85's datasheet stroke. The URDF's lower joint limit (theta = 0) would open the
+pads to g(0) = 86.012 mm, 1 mm wider than the gripper we model, so the driver angle is limited to
+``THETA_MIN = theta(85 mm) = 0.011702 rad``; gap <-> theta stays a bijection on
+[THETA_MIN, THETA_MAX], and every part (env action space, jaw driver, expert, teleop, recorded
+``jaw_length``) shares the 85 mm range through ``defgrasp_env.layout``. (MuJoCo Menagerie's
+closed-loop model differs by up to 4 mm; we simulate this one.)
 
 Gripper frame G (= the wrist flange, see ``defgrasp_env.wrist``)
 -----------------------------------------------------------------
@@ -85,9 +87,9 @@ GAP_OFFSET = KNUCKLE_LATERAL + PAD_LATERAL - PAD_THICKNESS / 2.0  # 0.0054057553
 ARC_RADIUS = math.hypot(FINGER_LATERAL, FINGER_APPROACH)  # 0.0571206 m
 ARC_PHASE = math.atan2(FINGER_APPROACH, FINGER_LATERAL)  # 0.8522957 rad
 
-THETA_MIN = 0.0  # rad, fully open
+GAP_MAX = 0.085  # m, fully open: the 2F-85 stroke (see "Gap limits")
+THETA_MIN = math.acos((0.5 * GAP_MAX - GAP_OFFSET) / ARC_RADIUS) - ARC_PHASE  # 0.0117021 rad
 THETA_MAX = 0.8  # rad, fully closed (URDF finger_joint upper limit)
-GAP_MAX = 2.0 * (GAP_OFFSET + ARC_RADIUS * math.cos(THETA_MIN + ARC_PHASE))  # 0.0860115 m
 GAP_MIN = 2.0 * (GAP_OFFSET + ARC_RADIUS * math.cos(THETA_MAX + ARC_PHASE))  # 0.0015112 m
 
 _EPS = 1e-9  # tolerance for range checks (rad or m); values within it are clipped
@@ -115,7 +117,7 @@ def _checked(x, lo: float, hi: float, name: str, unit: str) -> np.ndarray:
 def gap_from_theta(theta) -> np.ndarray:
     """Gap between the pad inner faces (m) for driver angles ``theta`` (rad), any shape.
 
-    ``theta`` must lie in ``[THETA_MIN, THETA_MAX] = [0, 0.8]`` rad (ValueError otherwise).
+    ``theta`` must lie in ``[THETA_MIN, THETA_MAX] = [0.011702, 0.8]`` rad (ValueError otherwise).
     Returns float64 with the shape of ``theta``; strictly decreasing in ``theta``.
     """
     t = _checked(theta, THETA_MIN, THETA_MAX, "theta", "rad")
@@ -125,8 +127,8 @@ def gap_from_theta(theta) -> np.ndarray:
 def theta_from_gap(gap) -> np.ndarray:
     """Driver angle ``theta`` (rad) giving pad inner-face gap ``gap`` (m), any shape.
 
-    ``gap`` must lie in ``[GAP_MIN, GAP_MAX]`` = [1.511, 86.012] mm (ValueError otherwise).
-    Exact inverse of :func:`gap_from_theta`; the result is clipped to [0, 0.8] rad.
+    ``gap`` must lie in ``[GAP_MIN, GAP_MAX]`` = [1.511, 85] mm (ValueError otherwise).
+    Exact inverse of :func:`gap_from_theta`; the result is clipped to [THETA_MIN, THETA_MAX] rad.
     """
     g = _checked(gap, GAP_MIN, GAP_MAX, "gap", "m")
     c = np.clip((0.5 * g - GAP_OFFSET) / ARC_RADIUS, -1.0, 1.0)
@@ -140,7 +142,7 @@ def pad_centers(theta) -> np.ndarray:
     -(KNUCKLE_APPROACH + PAD_APPROACH + ARC_RADIUS sin(theta + ARC_PHASE)), 0)``; right mirrors x.
     The centres move on circles of radius ``ARC_RADIUS`` about :func:`pad_arc_centers`: closing
     moves them inward and first further out along the approach axis (max reach at
-    ``theta = pi/2 - ARC_PHASE = 0.7185`` rad): 130.32 mm below the flange open, 144.44 mm at most,
+    ``theta = pi/2 - ARC_PHASE = 0.7185`` rad): 130.76 mm below the flange open, 144.44 mm at most,
     144.25 mm closed.
     """
     t = _checked(theta, THETA_MIN, THETA_MAX, "theta", "rad")
@@ -185,7 +187,7 @@ def tcp_offset(*, gap=None, theta=None) -> np.ndarray:
     """Flange -> tool centre point (midpoint of the two pad centres) in frame G (m), ``shape + (3,)``.
 
     Equals ``(0, -(KNUCKLE_APPROACH + PAD_APPROACH + ARC_RADIUS sin(theta + ARC_PHASE)), 0)``:
-    0.130324 m below the flange when open, 0.144445 m at most (theta = 0.7185 rad), 0.144255 m closed.
+    0.130761 m below the flange when open, 0.144445 m at most (theta = 0.7185 rad), 0.144255 m closed.
     """
     t = _theta_from(gap, theta)
     return pad_centers(t).mean(axis=-2)

@@ -11,12 +11,12 @@ Rules (horizontal plane x-z; a closing axis d and -d are the same grasp):
   the one closest to the current closing axis, so round objects need no wrist turn). The rope
   gets its closing axis across the rope, the cube across two faces.
 * **Rim** (objects too wide for the open jaws, e.g. the torus, 80 mm across a hole, with the jaws
-  opening 86 mm): the pads close across the rim on the side of the farthest keypoint; the rim
+  opening 85 mm): the pads close across the rim on the side of the farthest keypoint; the rim
   thickness is taken as the object's height (a round tube) and the rim centre lies half a
   thickness inside the farthest keypoint. Eight keypoints undersample round outlines (the
   torus's narrowest centred opening looks ~65 mm), so for compact objects (farthest keypoint
   closer than twice the narrowest half-opening) the farthest keypoint decides: opening needed
-  ``2 r_max`` > ``GAP_MAX - 2 rim_margin`` (70 mm) means rim. Elongated objects (the rope) keep
+  ``2 r_max`` > ``JAW_GAP_MAX - 2 rim_margin`` (69 mm) means rim. Elongated objects (the rope) keep
   the narrow estimate.
 * **Grasp height** of the tool centre point (pad centre): the feature point's height, raised so
   that the pad bottoms stay ``ground_clearance`` above the ground.
@@ -28,7 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..gripper import GAP_MAX, PAD_HALF_EXTENTS
+from ..gripper import PAD_HALF_EXTENTS
+from ..layout import JAW_GAP_MAX
 
 __all__ = ["GraspPlan", "plan_grasps", "closing_yaw", "PAD_HALF_LENGTH"]
 
@@ -76,7 +77,7 @@ def plan_grasps(feature: np.ndarray, keypoints: np.ndarray, current_yaw: np.ndar
     """Grasp plans for N worlds from feature points [N, 3] and keypoints [N, K, 3] (m, world).
 
     ``current_yaw`` [N] (rad) breaks ties between equally narrow closing directions. Objects whose
-    narrowest centred opening exceeds ``GAP_MAX - 2 rim_margin`` are grasped at the rim, descending
+    narrowest centred opening exceeds ``JAW_GAP_MAX - 2 rim_margin`` are grasped at the rim, descending
     with a gap of the rim thickness + 2 ``rim_clearance``.
     """
     feature = np.asarray(feature, np.float64)
@@ -103,7 +104,7 @@ def plan_grasps(feature: np.ndarray, keypoints: np.ndarray, current_yaw: np.ndar
     # opening the pads must clear; elongated ones (the rope) keep the narrow estimate
     compact = r_max < 2.0 * best
     clear_width = np.where(compact, 2.0 * np.maximum(r_max, best), width)
-    rim = clear_width > GAP_MAX - 2.0 * rim_margin
+    rim = clear_width > JAW_GAP_MAX - 2.0 * rim_margin
     thickness = np.clip(top - bottom, 0.005, np.maximum(r_max, 0.005))
     out_dir = rel[np.arange(n), far] / np.maximum(r_max, 1e-9)[:, None]
 
@@ -111,7 +112,7 @@ def plan_grasps(feature: np.ndarray, keypoints: np.ndarray, current_yaw: np.ndar
     centre_xz = np.where(rim[:, None], feature[:, [0, 2]] + out_dir * (r_max - thickness / 2)[:, None],
                          feature[:, [0, 2]])
     width = np.where(rim, thickness, width)
-    open_gap = np.where(rim, np.minimum(thickness + 2.0 * rim_clearance, GAP_MAX), GAP_MAX)
+    open_gap = np.where(rim, np.minimum(thickness + 2.0 * rim_clearance, JAW_GAP_MAX), JAW_GAP_MAX)
     height = np.maximum(feature[:, 1], PAD_HALF_LENGTH + ground_clearance)
     if np.any(rim):
         rim_height = np.maximum(0.5 * (top + bottom), PAD_HALF_LENGTH + ground_clearance)

@@ -1,9 +1,10 @@
 """``ScriptedPickupExpert``: a phase-scripted top-down pick-up policy from observations only.
 
-It reads nothing but the observation dict of ``DeformablePickup-v0`` (``obs_type="state"``) and the
-public gripper constants of ``defgrasp_env.gripper``; it never touches the simulator. Works on one
-observation (``agent_pos`` [10], ``environment_state`` [33]) or a batch ([N, 10], [N, 33], as from
-``gym.make_vec``) and returns float32 delta actions [7] or [N, 7].
+It reads nothing but the observation dict of ``DeformablePickup-v0`` (``obs_type="state"``), in
+the layout of ``defgrasp_env.layout``, and the public gripper geometry of ``defgrasp_env.gripper``;
+it never touches the simulator. Works on one observation (``agent_pos`` [10], ``environment_state``
+[33]) or a batch ([N, 10], [N, 33], as from ``gym.make_vec``) and returns float32 delta actions
+(``DELTA_ACTION``) [7] or [N, 7].
 
 Phases (per world, explicit state; ``reset()`` restarts them):
 
@@ -33,7 +34,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..gripper import GAP_MAX, GAP_MIN, tcp_offset
+from ..gripper import tcp_offset
+from ..layout import (AGENT_POS, DELTA_ACTION, ENV_STATE, JAW_GAP_MAX, JAW_GAP_MIN, NUM_KEYPOINTS,
+                      gap_to_jaw_command)
 from .grasp_planning import PAD_HALF_LENGTH, plan_grasps
 
 __all__ = ["ExpertConfig", "ScriptedPickupExpert", "PHASE_NAMES", "RECOMMENDED_ENV_KWARGS"]
@@ -127,12 +130,6 @@ def _rotation_vector(q_target: np.ndarray, q: np.ndarray) -> np.ndarray:
     return r[:, :3] * np.where(s > 1e-12, angle / np.maximum(s, 1e-12), 2.0)[:, None]
 
 
-def _jaw_action(gap: np.ndarray) -> np.ndarray:
-    """Delta-mode jaw command in [-1, 1] whose target is ``gap`` (m): -1 open ... +1 closed."""
-    g = np.clip(gap, GAP_MIN, GAP_MAX)
-    return 2.0 * (GAP_MAX - g) / (GAP_MAX - GAP_MIN) - 1.0
-
-
 class ScriptedPickupExpert:
     """Scripted pick-up expert for ``DeformablePickup-v0`` (delta actions, state observations).
 
@@ -178,14 +175,14 @@ class ScriptedPickupExpert:
         self._plan_point = np.zeros((n, 3))
         self._plan_yaw = np.zeros(n)
         self._plan_width = np.zeros(n)
-        self._plan_gap = np.full(n, GAP_MAX)
+        self._plan_gap = np.full(n, JAW_GAP_MAX)
         self._plan_top = np.zeros(n)
         self._offset = np.zeros((n, 3))
         self._velocity = np.zeros((n, 3))
-        self._last_gap = np.full(n, GAP_MAX)
+        self._last_gap = np.full(n, JAW_GAP_MAX)
         self._stall = np.zeros(n, int)
         self._fresh = np.ones(n, bool)
-        self._contact_gap = np.full(n, GAP_MAX)
+        self._contact_gap = np.full(n, JAW_GAP_MAX)
         self._force_hist = np.zeros((n, max(self.config.force_window, 1), 2))
 
     def reset(self, mask=None) -> None:
@@ -204,8 +201,8 @@ class ScriptedPickupExpert:
         self._stall[m] = 0
         self._fresh[m] = True
         self._force_hist[m] = 0.0
-        self._contact_gap[m] = GAP_MAX
-        self._last_gap[m] = GAP_MAX
+        self._contact_gap[m] = JAW_GAP_MAX
+        self._last_gap[m] = JAW_GAP_MAX
 
     # -- policy -----------------------------------------------------------------------------
     def __call__(self, obs) -> np.ndarray:
@@ -216,9 +213,9 @@ class ScriptedPickupExpert:
         state = np.asarray(obs["environment_state"], np.float64)
         single = agent.ndim == 1
         agent, state = np.atleast_2d(agent), np.atleast_2d(state)
-        if agent.shape[1:] != (10,) or state.shape[1:] != (33,) or len(agent) != len(state):
-            raise ValueError(f"agent_pos must be [N, 10] and environment_state [N, 33], got "
-                             f"{agent.shape} and {state.shape}")
+        if agent.shape[1:] != (AGENT_POS.size,) or state.shape[1:] != (ENV_STATE.size,) or len(agent) != len(state):
+            raise ValueError(f"agent_pos must be [N, {AGENT_POS.size}] and environment_state [N, {ENV_STATE.size}], "
+                             f"got {agent.shape} and {state.shape}")
         if not (np.all(np.isfinite(agent)) and np.all(np.isfinite(state))):
             raise ValueError("observation must be finite")
         if len(agent) != self.num_worlds:
@@ -230,10 +227,10 @@ class ScriptedPickupExpert:
         c = self.config
         dt = c.dt
         n = self.num_worlds
-        flange, quat = agent[:, 0:3], agent[:, 3:7]
+        flange, quat = AGENT_POS.get(agent, "wrist_position"), AGENT_POS.get(agent, "wrist_quat")
         quat = quat / np.linalg.norm(quat, axis=1, keepdims=True)
-        gap = np.clip(agent[:, 7], GAP_MIN, GAP_MAX)
-        f_left, f_right = agent[:, 8], agent[:, 9]
+        gap = np.clip(AGENT_POS.get(agent, "jaw_gap")[:, 0], JAW_GAP_MIN, JAW_GAP_MAX)
+        f_left, f_right = AGENT_POS.get(agent, "tip_normal_force").T
         f_max = np.maximum(f_left, f_right)
         # the tip forces come with one- or two-step spikes of 10-1000 N while the FEM contact solve
         # is unconverged: decisions on "enough grip" use each pad's minimum over a short window
@@ -241,8 +238,8 @@ class ScriptedPickupExpert:
         self._force_hist[:, 0, 0], self._force_hist[:, 0, 1] = f_left, f_right
         self._force_hist[self._fresh, 1:] = 0.0
         f_min = self._force_hist.min(axis=1).min(axis=1)
-        feature, goal = state[:, 0:3], state[:, 6:9]
-        keypoints = state[:, 9:33].reshape(n, 8, 3)
+        feature, goal = ENV_STATE.get(state, "feature_position"), ENV_STATE.get(state, "goal")
+        keypoints = ENV_STATE.get(state, "keypoints").reshape(n, NUM_KEYPOINTS, 3)
         x_axis = _quat_rotate(quat, np.tile([1.0, 0.0, 0.0], (n, 1)))
         yaw_now = np.arctan2(-x_axis[:, 2], x_axis[:, 0])
         tcp = flange + _quat_rotate(quat, tcp_offset(gap=gap))
@@ -296,7 +293,7 @@ class ScriptedPickupExpert:
             tcp[arrived & (f_max > c.contact_force), 1], PAD_HALF_LENGTH)
         new_phase[arrived] = CLOSE
         self._counter[arrived] = 0
-        self._contact_gap[arrived] = GAP_MAX
+        self._contact_gap[arrived] = JAW_GAP_MAX
         self._stall[arrived] = 0
 
         # CLOSE: fast to the estimate + margin, slow to contact, squeeze to grip_force
@@ -305,10 +302,10 @@ class ScriptedPickupExpert:
         speed[ph] = c.descend_speed
         outside = gap > self._plan_width + c.approach_margin + 0.001  # float32 jaw commands: 1 mm slack
         touching = f_max > c.contact_force
-        first = ph & touching & (self._contact_gap >= GAP_MAX)
+        first = ph & touching & (self._contact_gap >= JAW_GAP_MAX)
         self._contact_gap[first] = gap[first]
         fast = ph & outside & ~touching
-        gap_cmd[fast] = np.maximum(self._plan_width[fast] + c.approach_margin, GAP_MIN)
+        gap_cmd[fast] = np.maximum(self._plan_width[fast] + c.approach_margin, JAW_GAP_MIN)
         slow = ph & ~outside & ~touching
         gap_cmd[slow] = gap[slow] - c.slow_close_speed * dt
         squeeze = ph & touching & (f_min < c.grip_force)
@@ -322,7 +319,7 @@ class ScriptedPickupExpert:
         new_phase[go_lift] = LIFT
         self._velocity[go_lift] = 0.0
         self._offset[go_lift] = (feature - tcp)[go_lift]
-        missed = ph & (gap <= GAP_MIN + 0.001) & ~touching
+        missed = ph & (gap <= JAW_GAP_MIN + 0.001) & ~touching
         new_phase[missed] = RETREAT
 
         # LIFT: feature point to the goal; keep the grip
@@ -336,21 +333,21 @@ class ScriptedPickupExpert:
         gap_cmd[ph] = gap[ph]
         gap_cmd[weak] = gap[weak] - 0.5 * c.squeeze_speed * dt
         self._lost = np.where(ph & (f_max < c.lost_force), self._lost + 1, np.where(ph, 0, self._lost))
-        lost = ph & ((self._lost >= c.lost_steps) | (gap <= GAP_MIN + 0.0005))
+        lost = ph & ((self._lost >= c.lost_steps) | (gap <= JAW_GAP_MIN + 0.0005))
         new_phase[lost] = RETREAT
 
         # RETREAT: open and rise, then plan again (if retries are left)
         ph = phase == RETREAT
-        gap_cmd[ph] = GAP_MAX
+        gap_cmd[ph] = JAW_GAP_MAX
         target_tcp[ph, 1] = np.maximum(hover_y[ph] + 0.02, tcp[ph, 1])
-        clear = ph & (gap >= GAP_MAX - 0.002) & (tcp[:, 1] >= hover_y + 0.015)
+        clear = ph & (gap >= JAW_GAP_MAX - 0.002) & (tcp[:, 1] >= hover_y + 0.015)
         again = clear & (self.retries < c.max_retries)
         new_phase[again] = APPROACH
         self.retries[again] += 1
 
         # --- flange velocity from the tcp target (the tcp hangs lower as the fingers close)
         # gap one step ahead at the 2F-85 default (fastest) jaw speed, 150 mm/s
-        next_gap = np.clip(gap + np.clip(gap_cmd - gap, -0.15 * dt, 0.15 * dt), GAP_MIN, GAP_MAX)
+        next_gap = np.clip(gap + np.clip(gap_cmd - gap, -0.15 * dt, 0.15 * dt), JAW_GAP_MIN, JAW_GAP_MAX)
         flange_target = target_tcp - _quat_rotate(_yaw_quat(target_yaw), tcp_offset(gap=next_gap))
         lifting = phase == LIFT
         d = flange_target - flange
@@ -367,12 +364,10 @@ class ScriptedPickupExpert:
         self._velocity = v
 
         omega = _rotation_vector(_yaw_quat(target_yaw), quat) / dt
-        action = np.zeros((n, 7))
-        action[:, 0:3] = v / c.max_linear_speed
-        action[:, 3:6] = omega / c.max_angular_speed
-        for sl in (slice(0, 3), slice(3, 6)):
-            peak = np.abs(action[:, sl]).max(axis=1, keepdims=True)
-            action[:, sl] /= np.maximum(peak, 1.0)
-        action[:, 6] = _jaw_action(gap_cmd)
+        linear, angular = v / c.max_linear_speed, omega / c.max_angular_speed
+        linear /= np.maximum(np.abs(linear).max(axis=1, keepdims=True), 1.0)
+        angular /= np.maximum(np.abs(angular).max(axis=1, keepdims=True), 1.0)
+        action = DELTA_ACTION.pack(linear_velocity=linear, angular_velocity=angular,
+                                   jaw=gap_to_jaw_command(gap_cmd)[:, None])
         self.phase = new_phase
         return np.clip(action, -1.0, 1.0).astype(np.float32)

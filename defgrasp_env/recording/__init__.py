@@ -3,6 +3,7 @@
 * :class:`HDF5Recorder` - Gymnasium wrapper writing one crash-safe HDF5 file per episode.
 * :class:`VectorHDF5Recorder` - the same for every world of the native vector env (files replay
   bit-exactly in a single env).
+* :class:`EpisodeWriter` - the one writer both use: open episodes per world, explicit save/discard.
 * :func:`load_episode` / :func:`validate_path` - read and check episode files.
 * :func:`replay_episode` - re-simulate an episode from its recorded config, seed and actions.
 * :func:`to_lerobot` - convert episodes to a LeRobot dataset; :func:`plot_episode` - Fig. 5 panels.
@@ -13,6 +14,7 @@
 from .reader import Episode, EpisodeFileError, list_episodes, load_episode
 from .recorder import HDF5Recorder
 from .vector_recorder import VectorHDF5Recorder
+from .writer import EpisodeWriter
 from .schema import FIELDS, FORMAT, SCHEMA_VERSION, schema_markdown
 from .validate import ValidationReport, validate_episode, validate_path
 
@@ -35,7 +37,7 @@ def plot_episode(*args, **kwargs):
     return impl(*args, **kwargs)
 
 
-__all__ = ["HDF5Recorder", "VectorHDF5Recorder", "Episode", "EpisodeFileError", "load_episode", "list_episodes",
+__all__ = ["EpisodeWriter", "HDF5Recorder", "VectorHDF5Recorder", "Episode", "EpisodeFileError", "load_episode", "list_episodes",
            "validate_episode", "validate_path", "ValidationReport", "replay_episode", "to_lerobot",
            "plot_episode", "FIELDS", "FORMAT", "SCHEMA_VERSION", "schema_markdown"]
 

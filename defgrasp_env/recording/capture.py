@@ -14,7 +14,7 @@ def object_record(scene: PickupScene, w: int = 0) -> dict[str, np.ndarray]:
     """The ``object/`` group of world ``w``: initial pose, material and mesh (local node indices)."""
     setup = scene.setups[w]
     mat = scene.materials[w]
-    mesh = scene.meshes[w]
+    mesh = scene.mesh(w)
     m = scene.model
     tets = m.tets.numpy()[m.world_tets(w)] - int(m.node_start[w])
     return {
@@ -36,12 +36,13 @@ def step_records(scene: PickupScene, worlds) -> list[tuple]:
     m, s = scene.model, scene.state
     x, v, fe, fc = (a.numpy() for a in (s.positions, s.velocities, s.elastic_force, s.contact_force))
     vm, mvm = s.von_mises.numpy(), s.mean_von_mises.numpy()
-    pos, quat = scene.flange_pose()
+    gripper = scene.gripper
+    pos, quat = gripper.flange_pose()
     rows = []
     for w in worlds:
         nodes, tets = m.world_nodes(w), m.world_tets(w)
         rows.append((x[nodes].copy(), v[nodes].copy(), fe[nodes].copy(), fc[nodes].copy(), vm[tets].copy(),
-                     mvm[w].copy(), pos[w].copy(), quat[w].copy(), float(scene.gap[w]), scene.tip_force[w].copy()))
+                     mvm[w].copy(), pos[w].copy(), quat[w].copy(), float(gripper.gap[w]), gripper.tip_force[w].copy()))
     return rows
 
 

@@ -3,6 +3,8 @@
 Frame ``k`` of an episode = observation before action ``k`` (``observations/*[k]``), action ``k``,
 and what step ``k`` returned (``next.reward``, ``next.done`` = terminated or truncated,
 ``next.success``). ``fps`` is the control rate. Images go in when the episodes hold camera frames.
+:func:`lerobot_frame` builds that frame and :func:`lerobot_features` its feature dict, for this
+export and for ``LeRobotRecorder`` alike.
 """
 
 from __future__ import annotations
@@ -33,7 +35,10 @@ def default_task(ep: Episode) -> str:
 
 
 @dataclass(frozen=True)
-class _Layout:
+class FrameShape:
+    """Sizes of a LeRobot frame: fps (Hz), agent_pos, environment_state and action lengths, and the
+    camera image [H, W, 3] (None: no camera)."""
+
     fps: int
     state_dim: int
     env_dim: int
@@ -41,7 +46,7 @@ class _Layout:
     image_shape: tuple[int, int, int] | None
 
 
-def _layout(episodes: list[Episode]) -> _Layout:
+def _frame_shape(episodes: list[Episode]) -> FrameShape:
     first = episodes[0]
     for key in ("observations/agent_pos", "observations/environment_state"):
         if key not in first:
@@ -51,12 +56,12 @@ def _layout(episodes: list[Episode]) -> _Layout:
     if abs(hz - round(hz)) > 1e-9:
         raise ValueError(f"{first.path}: LeRobot needs an integer fps, the control rate is {hz} Hz")
     pix = first.data.get("observations/pixels")
-    layout = _Layout(int(round(hz)), first["observations/agent_pos"].shape[1],
+    layout = FrameShape(int(round(hz)), first["observations/agent_pos"].shape[1],
                      first["observations/environment_state"].shape[1], first["steps/action"].shape[1],
                      None if pix is None else tuple(pix.shape[1:]))
     for ep in episodes[1:]:
         pix = ep.data.get("observations/pixels")
-        other = _Layout(int(round(float(ep.attrs["control_hz"]))),
+        other = FrameShape(int(round(float(ep.attrs["control_hz"]))),
                         ep["observations/agent_pos"].shape[1] if "observations/agent_pos" in ep else -1,
                         ep["observations/environment_state"].shape[1] if "observations/environment_state" in ep else -1,
                         ep["steps/action"].shape[1], None if pix is None else tuple(pix.shape[1:]))
@@ -66,7 +71,10 @@ def _layout(episodes: list[Episode]) -> _Layout:
     return layout
 
 
-def _features(layout: _Layout, names: dict, use_videos: bool) -> dict:
+def lerobot_features(layout: FrameShape, names: dict, use_videos: bool) -> dict:
+    """LeRobot feature dict of frames of ``layout``; ``names``: dataset key -> column names (from the
+    episode files or ``defgrasp_env.layout``; generic names where they are missing)."""
+
     def vec(n, key):
         feature_names = names.get(key)
         return {"dtype": "float32", "shape": (n,), "names": feature_names if feature_names and len(feature_names) == n
@@ -108,9 +116,9 @@ def to_lerobot(src: str | os.PathLike, dst: str | os.PathLike, repo_id: str | No
     if dst.exists():
         raise FileExistsError(f"{dst}: LeRobot dataset folder exists already; choose a new one (nothing was changed)")
     episodes = [load_episode(p, _KEYS, missing_ok=True) for p in paths]
-    layout = _layout(episodes)
+    layout = _frame_shape(episodes)
     repo_id = repo_id or f"defgrasp/{dst.name}"
-    features = _features(layout, episodes[0].names, use_videos)
+    features = lerobot_features(layout, episodes[0].names, use_videos)
     ds = LeRobotDataset.create(repo_id, layout.fps, features, root=dst, robot_type=ROBOT_TYPE,
                                use_videos=use_videos, video_backend="pyav")
     try:
@@ -142,12 +150,24 @@ def _add_episode(ds, ep: Episode, task: str) -> None:
     success = ep["steps/is_success"]
     pixels = ep.data.get("observations/pixels")
     for k in range(t):
-        frame = {
-            "observation.state": state[k], "observation.environment_state": env_state[k], "action": action[k],
-            "next.reward": reward[k:k + 1], "next.done": done[k:k + 1].astype(bool),
-            "next.success": success[k:k + 1].astype(bool), "task": task,
-        }
-        if pixels is not None:
-            frame[CAMERA_KEY] = pixels[k]
-        ds.add_frame(frame)
+        ds.add_frame(lerobot_frame(state[k], env_state[k], action[k], reward[k], done[k], success[k], task,
+                                   None if pixels is None else pixels[k]))
     ds.save_episode()
+
+
+def lerobot_frame(agent_pos, environment_state, action, reward, done, success, task: str, image=None) -> dict:
+    """One LeRobot frame: the observation before the action (``agent_pos`` [10], ``environment_state``
+    [33], layouts of ``defgrasp_env.layout``), the action, and what the step returned (reward,
+    done = terminated or truncated, success); ``image`` [H, W, 3] uint8 or None."""
+    frame = {
+        "observation.state": np.asarray(agent_pos, np.float32),
+        "observation.environment_state": np.asarray(environment_state, np.float32),
+        "action": np.asarray(action, np.float32),
+        "next.reward": np.asarray(reward, np.float32).reshape(1),
+        "next.done": np.asarray(done, bool).reshape(1),
+        "next.success": np.asarray(success, bool).reshape(1),
+        "task": task,
+    }
+    if image is not None:
+        frame[CAMERA_KEY] = image
+    return frame

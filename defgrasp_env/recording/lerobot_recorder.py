@@ -12,10 +12,9 @@ import os
 import pathlib
 
 import gymnasium as gym
-import numpy as np
 
-from ..envs.task import AGENT_POS_NAMES, ENV_STATE_NAMES
-from .lerobot_export import CAMERA_KEY, ROBOT_TYPE, _features, _Layout
+from ..layout import AGENT_POS, ENV_STATE
+from .lerobot_export import ROBOT_TYPE, FrameShape, lerobot_features, lerobot_frame
 
 
 class LeRobotRecorder(gym.Wrapper):
@@ -38,12 +37,12 @@ class LeRobotRecorder(gym.Wrapper):
         if record_frames and env.render_mode != "rgb_array":
             raise ValueError("record_frames needs the env made with render_mode='rgb_array'")
         image = (cfg.camera.height, cfg.camera.width, 3) if record_frames else None
-        layout = _Layout(int(round(cfg.control_hz)), len(AGENT_POS_NAMES), len(ENV_STATE_NAMES),
-                         env.action_space.shape[0], image)
-        names = {"observations/agent_pos": list(AGENT_POS_NAMES),
-                 "observations/environment_state": list(ENV_STATE_NAMES)}
+        layout = FrameShape(int(round(cfg.control_hz)), AGENT_POS.size, ENV_STATE.size, env.action_space.shape[0],
+                            image)
+        names = {"observations/agent_pos": list(AGENT_POS.names),
+                 "observations/environment_state": list(ENV_STATE.names)}
         self.dataset = LeRobotDataset.create(repo_id or f"defgrasp/{root.name}", layout.fps,
-                                             _features(layout, names, use_videos), root=root,
+                                             lerobot_features(layout, names, use_videos), root=root,
                                              robot_type=ROBOT_TYPE, use_videos=use_videos, video_backend="pyav")
         self.task = task or (f"Pick up the {cfg.object} and lift it to "
                              f"[{', '.join(f'{g:g}' for g in cfg.goal)}] m")
@@ -64,18 +63,9 @@ class LeRobotRecorder(gym.Wrapper):
         if self._obs is None:
             raise RuntimeError("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
-        frame = {
-            "observation.state": np.asarray(self._obs["agent_pos"], np.float32),
-            "observation.environment_state": np.asarray(self._obs["environment_state"], np.float32),
-            "action": np.asarray(action, np.float32),
-            "next.reward": np.array([reward], np.float32),
-            "next.done": np.array([terminated or truncated]),
-            "next.success": np.array([bool(info.get("is_success", False))]),
-            "task": self.task,
-        }
-        if self._frame is not None:
-            frame[CAMERA_KEY] = self._frame
-        self.dataset.add_frame(frame)
+        self.dataset.add_frame(lerobot_frame(self._obs["agent_pos"], self._obs["environment_state"], action, reward,
+                                             terminated or truncated, bool(info.get("is_success", False)),
+                                             self.task, self._frame))
         self._pending += 1
         self._obs = obs
         self._frame = self.env.render() if self.record_frames else None

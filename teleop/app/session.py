@@ -220,14 +220,14 @@ class CollectionSession:
             glove.send_haptics(np.zeros(5), np.zeros(5), 0.0)
 
     def _reset_env(self, keep_pending: bool) -> None:
-        """Reset for the next episode; the recorder writes the pending episode iff keep_pending."""
+        """Reset for the next episode; the recorder saves the pending episode iff keep_pending, else
+        discards it."""
         if self.recorder is not None:
-            self.recorder.save_unfinished = keep_pending
-        try:
-            self._obs, _ = self.env.reset(seed=self._next_seed())
-        finally:
-            if self.recorder is not None:
-                self.recorder.save_unfinished = True
+            if keep_pending:
+                self.recorder.save("reset")
+            else:
+                self.recorder.discard()
+        self._obs, _ = self.env.reset(seed=self._next_seed())
         self._collect_saved()
         self._info = {}
         self._steps = 0
@@ -410,7 +410,10 @@ class CollectionSession:
 
     def _close_env(self, steps: int) -> None:
         if self.recorder is not None:
-            self.recorder.save_unfinished = self._keep_current
+            if self._keep_current:
+                self.recorder.save("close")
+            else:
+                self.recorder.discard()
             if steps and not self._keep_current:
                 self.report.discarded += 1
                 self._say(f"discarded the unfinished episode ({steps} steps)")

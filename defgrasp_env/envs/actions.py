@@ -1,0 +1,63 @@
+"""Action checking and decoding: batched actions [W, A] (``defgrasp_env.layout``) -> the flange
+position [W, 3] m, orientation [W, 4] xyzw and jaw-gap [W] m targets of one control period."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..gripper import Gripper
+from ..layout import ABSOLUTE_ACTION, DELTA_ACTION, jaw_command_to_gap
+from ..transforms import axis_angle_to_quat, quat_multiply, quat_normalize
+from .config import PickupConfig
+
+
+def check_actions(actions, expected_shape: tuple[int, ...], space_low, space_high) -> np.ndarray:
+    """Validate (shape, finiteness) and clip to the action space; returns float64 [W, A]."""
+    a = np.asarray(actions, dtype=np.float64)
+    if a.shape != expected_shape:
+        raise ValueError(f"action must have shape {expected_shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action must be finite, got {a.reshape(-1)[~np.isfinite(a.reshape(-1))][:3]} "
+                         f"in {a.tolist()}")
+    return np.clip(a, space_low, space_high)
+
+
+def delta_targets(gripper: Gripper, config: PickupConfig, action: np.ndarray):
+    """Targets for normalised delta actions [W, 7] (``DELTA_ACTION``): the flange moves by the
+    velocities times ``dt`` from where it is; the jaw command decodes to a gap."""
+    pos, quat = gripper.flange_pose()
+    target_pos = pos + DELTA_ACTION.get(action, "linear_velocity") * config.max_linear_speed * config.dt
+    dq = axis_angle_to_quat(DELTA_ACTION.get(action, "angular_velocity") * config.max_angular_speed * config.dt)
+    target_quat = quat_normalize(quat_multiply(dq, quat))
+    return target_pos, target_quat, jaw_command_to_gap(DELTA_ACTION.get(action, "jaw")[:, 0])
+
+
+def absolute_targets(gripper: Gripper, config: PickupConfig, action: np.ndarray):
+    """Targets for absolute actions [W, 8] (``ABSOLUTE_ACTION``): the flange moves toward the
+    target pose no faster than the configured speeds; the gap is the commanded one."""
+    quat = ABSOLUTE_ACTION.get(action, "orientation")
+    norm = np.linalg.norm(quat, axis=1)
+    if np.any(norm < 1e-6):
+        raise ValueError(f"absolute action quaternion must be non-zero, got {quat[norm < 1e-6][0].tolist()}")
+    target_quat = quat_normalize(quat)
+    pos, quat = gripper.flange_pose()
+    d = ABSOLUTE_ACTION.get(action, "position") - pos
+    dist = np.linalg.norm(d, axis=1, keepdims=True)
+    step = np.minimum(1.0, config.max_linear_speed * config.dt / np.maximum(dist, 1e-12))
+    rel = quat_multiply(target_quat, quat * np.array([-1, -1, -1, 1.0]))
+    rel = np.where(rel[:, 3:4] < 0, -rel, rel)
+    angle = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), rel[:, 3])
+    frac = np.minimum(1.0, config.max_angular_speed * config.dt / np.maximum(angle, 1e-12))
+    axis = rel[:, :3] / np.maximum(np.linalg.norm(rel[:, :3], axis=1, keepdims=True), 1e-12)
+    new_quat = quat_multiply(axis_angle_to_quat(axis * (angle * frac)[:, None]), quat)
+    return pos + d * step, quat_normalize(new_quat), ABSOLUTE_ACTION.get(action, "gap")[:, 0]
+
+
+#: The decoder of each ``action_mode``.
+DECODERS = {"delta": delta_targets, "absolute": absolute_targets}
+
+
+def targets(gripper: Gripper, config: PickupConfig, actions: np.ndarray):
+    """Flange position [W, 3], orientation [W, 4] and jaw-gap [W] targets for checked actions [W, A]
+    of ``config.action_mode``."""
+    return DECODERS[config.action_mode](gripper, config, actions)

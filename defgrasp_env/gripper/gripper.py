@@ -1,0 +1,165 @@
+"""``Gripper``: W 2F-85 grippers, each on an invisible 6-DOF wrist (batched numpy state).
+
+The gripper owns the robot side of the pickup scene: the wrist joints, the jaw gap and its driver,
+the grip-stiffness estimate, the pads' collision boxes and their poses, the lift that keeps the
+pads above the ground, and the tip-force readout. It knows nothing about the FEM solver: per
+physics substep the scene (which owns the substep loop) asks it for the pad box poses to move to
+(:meth:`Gripper.substep`) and hands it the pad normal forces the solver measured there
+(:meth:`Gripper.sense`).
+
+Force hooks: the jaw driver's force limit runs in :meth:`Gripper.substep` on the forces of the
+previous :meth:`Gripper.sense`; a limit on the force the *wrist* exerts through the pads belongs
+next to it, in :meth:`Gripper._wrist_joints` (the joints the wrist moves to in a substep), fed by
+the pad forces that :meth:`Gripper.sense` receives.
+
+Frames and units: world frame (y up), m, rad, N; quaternions xyzw; joints
+``q = (x, y, z, roll, pitch, yaw)`` of ``defgrasp_env.wrist``; pad index 0 = left (+x_G), 1 = right.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..transforms import quat_rotate
+from ..wrist import clamp_joints, fk_analytic, ik_analytic
+from .driver import GripperConfig, GripperDriver, update_grip_stiffness
+from .linkage import GAP_MAX, GAP_MIN, pad_boxes
+
+__all__ = ["GROUND_CLEARANCE", "Gripper", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
+
+#: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
+#: can never push a node through itself; the inner face stays where the linkage puts it.
+PAD_BACKING = 0.01
+#: Start height of the flange above the ground (m) and pad clearance kept above the ground (m).
+START_FLANGE_HEIGHT = 0.30
+GROUND_CLEARANCE = 0.001
+#: Half extents (m) of each pad's collision box (the pad plus its backing), in frame G.
+PAD_BOX_HALF_EXTENTS = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2, 0.0, 0.0])
+_CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
+class Gripper:
+    """W grippers on 6-DOF wrists. State (read-only views, float64, world frame):
+
+    * ``q`` [W, 6]: wrist joints (m, m, m, rad, rad, rad);
+    * ``gap`` [W]: jaw gap between the pad inner faces, m, in [GAP_MIN, GAP_MAX];
+    * ``tip_force`` [W, 2]: normal force on the left and right pad inner face, N (last substep);
+    * ``grip_stiffness`` [W]: the jaw driver's estimate of d(grip force)/d(closing), N/m (0: unknown).
+
+    One control period: :meth:`begin_step` (wrist targets), then per physics substep
+    :meth:`substep` (drive the jaw and wrist, returns the pad poses) and :meth:`sense` (pad forces).
+    """
+
+    pad_half_extents = PAD_BOX_HALF_EXTENTS
+
+    def __init__(self, config: GripperConfig, num_worlds: int):
+        self.driver = GripperDriver(config)
+        self.num_worlds = num_worlds
+        self._q = np.zeros((num_worlds, 6))
+        self._gap = np.full(num_worlds, GAP_MAX)
+        self._tip_force = np.zeros((num_worlds, 2))
+        self._grip_stiffness = np.zeros(num_worlds)
+        self._q_start = self._q_move = None
+        self._before = None  # (gap, grip force, target gap) at the start of the running substep
+
+    # -- state -----------------------------------------------------------------------------
+    @property
+    def q(self) -> np.ndarray:
+        return _read_only(self._q)
+
+    @property
+    def gap(self) -> np.ndarray:
+        return _read_only(self._gap)
+
+    @property
+    def tip_force(self) -> np.ndarray:
+        return _read_only(self._tip_force)
+
+    @property
+    def grip_stiffness(self) -> np.ndarray:
+        return _read_only(self._grip_stiffness)
+
+    def reset(self, mask: np.ndarray, flange_xz: np.ndarray) -> None:
+        """Worlds in ``mask`` [W]: flange at ``flange_xz`` [W, 2] (m, world x and z; rows outside the
+        mask are ignored) and ``START_FLANGE_HEIGHT``, pointing down, jaw open, no force."""
+        for w in np.flatnonzero(mask):
+            self._q[w] = [flange_xz[w][0], START_FLANGE_HEIGHT, flange_xz[w][1], 0.0, 0.0, 0.0]
+            self._gap[w] = GAP_MAX
+            self._tip_force[w] = 0.0
+            self._grip_stiffness[w] = 0.0
+
+    # -- kinematics ------------------------------------------------------------------------
+    def flange_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Flange positions [W, 3] (m) and orientations [W, 4] (xyzw) in the world."""
+        return fk_analytic(self._q)
+
+    def pad_poses(self, q: np.ndarray | None = None, gap: np.ndarray | None = None):
+        """Collision-box centres [W, 2, 3] (m) and orientations [W, 2, 4] (xyzw) of the pads for
+        joints ``q`` [W, 6] and gap [W] (m; default: the current ones)."""
+        q = self._q if q is None else q
+        gap = self._gap if gap is None else gap
+        pos, quat = fk_analytic(q)
+        centers = pad_boxes(gap=np.clip(gap, GAP_MIN, GAP_MAX))[0].copy()      # [W,2,3] in G
+        centers[:, 0, 0] += PAD_BACKING / 2
+        centers[:, 1, 0] -= PAD_BACKING / 2
+        world = pos[:, None, :] + quat_rotate(quat[:, None, :], centers)
+        return world, np.repeat(quat[:, None, :], 2, axis=1)
+
+    def tcp_positions(self) -> np.ndarray:
+        """Tool centre point (midpoint between the pad inner faces) [W, 3], m."""
+        centers, _ = self.pad_poses()
+        return centers.mean(axis=1)
+
+    def lift_above_ground(self, q: np.ndarray, gap: np.ndarray):
+        """Raise the flange so that no pad box corner is below ``GROUND_CLEARANCE``. Returns the
+        joints [W, 6] and the pad poses (as :meth:`pad_poses`) for them."""
+        centers, quats = self.pad_poses(q, gap)
+        corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], _CORNER_SIGNS * PAD_BOX_HALF_EXTENTS)
+        lowest = corners[..., 1].reshape(len(q), -1).min(axis=1)
+        lifted = q.copy()
+        lifted[:, 1] += np.maximum(GROUND_CLEARANCE - lowest, 0.0)
+        lifted = clamp_joints(lifted)
+        centers[..., 1] += (lifted[:, 1] - q[:, 1])[:, None]  # joint 1 is the world-y slide
+        return lifted, centers, quats
+
+    # -- actuation (one control period) ---------------------------------------------------
+    def begin_step(self, target_pos: np.ndarray, target_quat: np.ndarray) -> None:
+        """Start a control period toward flange targets [W, 3] m, [W, 4] xyzw (joint limits
+        enforced; the wrist turns the shortest way round)."""
+        self._q_start = self._q.copy()
+        q_move = clamp_joints(ik_analytic(target_pos, target_quat).q) - self._q_start
+        q_move[:, 3:] = (q_move[:, 3:] + np.pi) % (2 * np.pi) - np.pi
+        self._q_move = q_move
+
+    def _wrist_joints(self, fraction: float) -> np.ndarray:
+        """Joints [W, 6] a ``fraction`` of the way through the control period's wrist motion."""
+        return clamp_joints(self._q_start + self._q_move * fraction)
+
+    def substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray):
+        """Substep ``k`` of ``count`` (length ``h`` s): the jaw driver moves the gap toward
+        ``target_gap`` [W] (m) on the forces of the last :meth:`sense` (speed and force limits,
+        ``gripper.driver``), the wrist moves ``(k + 1) / count`` of the way, and the flange is lifted
+        so that the pads stay above the ground. Worlds with ``active == False`` keep wrist and jaw.
+        Returns the pad box centres [W, 2, 3] and orientations [W, 2, 4] to move to."""
+        self._before = (self._gap, self._tip_force.mean(axis=1), target_gap)
+        gap = self.driver.step(target_gap, self._gap, h, self._tip_force[:, 0], self._tip_force[:, 1],
+                               self._grip_stiffness)
+        q = np.where(active[:, None], self._wrist_joints((k + 1) / count), self._q)
+        # an inactive world keeps q, already above the ground: the lift leaves it as it is
+        self._q, pos, quat = self.lift_above_ground(q, np.where(active, gap, self._gap))
+        self._gap = np.where(active, gap, self._gap)
+        return pos, quat
+
+    def sense(self, pad_normal_force: np.ndarray) -> None:
+        """The pad normal forces [W, 2] (N, left and right) measured at the end of the substep:
+        the tip-force readout and the grip-stiffness estimate follow them."""
+        gap_before, force_before, target_gap = self._before
+        self._tip_force = np.array(pad_normal_force, dtype=np.float64).reshape(self.num_worlds, 2)
+        self._grip_stiffness = update_grip_stiffness(self._grip_stiffness, gap_before, self._gap, force_before,
+                                                     self._tip_force.mean(axis=1), target_gap)

@@ -1,0 +1,118 @@
+"""``Gripper``: the batched gripper-on-a-wrist state the scene drives, tested without the FEM (forces
+are handed in by hand), and the scene's single ownership of the physics substeps."""
+
+import ast
+import pathlib
+
+import numpy as np
+import pytest
+
+import defgrasp_env
+from defgrasp_env.envs.config import PickupConfig
+from defgrasp_env.envs.scene import PickupScene, WorldSetup
+from defgrasp_env.gripper import (GAP_MAX, GAP_MIN, GROUND_CLEARANCE, PAD_BOX_HALF_EXTENTS, START_FLANGE_HEIGHT,
+                                  Gripper, GripperConfig, tcp_offset)
+from defgrasp_env.sim.materials import Material
+
+ROOT = pathlib.Path(defgrasp_env.__file__).resolve().parents[1]
+
+
+def _gripper(n=3, **cfg):
+    g = Gripper(GripperConfig(**cfg), n)
+    g.reset(np.ones(n, bool), np.array([[0.01 * i, -0.02 * i] for i in range(n)]))
+    return g
+
+
+def _period(g, target_pos, target_quat, target_gap, forces, substeps=4, dt=0.05, active=None):
+    """One control period driven by hand: ``forces`` [W, 2] N are 'measured' after every substep."""
+    active = np.ones(g.num_worlds, bool) if active is None else active
+    g.begin_step(target_pos, target_quat)
+    poses = []
+    for k in range(substeps):
+        poses.append(g.substep(k, substeps, dt / substeps, target_gap, active))
+        g.sense(forces)
+    return poses
+
+
+def test_reset_state_and_read_only_views():
+    g = _gripper()
+    pos, quat = g.flange_pose()
+    np.testing.assert_allclose(pos, [[0.0, START_FLANGE_HEIGHT, 0.0], [0.01, 0.3, -0.02], [0.02, 0.3, -0.04]])
+    np.testing.assert_allclose(quat, np.tile([0, 0, 0, 1.0], (3, 1)), atol=1e-15)  # pointing down
+    assert np.all(g.gap == GAP_MAX) and not g.tip_force.any() and not g.grip_stiffness.any()
+    for name in ("q", "gap", "tip_force", "grip_stiffness"):
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(g, name)[...] = 0.0
+    # the tcp hangs below the flange by the linkage's offset
+    np.testing.assert_allclose(g.tcp_positions(), pos + tcp_offset(gap=GAP_MAX), atol=1e-12)
+
+
+def test_jaw_closes_at_its_speed_and_stops_at_the_force_limit():
+    g = _gripper(1, closing_speed_mm_s=100.0, grip_force_limit=20.0)
+    pos, quat = g.flange_pose()
+    _period(g, pos, quat, np.array([GAP_MIN]), np.zeros((1, 2)))
+    assert g.gap[0] == pytest.approx(GAP_MAX - 0.1 * 0.05, abs=1e-12)  # 100 mm/s for 50 ms
+    # 25 N (above the 20 N limit) measured from now on: the driver sees it one substep late, so the
+    # jaw closes one more substep (1.25 mm), estimates k = 2 * 25 N / 1.25 mm at that first touch
+    # (gripper.driver), and then opens by (25 - 20) / k in each of the 3 remaining substeps
+    _period(g, pos, quat, np.array([GAP_MIN]), np.full((1, 2), 25.0))
+    k = 2 * 25.0 / 0.00125
+    assert g.gap[0] == pytest.approx(GAP_MAX - 0.005 - 0.00125 + 3 * 5.0 / k, abs=1e-12)
+    assert g.grip_stiffness[0] == pytest.approx(k)
+    np.testing.assert_array_equal(g.tip_force, [[25.0, 25.0]])
+
+
+def test_wrist_reaches_its_target_and_pads_never_go_below_the_ground():
+    g = _gripper(2)
+    pos, quat = g.flange_pose()
+    target = pos + [[0.05, -0.1, 0.0], [0.0, -1.0, 0.0]]  # world 1: far into the ground
+    poses = _period(g, target, quat, g.gap.copy(), np.zeros((2, 2)))
+    new_pos, _ = g.flange_pose()
+    np.testing.assert_allclose(new_pos[0], target[0], atol=1e-9)
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * PAD_BOX_HALF_EXTENTS
+    for centers, quats in poses:
+        assert centers.shape == (2, 2, 3) and quats.shape == (2, 2, 4)
+        lowest = (centers[:, :, None, :] + corners)[..., 1].min(axis=(1, 2))  # quats are identity here
+        assert np.all(lowest >= GROUND_CLEARANCE - 1e-12)
+    assert lowest[1] == pytest.approx(GROUND_CLEARANCE, abs=1e-12)  # lifted exactly to the clearance
+
+
+def test_inactive_worlds_keep_wrist_and_jaw_bit_for_bit():
+    g = _gripper(2)
+    pos, quat = g.flange_pose()
+    q0, gap0 = g.q.copy(), g.gap.copy()
+    _period(g, pos + 0.05, quat, np.full(2, GAP_MIN), np.zeros((2, 2)), active=np.array([True, False]))
+    assert np.array_equal(g.q[1], q0[1]) and g.gap[1] == gap0[1]
+    assert not np.array_equal(g.q[0], q0[0]) and g.gap[0] < gap0[0]
+
+
+def test_scene_owns_the_substeps():
+    cfg = PickupConfig()
+    setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
+    scene = PickupScene(cfg, [setup])
+    assert scene.substeps == cfg.solver.substeps == 4 and scene.solver.config.substeps == 1
+    calls = []
+    step = scene.solver.step
+    scene.solver.step = lambda *a: calls.append(a[-1]) or step(*a)
+    pos, quat = scene.gripper.flange_pose()
+    scene.step(pos, quat, scene.gripper.gap.copy())
+    assert calls == [cfg.dt / 4] * 4
+
+
+def test_camera_task_and_recorders_use_public_scene_accessors():
+    public = {"config", "num_worlds", "gripper", "model", "state", "solver", "substeps", "object_names", "setups",
+              "materials", "mesh", "node_positions", "feature_points", "keypoint_positions", "finite", "step",
+              "reset_worlds"}
+    files = [ROOT / "defgrasp_env/envs" / n for n in ("common.py", "task.py", "actions.py", "pickup_env.py",
+                                                       "vector_env.py")]
+    files += sorted((ROOT / "defgrasp_env/recording").glob("*.py"))
+    used = set()
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, (ast.Name, ast.Attribute)):
+                owner = node.value.id if isinstance(node.value, ast.Name) else node.value.attr
+                if owner == "scene":
+                    used.add((path.name, node.attr))
+    assert {attr for _, attr in used} <= public, sorted(u for u in used if u[1] not in public)
+    for attr in public - {"config", "num_worlds", "gripper", "model", "state", "solver", "substeps"}:
+        assert hasattr(PickupScene, attr)
