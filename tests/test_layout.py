@@ -162,6 +162,10 @@ def test_recorders_and_lerobot_name_columns_by_the_layout():
     features = lerobot_features(FrameShape(20, AGENT_POS.size, ENV_STATE.size, DELTA_ACTION.size, None), names, False)
     assert features["observation.state"]["names"] == list(AGENT_POS.names)
     assert features["observation.environment_state"]["names"] == list(ENV_STATE.names)
+    # files without column names get the layout's
+    bare = lerobot_features(FrameShape(20, AGENT_POS.size, ENV_STATE.size, ABSOLUTE_ACTION.size, None), {}, False)
+    assert bare["action"]["names"] == list(ABSOLUTE_ACTION.names)
+    assert bare["observation.state"]["names"] == list(AGENT_POS.names)
     frame = lerobot_frame(np.arange(10.0), np.arange(33.0), np.zeros(7), 1.5, True, False, "pick")
     for key, feature in features.items():
         assert np.asarray(frame[key]).shape == feature["shape"], key

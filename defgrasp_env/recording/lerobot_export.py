@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..layout import ACTION_LAYOUTS, AGENT_POS, ENV_STATE
 from .reader import Episode, episode_paths, load_episode
 
 ROBOT_TYPE = "robotiq_2f85_on_6dof_wrist"
@@ -71,14 +72,23 @@ def _frame_shape(episodes: list[Episode]) -> FrameShape:
     return layout
 
 
+def _layout_names(key: str, n: int) -> list[str] | None:
+    """Column names of dataset ``key`` with ``n`` columns from ``defgrasp_env.layout`` (None: no fit)."""
+    layouts = {"observations/agent_pos": (AGENT_POS,), "observations/environment_state": (ENV_STATE,),
+               "steps/action": tuple(ACTION_LAYOUTS.values())}
+    return next((list(v.names) for v in layouts.get(key, ()) if v.size == n), None)
+
+
 def lerobot_features(layout: FrameShape, names: dict, use_videos: bool) -> dict:
     """LeRobot feature dict of frames of ``layout``; ``names``: dataset key -> column names (from the
-    episode files or ``defgrasp_env.layout``; generic names where they are missing)."""
+    episode files); where they are missing or do not fit, those of ``defgrasp_env.layout``, else
+    generic names."""
 
     def vec(n, key):
         feature_names = names.get(key)
-        return {"dtype": "float32", "shape": (n,), "names": feature_names if feature_names and len(feature_names) == n
-                else [f"{key.split('/')[-1]}_{i}" for i in range(n)]}
+        if not feature_names or len(feature_names) != n:
+            feature_names = _layout_names(key, n) or [f"{key.split('/')[-1]}_{i}" for i in range(n)]
+        return {"dtype": "float32", "shape": (n,), "names": list(feature_names)}
 
     features = {
         "observation.state": vec(layout.state_dim, "observations/agent_pos"),
