@@ -222,14 +222,7 @@ class PickupScene:
             self.tip_force = self.state.pad_normal_force.numpy().reshape(-1, 2).astype(np.float64)
             self.grip_stiffness = update_grip_stiffness(self.grip_stiffness, gap_before, self.gap, force_before,
                                                         self.tip_force.mean(axis=1), target_gap)
-        stats = SolveStats(
-            newton_iterations=np.sum([r.newton_iterations for r in reports], axis=0),
-            cg_iterations=np.sum([r.cg_iterations for r in reports], axis=0),
-            last_update=reports[-1].last_update,
-            residual_force=reports[-1].residual_force,
-            penetration=np.max([r.penetration for r in reports], axis=0),
-            diverged=np.any([r.diverged for r in reports], axis=0),
-        )
+        stats = SolveStats.combine(reports)
         return stats
 
     # -- readouts --------------------------------------------------------------------------

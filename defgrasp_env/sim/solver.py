@@ -39,6 +39,8 @@ class SolverConfig:
             float32 noise near a solution).
         max_node_step: a Newton update longer than this (m) marks the world as diverged.
         line_search_steps: halvings of a Newton step at most while it raises the energy.
+        penetration_bound: a returned state with a node deeper than this (m) inside a pad's
+            collision box or below the ground is flagged (``SolveStats.penetrated``).
         check_every: on the host, test every this many CG iterations, and after every Newton
             iteration and line-search trial, whether all worlds are done (0 = never: run the full
             iteration counts, with no host round trip).
@@ -53,6 +55,7 @@ class SolverConfig:
     max_node_step: float = 0.5
     line_search_steps: int = 8
     check_every: int = 4
+    penetration_bound: float = 1e-3
 
     def __post_init__(self) -> None:
         for name, low in (("substeps", 1), ("newton_iterations", 1), ("cg_iterations", 1),
@@ -64,6 +67,7 @@ class SolverConfig:
         check_range("cg_tolerance", self.cg_tolerance, 0.0, 1.0)
         check_range("cg_update_fraction", self.cg_update_fraction, 0.0, 1.0, low_open=False, high_open=False)
         check_range("max_node_step", self.max_node_step, 0.0, math.inf, "m")
+        check_range("penetration_bound", self.penetration_bound, 0.0, math.inf, "m")
 
 
 @dataclass
@@ -76,10 +80,23 @@ class SolveStats:
     residual_force: np.ndarray      # float, N: largest node force residual at the returned state
     penetration: np.ndarray         # float, m: deepest ground/pad penetration at the returned state
     diverged: np.ndarray            # bool: the world blew up (NaN, runaway update); its state was kept
+    converged: np.ndarray           # bool: every substep's Newton loop met newton_tolerance, not diverged
+    penetrated: np.ndarray          # bool: penetration > SolverConfig.penetration_bound
 
-    @property
-    def converged(self) -> np.ndarray:
-        return ~self.diverged
+    @classmethod
+    def combine(cls, reports: "list[SolveStats]") -> "SolveStats":
+        """One report for consecutive steps: iterations summed, the last state's update and
+        residual, the deepest penetration, and any step's divergence/non-convergence/penetration."""
+        return cls(
+            newton_iterations=np.sum([r.newton_iterations for r in reports], axis=0),
+            cg_iterations=np.sum([r.cg_iterations for r in reports], axis=0),
+            last_update=reports[-1].last_update,
+            residual_force=reports[-1].residual_force,
+            penetration=np.max([r.penetration for r in reports], axis=0),
+            diverged=np.any([r.diverged for r in reports], axis=0),
+            converged=np.all([r.converged for r in reports], axis=0),
+            penetrated=np.any([r.penetrated for r in reports], axis=0),
+        )
 
 
 class ImplicitSolver:
@@ -120,7 +137,8 @@ class ImplicitSolver:
         self._wf = {k: wp.zeros(w, dtype=float, device=d) for k in (
             "rz", "rz_new", "rz0", "p_ap", "dx_norm", "last_dx", "res_norm", "penetration", "step", "cg_update")}
         self._wi = {k: wp.zeros(w, dtype=int, device=d) for k in (
-            "newton_active", "cg_active", "newton_it", "cg_it", "cg_total", "diverged", "all_on", "searching")}
+            "newton_active", "cg_active", "newton_it", "substep_newton_it", "cg_it", "cg_total", "diverged",
+            "unconverged", "all_on", "searching")}
         self._wi["all_on"].fill_(1)
         self._wf["step"].fill_(1.0)  # Newton step length: begin_line_search resets it, else it stays 1
         # coarse (rigid translation) correction: T_k = e_k masked by the free axes, A T_k, per-world 3x3
@@ -146,7 +164,7 @@ class ImplicitSolver:
         for name in self.work_control.__dataclass_fields__:
             wp.copy(getattr(self.work_control, name), getattr(control, name))
         wp.copy(self._step_start, state_in.positions)
-        for a in (wi["newton_it"], wi["cg_total"], wi["diverged"], wf["penetration"]):
+        for a in (wi["newton_it"], wi["cg_total"], wi["diverged"], wi["unconverged"], wf["penetration"]):
             a.zero_()
         for k in range(cfg.substeps):
             for cmd in plan["pads"][k]:
@@ -162,19 +180,24 @@ class ImplicitSolver:
         wp.copy(work.pad_positions, self.work_control.pad_target_positions)
         wp.copy(work.pad_orientations, self.work_control.pad_target_orientations)
         state_out.copy_from(work)
+        diverged = wi["diverged"].numpy().astype(bool)
+        penetration = wf["penetration"].numpy().copy()
         return SolveStats(
             newton_iterations=wi["newton_it"].numpy().copy(),
             cg_iterations=wi["cg_total"].numpy().copy(),
             last_update=wf["last_dx"].numpy().copy(),
             residual_force=wf["res_norm"].numpy().copy(),
-            penetration=wf["penetration"].numpy().copy(),
-            diverged=wi["diverged"].numpy().astype(bool),
+            penetration=penetration,
+            diverged=diverged,
+            converged=~diverged & (wi["unconverged"].numpy() == 0),
+            penetrated=penetration > cfg.penetration_bound,
         )
 
     # -- internals ---------------------------------------------------------------------------
     def _newton(self, plan: dict) -> None:
         cfg, wi = self.config, self._wi
         wp.copy(wi["newton_active"], wi["all_on"])
+        wi["substep_newton_it"].zero_()
         for it in range(cfg.newton_iterations):
             for cmd in plan["evaluate"]:
                 cmd.launch()
@@ -323,8 +346,8 @@ class ImplicitSolver:
                 rec(kn.apply_newton_step, n, self._dx, m.node_world, newton_active, wf["step"], cfg.max_node_step,
                     x, wf["dx_norm"], wi["diverged"]),
                 rec(kn.end_newton_iteration, w, wf["dx_norm"], cfg.newton_tolerance, cfg.newton_iterations,
-                    wi["diverged"], wi["newton_it"], newton_active, wf["rz"], wf["res_norm"], wi["cg_it"],
-                    wf["last_dx"])],
+                    wi["diverged"], wi["substep_newton_it"], wi["newton_it"], newton_active, wf["rz"],
+                    wf["res_norm"], wi["cg_it"], wf["last_dx"], wi["unconverged"])],
             "end": rec(kn.end_substep, n, self._x_start, m.node_world, wi["diverged"], 1.0 / h, x, self._v_new),
             "outputs": [
                 nodes(x, wi["all_on"], 1), tets(x, wi["all_on"]), begin_solve(wi["all_on"]),

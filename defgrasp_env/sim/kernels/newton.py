@@ -230,21 +230,29 @@ def end_newton_iteration(
     tol: float,
     max_iterations: int,
     diverged: wp.array(dtype=int),
+    substep_iterations: wp.array(dtype=int),
     newton_iterations: wp.array(dtype=int),
     newton_active: wp.array(dtype=int),
     rz: wp.array(dtype=float),
     residual_norm: wp.array(dtype=float),
     cg_iterations: wp.array(dtype=int),
     last_dx_norm: wp.array(dtype=float),
+    unconverged: wp.array(dtype=int),
 ):
+    """Count the iteration (this substep's, for the limit, and the step's total) and stop a world
+    on the update tolerance, at the per-substep limit (flagged ``unconverged``) or on divergence."""
     w = wp.tid()
     if newton_active[w] == 0:
         return
-    it = newton_iterations[w] + 1
-    newton_iterations[w] = it
+    it = substep_iterations[w] + 1
+    substep_iterations[w] = it
+    newton_iterations[w] = newton_iterations[w] + 1
     last_dx_norm[w] = dx_norm[w]
-    if dx_norm[w] <= tol or it >= max_iterations or diverged[w] != 0:
+    if dx_norm[w] <= tol or diverged[w] != 0:
         newton_active[w] = 0
+    elif it >= max_iterations:
+        newton_active[w] = 0
+        unconverged[w] = 1
     dx_norm[w] = 0.0
     rz[w] = 0.0
     residual_norm[w] = 0.0
