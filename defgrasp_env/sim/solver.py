@@ -312,7 +312,7 @@ class ImplicitSolver:
                           *self._pad)] if m.pads_per_world else [] for k in range(k_sub)],
             "begin": [rec(kn.begin_substep, n, x, work.velocities, self._step_start, ctl.prescribed_positions,
                           m.free_axes, (k + 1) / k_sub, h, self._x_start) for k in range(k_sub)],
-            "lag": [rec(kc.lag_contacts, n, self._x_start, m.node_world, self._pad[0], self._pad[1],
+            "lag": [rec(kc.lag_contacts, n, self._x_start, x, m.node_world, *self._pad,
                         m.pad_half_extents, m.pads_per_world, c.stiffness, self._lag_fn, self._lag_normal),
                     rec(kc.keep_pad_depth, n, self._x_start, m.node_world, m.free_axes, *self._pad, m.pads_per_world,
                        self._lag_fn, self._lag_normal, x),

@@ -1,5 +1,10 @@
 """Penalty contact with the ground plane y = 0 and kinematic oriented boxes, with smoothed Coulomb friction.
 
+Each node meets each box through one face per substep, chosen at the substep start by continuous
+collision detection of the node's motion relative to the box (``contact_face``); the penalty then
+pushes the node out through that face only, so a box that moves further than its half thickness in
+a substep cannot push nodes out of its far side (the nearest face of a deep node is the wrong one).
+
 Normal: energy k/2 d^2 for penetration depth d, so the normal force is k d and its Hessian k n n^T.
 Friction (normal force f_n and normal lagged at the substep start, IPC-style smoothing): for a tangential slip u_T over the step,
 force = -mu f_n f1(|u_T|) u_T / |u_T| with f1(s) = 2 s/eps - s^2/eps^2 for s < eps and 1 beyond,
@@ -41,6 +46,72 @@ def box_penetration(local: wp.vec3, half: wp.vec3):
     return depth, n
 
 
+@wp.func
+def axis_normal(axis: int, sign: float):
+    n = wp.vec3(0.0)
+    n[axis] = sign
+    return n
+
+
+@wp.func
+def contact_face(start: wp.vec3, guess: wp.vec3, half: wp.vec3):
+    """Outward normal (box frame) of the face through which a node meets the box in a substep.
+
+    ``start``: the node at the substep start in the box's start frame; ``guess``: its predicted
+    end position in the box's end frame (both m). A node inside at the start (shallow, as every
+    returned state is) keeps its nearest face. Otherwise the segment start -> guess, the node's
+    motion relative to the box, is clipped against the three slabs (continuous collision
+    detection): the slab entered last is the face it crosses first. A node the segment does not
+    bring into the box gets the face of its largest separation (the side it is on)."""
+    if wp.abs(start[0]) < half[0] and wp.abs(start[1]) < half[1] and wp.abs(start[2]) < half[2]:
+        depth, n = box_penetration(start, half)
+        return n
+    d = guess - start
+    t_enter = float(0.0)
+    t_exit = float(1.0)
+    entry = int(-1)
+    hit = int(1)
+    best = int(0)
+    separation = float(-1.0e30)
+    for j in range(3):
+        gap = wp.abs(start[j]) - half[j]
+        if gap > separation:
+            separation = gap
+            best = j
+        if wp.abs(d[j]) < 1.0e-12:
+            if gap >= 0.0:
+                hit = 0
+        else:
+            t0 = (-half[j] - start[j]) / d[j]
+            t1 = (half[j] - start[j]) / d[j]
+            if t0 > t1:
+                tmp = t0
+                t0 = t1
+                t1 = tmp
+            if t0 > t_enter:
+                t_enter = t0
+                entry = j
+            t_exit = wp.min(t_exit, t1)
+    if hit == 1 and entry >= 0 and t_enter <= t_exit:
+        best = entry
+    return axis_normal(best, wp.sign(start[best]))
+
+
+@wp.func
+def face_penetration(local: wp.vec3, half: wp.vec3, n: wp.vec3):
+    """Depth (m, > 0 inside) of a point (box frame) behind the face with outward normal ``n`` (a
+    box axis), counted only inside the face's lateral extent; the point is pushed out through
+    that face however deep it is, never through the opposite one."""
+    depth = float(-1.0)
+    for j in range(3):
+        if n[j] != 0.0:
+            depth = half[j] - n[j] * local[j]
+    for j in range(3):
+        if n[j] == 0.0 and wp.abs(local[j]) >= half[j]:
+            depth = -1.0
+    return depth
+
+
 @wp.kernel
 def interpolate_pads(
     start_pos: wp.array(dtype=wp.vec3),
@@ -67,18 +138,22 @@ def interpolate_pads(
 @wp.kernel
 def lag_contacts(
     x_start: wp.array(dtype=wp.vec3),
+    x_guess: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     pad_pos0: wp.array(dtype=wp.vec3),
     pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
     pad_half: wp.array(dtype=wp.vec3),
     pads_per_world: int,
     stiffness: float,
     lag_normal_force: wp.array(dtype=float),
     lag_normal: wp.array(dtype=wp.vec3),
 ):
-    """Normal force (N) and normal of every node's contacts at the substep start, which the friction
-    law holds fixed during the substep's Newton solve (slot 0: ground; slot 1 + k: pad k, normal in
-    the pad's frame)."""
+    """Contact face of every node with every pad for the substep (``contact_face``: CCD of the
+    node's motion relative to the pad), and the normal force (N) and normal at the substep start,
+    which the friction law holds fixed during the substep's Newton solve (slot 0: ground; slot
+    1 + k: pad k, normal in the pad's frame; the contact terms use that face all substep long)."""
     i = wp.tid()
     w = node_world[i]
     slots = pads_per_world + 1
@@ -88,7 +163,9 @@ def lag_contacts(
     for k in range(pads_per_world):
         pad = w * pads_per_world + k
         local = wp.quat_rotate_inv(pad_rot0[pad], xi - pad_pos0[pad])
-        depth, n_local = box_penetration(local, pad_half[pad])
+        guess = wp.quat_rotate_inv(pad_rot1[pad], x_guess[i] - pad_pos1[pad])
+        n_local = contact_face(local, guess, pad_half[pad])
+        depth = face_penetration(local, pad_half[pad], n_local)
         lag_normal_force[i * slots + 1 + k] = stiffness * wp.max(depth, 0.0)
         lag_normal[i * slots + 1 + k] = n_local
 
@@ -176,7 +253,8 @@ def evaluate_nodes(
         pad = w * pads_per_world + k
         rot1 = pad_rot1[pad]
         local = wp.quat_rotate_inv(rot1, xi - pad_pos1[pad])
-        depth, n_local = box_penetration(local, pad_half[pad])
+        n_local = lag_normal[i * slots + 1 + k]
+        depth = face_penetration(local, pad_half[pad], n_local)
         f_pad = wp.vec3(0.0)
         if depth > 0.0:
             n = wp.quat_rotate(rot1, n_local)
@@ -188,7 +266,7 @@ def evaluate_nodes(
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
             slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
-            n_lag = wp.quat_rotate(rot1, lag_normal[i * slots + 1 + k])
+            n_lag = wp.quat_rotate(rot1, n_local)
             f_fric, h_fric = friction_force(pad_mu, lag_fn, slip, n_lag, eps)
             f_pad += f_fric
             hess += h_fric

@@ -8,7 +8,7 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 
 import warp as wp
 
-from .contact import box_penetration, pad_slip
+from .contact import face_penetration, pad_slip
 from .elastic import deformation_gradient, polar_rotation
 
 
@@ -85,13 +85,14 @@ def node_energy(
         pad = w * pads_per_world + k
         rot1 = pad_rot1[pad]
         local = wp.quat_rotate_inv(rot1, xi - pad_pos1[pad])
-        depth, n_local = box_penetration(local, pad_half[pad])
+        n_local = lag_normal[i * slots + 1 + k]
+        depth = face_penetration(local, pad_half[pad], n_local)
         if depth > 0.0:
             e += 0.5 * stiffness * depth * depth
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
             slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
-            n_lag = wp.quat_rotate(rot1, lag_normal[i * slots + 1 + k])
+            n_lag = wp.quat_rotate(rot1, n_local)
             e += friction_potential(pad_mu, lag_fn, slip, n_lag, eps)
     wp.atomic_add(energy, w, wp.float64(e))
 
