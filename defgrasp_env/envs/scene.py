@@ -15,10 +15,12 @@ from ..gripper import GAP_MAX, GAP_MIN, GripperDriver, pad_boxes, update_grip_st
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.model import ContactParams, build_model, set_world_material
+from ..sim.pad_motion import corner_travel, substeps_for_travel
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
 from ..transforms import axis_angle_to_quat, quat_multiply, quat_normalize, quat_rotate, quat_to_matrix
 from ..wrist import clamp_joints, fk_analytic, ik_analytic
+from ..wrist.force_limit import limited_substep, wrist_force
 from .config import PickupConfig
 
 #: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
@@ -90,6 +92,8 @@ class PickupScene:
         self.gap = np.full(w, GAP_MAX)
         self.tip_force = np.zeros((w, 2))
         self.grip_stiffness = np.zeros(w)  # N/m, the jaw driver's estimate (0: not gripping)
+        self.wrist_force = np.zeros(w)     # N, net force of the pads on the object (wrist force limit)
+        self._substep_start = State.from_model(self.model)  # wrist force limit: re-solve a substep from here
         self.setups = list(setups)  # the setup each world was last reset to (initial pose, material)
         self.reset_worlds(np.ones(w, bool), setups)
 
@@ -115,6 +119,7 @@ class PickupScene:
             self.gap[w] = GAP_MAX
             self.tip_force[w] = 0.0
             self.grip_stiffness[w] = 0.0
+            self.wrist_force[w] = 0.0
         self.state.positions.assign(x)
         self.state.velocities.assign(v)
         self._zero_outputs(mask)
@@ -205,7 +210,9 @@ class PickupScene:
         q_start = self.q.copy()
         q_move = clamp_joints(ik_analytic(target_pos, target_quat).q) - q_start
         q_move[:, 3:] = (q_move[:, 3:] + np.pi) % (2 * np.pi) - np.pi  # shortest way round
-        count = cfg.solver.substeps
+        # substeps adapted to the pad travel (sim.pad_motion), jaw included
+        travel = corner_travel(*self.pad_poses(q_start), *self.pad_poses(q_start + q_move), PAD_BOX_HALF_EXTENTS)
+        count = substeps_for_travel(travel + cfg.gripper.closing_speed * cfg.dt / 2, cfg.solver.substeps)
         h = cfg.dt / count
         reports = []
         for k in range(count):
@@ -213,12 +220,24 @@ class PickupScene:
             gap = self.driver.step(target_gap, self.gap, h, self.tip_force[:, 0], self.tip_force[:, 1],
                                    self.grip_stiffness)
             q = np.where(active[:, None], clamp_joints(q_start + q_move * (k + 1) / count), self.q)
-            # an inactive world keeps q, already above the ground: the lift leaves it as it is
-            self.q, pos, quat = self._lift_above_ground(q, np.where(active, gap, self.gap))
+            # -- wrist force limit hook (wrist.force_limit): the substep is re-solved from its start
+            # state with a fraction of the wrist motion while the pads' net force exceeds the limit
+            q_prev, gap_prev = self.q, self.gap
+            self._substep_start.copy_from(self.state)
+
+            def solve(scale, q_prev=q_prev, q=q, gap=gap, gap_prev=gap_prev):
+                self.state.copy_from(self._substep_start)
+                # an inactive world keeps q, already above the ground: the lift leaves it as it is
+                moved = np.where(scale[:, None] < 1.0, q_prev + (q - q_prev) * scale[:, None], q)
+                self.q, pos, quat = self._lift_above_ground(moved, np.where(active, gap, gap_prev))
+                self.control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
+                self.control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
+                report = self.solver.step(self.state, self.state, self.control, h)
+                return report, wrist_force(self.state.pad_force.numpy().reshape(-1, 2, 3))
+
+            report, self.wrist_force, _ = limited_substep(solve, self.wrist_force, cfg.wrist_force_limit)
+            reports.append(report)
             self.gap = np.where(active, gap, self.gap)
-            self.control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
-            self.control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
-            reports.append(self.solver.step(self.state, self.state, self.control, h))
             self.tip_force = self.state.pad_normal_force.numpy().reshape(-1, 2).astype(np.float64)
             self.grip_stiffness = update_grip_stiffness(self.grip_stiffness, gap_before, self.gap, force_before,
                                                         self.tip_force.mean(axis=1), target_gap)

@@ -41,6 +41,9 @@ class SolverConfig:
         line_search_steps: halvings of a Newton step at most while it raises the energy.
         penetration_bound: a returned state with a node deeper than this (m) inside a pad's
             collision box or below the ground is flagged (``SolveStats.penetrated``).
+        penetration_iterations: extra Newton iterations at most per substep, after
+            ``newton_iterations``, in the worlds whose iterate is still deeper than half of
+            ``penetration_bound`` (a violent contact the regular iterations did not resolve).
         check_every: on the host, test every this many CG iterations, and after every Newton
             iteration and line-search trial, whether all worlds are done (0 = never: run the full
             iteration counts, with no host round trip).
@@ -56,10 +59,11 @@ class SolverConfig:
     line_search_steps: int = 8
     check_every: int = 4
     penetration_bound: float = 1e-3
+    penetration_iterations: int = 8
 
     def __post_init__(self) -> None:
         for name, low in (("substeps", 1), ("newton_iterations", 1), ("cg_iterations", 1),
-                          ("line_search_steps", 0), ("check_every", 0)):
+                          ("line_search_steps", 0), ("check_every", 0), ("penetration_iterations", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -135,7 +139,8 @@ class ImplicitSolver:
         self._pad = [vec(pads), wp.zeros(pads, dtype=wp.quat, device=d), vec(pads),
                      wp.zeros(pads, dtype=wp.quat, device=d)]
         self._wf = {k: wp.zeros(w, dtype=float, device=d) for k in (
-            "rz", "rz_new", "rz0", "p_ap", "dx_norm", "last_dx", "res_norm", "penetration", "step", "cg_update")}
+            "rz", "rz_new", "rz0", "p_ap", "dx_norm", "last_dx", "res_norm", "penetration", "step", "cg_update",
+        "depth")}
         self._wi = {k: wp.zeros(w, dtype=int, device=d) for k in (
             "newton_active", "cg_active", "newton_it", "substep_newton_it", "cg_it", "cg_total", "diverged",
             "unconverged", "all_on", "searching")}
@@ -198,7 +203,13 @@ class ImplicitSolver:
         cfg, wi = self.config, self._wi
         wp.copy(wi["newton_active"], wi["all_on"])
         wi["substep_newton_it"].zero_()
-        for it in range(cfg.newton_iterations):
+        for it in range(cfg.newton_iterations + cfg.penetration_iterations):
+            if it >= cfg.newton_iterations:
+                # extra iterations only in worlds still deeper than half the penetration bound
+                for cmd in plan["depth"]:
+                    cmd.launch()
+                if cfg.check_every and not wi["newton_active"].numpy().any():
+                    break
             for cmd in plan["evaluate"]:
                 cmd.launch()
             self._run_cg(plan)
@@ -207,7 +218,7 @@ class ImplicitSolver:
             self._line_search(plan, first=it == 0)
             for cmd in plan["apply"]:
                 cmd.launch()
-            if cfg.check_every and not wi["newton_active"].numpy().any():
+            if cfg.check_every and it < cfg.newton_iterations - 1 and not wi["newton_active"].numpy().any():
                 break
 
     def _run_cg(self, plan: dict) -> None:
@@ -261,11 +272,11 @@ class ImplicitSolver:
             if energy is not None:
                 return rec(kenergy.node_energy, n, x, self._x_start, work.velocities, m.node_mass, m.node_world,
                            active, ctl.external_force, m.gravity, h, *self._pad, m.pad_half_extents,
-                           m.pads_per_world, self._lag_fn, self._lag_normal, c.stiffness, c.ground_friction,
+                           m.pads_per_world, self._lag_fn, self._lag_normal, m.node_contact_stiffness, c.stiffening_depth, c.ground_friction,
                            c.pad_friction, c.stick_velocity, energy)
             return rec(kc.evaluate_nodes, n, x, self._x_start, work.velocities, m.node_mass, m.node_world, active,
                        ctl.external_force, m.gravity, h, *self._pad, m.pad_half_extents, m.pads_per_world,
-                       self._lag_fn, self._lag_normal, c.stiffness, c.ground_friction, c.pad_friction,
+                       self._lag_fn, self._lag_normal, m.node_contact_stiffness, c.stiffening_depth, c.ground_friction, c.pad_friction,
                        c.stick_velocity, record_pads, self._r, self._diag, self._contact_h, work.contact_force,
                        work.elastic_force, work.pad_normal_force, work.pad_force, wf["penetration"])
 
@@ -313,8 +324,9 @@ class ImplicitSolver:
             "begin": [rec(kn.begin_substep, n, x, work.velocities, self._step_start, ctl.prescribed_positions,
                           m.free_axes, (k + 1) / k_sub, h, self._x_start) for k in range(k_sub)],
             "lag": [rec(kc.lag_contacts, n, self._x_start, x, m.node_world, *self._pad,
-                        m.pad_half_extents, m.pads_per_world, c.stiffness, self._lag_fn, self._lag_normal),
-                    rec(kc.keep_pad_depth, n, self._x_start, m.node_world, m.free_axes, *self._pad, m.pads_per_world,
+                        m.pad_half_extents, m.pads_per_world, m.node_contact_stiffness, c.stiffening_depth, self._lag_fn, self._lag_normal),
+                    rec(kc.keep_pad_depth, n, self._x_start, m.node_world, m.free_axes, *self._pad, m.pad_half_extents,
+                        m.pads_per_world,
                        self._lag_fn, self._lag_normal, x),
                     rec(ke.seed_rotations, t, x, m.tets, m.tet_rest_inv, self._tet_rotation)],
             "evaluate": [
@@ -348,6 +360,9 @@ class ImplicitSolver:
                 rec(kn.end_newton_iteration, w, wf["dx_norm"], cfg.newton_tolerance, cfg.newton_iterations,
                     wi["diverged"], wi["substep_newton_it"], wi["newton_it"], newton_active, wf["rz"],
                     wf["res_norm"], wi["cg_it"], wf["last_dx"], wi["unconverged"])],
+            "depth": [rec(kc.deepest_contact, n, x, m.node_world, self._pad[2], self._pad[3], m.pad_half_extents,
+                          m.pads_per_world, self._lag_normal, wf["depth"]),
+                      rec(kc.reactivate_deep_worlds, w, wf["depth"], 0.5 * cfg.penetration_bound, newton_active)],
             "end": rec(kn.end_substep, n, self._x_start, m.node_world, wi["diverged"], 1.0 / h, x, self._v_new),
             "outputs": [
                 nodes(x, wi["all_on"], 1), tets(x, wi["all_on"]), begin_solve(wi["all_on"]),

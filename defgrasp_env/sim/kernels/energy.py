@@ -1,6 +1,6 @@
 """Incremental potential of a backward-Euler substep and the per-world backtracking line search.
 
-E(x) = sum_nodes [ m/(2 dt^2) |x - x_hat|^2 - (m g + f_ext) . (x - x_start) + k/2 d^2 (ground, pads)
+E(x) = sum_nodes [ m/(2 dt^2) |x - x_hat|^2 - (m g + f_ext) . (x - x_start) + penalty_energy(d) (ground, pads)
                    + mu f_n f0(|slip_t|) ]  +  sum_tets V0 psi(F),
 the function whose stationary point the Newton solve seeks; f0 is the integral of the smoothed
 Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums go to float64.
@@ -8,7 +8,7 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 
 import warp as wp
 
-from .contact import face_penetration, pad_slip
+from .contact import face_penetration, pad_slip, penalty_energy
 from .elastic import deformation_gradient, polar_rotation
 
 
@@ -60,7 +60,8 @@ def node_energy(
     pads_per_world: int,
     lag_normal_force: wp.array(dtype=float),
     lag_normal: wp.array(dtype=wp.vec3),
-    stiffness: float,
+    stiffness: wp.array(dtype=float),
+    knee: float,
     ground_mu: float,
     pad_mu: float,
     stick_velocity: float,
@@ -77,7 +78,8 @@ def node_energy(
     d = xi - (x_start[i] + dt * v_start[i])
     e = 0.5 * m / (dt * dt) * wp.dot(d, d) - wp.dot(m * gravity + external_force[i], xi - x_start[i])
     depth = wp.max(-xi[1], 0.0)
-    e += 0.5 * stiffness * depth * depth
+    k_i = stiffness[i]
+    e += penalty_energy(k_i, depth, knee)
     lag_fn = lag_normal_force[i * slots]
     if lag_fn > 0.0:
         e += friction_potential(ground_mu, lag_fn, xi - x_start[i], wp.vec3(0.0, 1.0, 0.0), eps)
@@ -88,7 +90,7 @@ def node_energy(
         n_local = lag_normal[i * slots + 1 + k]
         depth = face_penetration(local, pad_half[pad], n_local)
         if depth > 0.0:
-            e += 0.5 * stiffness * depth * depth
+            e += penalty_energy(k_i, depth, knee)
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
             slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
