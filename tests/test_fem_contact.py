@@ -92,7 +92,9 @@ BLOCK_PAD_HALF = np.array([0.005, 0.015, 0.015])
 
 
 def squeeze_lift_open(mu: float, compression: float, opening_rate: float):
-    """A 40 mm cube (E = 1e5) on the ground is squeezed by two pads (x = -+) to ``compression``
+    """A 40 mm cube (E = 1e5) on the ground (penalty stiffness 1e6 N/m per node, as the compressions
+    below were set for: ``modulus_scale=1e9`` makes the material-scaled stiffness exceed the cap)
+    is squeezed by two pads (x = -+) to ``compression``
     (m per side), lifted 20 mm (cosine profile over 1 s, peak acceleration 1 % g), held 1.25 s,
     then the pads open at ``opening_rate`` (m/s per side) until the block slides (downward speed
     relative to the pads > 2 x stick_velocity), then stay there 0.5 s.
@@ -102,7 +104,7 @@ def squeeze_lift_open(mu: float, compression: float, opening_rate: float):
     mesh = make_object_mesh("cuboid")
     model = build_model([mesh], [Material(density=1000.0, youngs_modulus=1e5, poisson_ratio=0.3)],
                         pad_half_extents=[BLOCK_PAD_HALF, BLOCK_PAD_HALF],
-                        contact=ContactParams(pad_friction=mu), device="cpu")
+                        contact=ContactParams(pad_friction=mu, modulus_scale=1e9), device="cpu")
     state, control = State.from_model(model), Control.from_model(model)
     solver = ImplicitSolver(model, FRICTION_CONFIG)
     mass = model.node_mass.numpy().astype(np.float64)

@@ -61,3 +61,22 @@ def test_penetration_beyond_the_bound_is_flagged():
         reports[bound] = stats
     assert 1e-9 < reports[1e-3].penetration[0] < 1e-3
     assert not reports[1e-3].penetrated[0] and reports[1e-9].penetrated[0]
+
+
+def test_public_sim_api():
+    """``defgrasp_env.sim`` exports the Model/State/Control split, the solver and meshing: the
+    docstring's example runs as written (a sphere falls under gravity, nothing else imported)."""
+    import defgrasp_env.sim as sim
+
+    for name in sim.__all__:
+        assert getattr(sim, name) is not None
+    model = sim.build_model([sim.make_object_mesh("sphere")], [sim.Material(youngs_modulus=1e5)],
+                            poses=[((0.0, 0.01, 0.0), (0.0, 0.0, 0.0, 1.0))],
+                            pad_half_extents=[(0.008, 0.019, 0.011)], device="cpu")
+    state, control = sim.State.from_model(model), sim.Control.from_model(model)
+    control.pad_target_positions.assign(np.array([[0.2, 0.1, 0.0]], np.float32))
+    state.pad_positions.assign(np.array([[0.2, 0.1, 0.0]], np.float32))
+    y0 = state.positions.numpy()[:, 1].mean()
+    stats = sim.ImplicitSolver(model, sim.SolverConfig()).step(state, state, control, dt=0.02)
+    assert isinstance(stats, sim.SolveStats) and not stats.diverged.any()
+    assert state.positions.numpy()[:, 1].mean() < y0

@@ -1,4 +1,4 @@
-"""Incremental potential of a backward-Euler substep and the per-world backtracking line search.
+"""Incremental potential of a backward-Euler substep (the line search's objective, ``kernels.line_search``).
 
 E(x) = sum_nodes [ m/(2 dt^2) |x - x_hat|^2 - (m g + f_ext) . (x - x_start) + penalty_energy(d) (ground, pads)
                    + mu f_n f0(|slip_t|) ]  +  sum_tets V0 psi(F),
@@ -27,18 +27,6 @@ def strain_energy_density(f: wp.mat33, rotation_guess: wp.quat, mu: float, lam: 
     d = f - wp.quat_to_matrix(polar_rotation(f, rotation_guess))
     j = wp.determinant(f)
     return mu * wp.ddot(d, d) + 0.5 * lam * (j - 1.0) * (j - 1.0)
-
-
-@wp.kernel
-def trial_positions(
-    x: wp.array(dtype=wp.vec3),
-    dx: wp.array(dtype=wp.vec3),
-    node_world: wp.array(dtype=int),
-    step_length: wp.array(dtype=float),
-    x_trial: wp.array(dtype=wp.vec3),
-):
-    i = wp.tid()
-    x_trial[i] = x[i] + step_length[node_world[i]] * dx[i]
 
 
 @wp.kernel
@@ -122,41 +110,3 @@ def tet_energy(
     f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t])
     e = rest_volume[t] * strain_energy_density(f, tet_rotation[t], tet_mu[t], tet_lambda[t])
     wp.atomic_add(energy, w, wp.float64(e))
-
-
-@wp.kernel
-def begin_line_search(
-    newton_active: wp.array(dtype=int),
-    step_length: wp.array(dtype=float),
-    searching: wp.array(dtype=int),
-    trial_energy: wp.array(dtype=wp.float64),
-):
-    w = wp.tid()
-    step_length[w] = 1.0
-    searching[w] = newton_active[w]
-    trial_energy[w] = wp.float64(0.0)
-
-
-@wp.kernel
-def end_line_search_trial(
-    start_energy: wp.array(dtype=wp.float64),
-    rel_tol: float,
-    min_step: float,
-    trial_energy: wp.array(dtype=wp.float64),
-    step_length: wp.array(dtype=float),
-    searching: wp.array(dtype=int),
-):
-    """Accept the trial if it does not raise the energy (within float32 rounding of its terms),
-    else halve the step; stop halving at ``min_step``. An accepted trial's energy becomes the
-    start energy of the next Newton iteration (the step applied is the trial's, bit for bit)."""
-    w = wp.tid()
-    if searching[w] == 0:
-        return
-    e0 = start_energy[w]
-    tol = wp.float64(rel_tol) * wp.abs(e0) + wp.float64(1.0e-12)
-    if trial_energy[w] <= e0 + tol or step_length[w] <= min_step:
-        searching[w] = 0
-        start_energy[w] = trial_energy[w]
-    else:
-        step_length[w] = 0.5 * step_length[w]
-    trial_energy[w] = wp.float64(0.0)
