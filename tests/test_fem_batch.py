@@ -61,8 +61,9 @@ def run(worlds, steps, config=SolverConfig(), device="cpu", force=None):
 
 def test_worlds_are_independent_bitwise_on_cpu():
     """W = 3 different worlds (objects, E, pad motions) in one model give bit-identical states,
-    pad forces, stresses and per-world SolveStats to each world simulated alone; every world
-    reports convergence (not diverged, finite residual)."""
+    pad forces, stresses and per-world SolveStats to each world simulated alone; no world diverges
+    and every residual is finite (``converged``, now "met the Newton tolerance in every substep",
+    is compared bitwise like the other fields; the default 4 iterations need not meet it)."""
     steps = 14
     model, together, stats_together = run((0, 1, 2), steps)
     for w in range(3):
@@ -76,10 +77,10 @@ def test_worlds_are_independent_bitwise_on_cpu():
             np.testing.assert_array_equal(fn[2 * w:2 * w + 2], fna)
             np.testing.assert_array_equal(vm[tets], vma)
             for field in ("newton_iterations", "cg_iterations", "last_update", "residual_force", "penetration",
-                          "diverged"):
+                          "diverged", "converged", "penetrated"):
                 np.testing.assert_array_equal(getattr(stats_together[k], field)[w], getattr(stats_alone[k], field)[0])
     for s in stats_together:
-        assert not s.diverged.any() and s.converged.all()
+        assert not s.diverged.any()
         assert np.all(np.isfinite(s.residual_force))
     assert together[-1][2][0] > 0.1          # the squeezed cuboid is held by its pads
 
@@ -95,7 +96,7 @@ def test_divergence_is_reported_and_contained():
     _, reference, _ = run((0, 1, 2), 3)
     for k in range(3):
         assert stats[k].diverged.tolist() == [False, True, False]
-        assert stats[k].converged.tolist() == [True, False, True]
+        assert not stats[k].converged[1]
         for arr in history[k]:
             assert np.all(np.isfinite(arr))
         x, v = history[k][0], history[k][1]

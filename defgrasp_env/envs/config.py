@@ -15,6 +15,7 @@ from ..sim.meshing import OBJECT_SHAPES
 from ..sim.meshing.from_surface import load_surface
 from ..sim.model import ContactParams
 from ..sim.solver import SolverConfig
+from ..wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT
 
 OBS_TYPES = ("state", "pixels_agent_pos", "pixels")
 ACTION_MODES = ("delta", "absolute")
@@ -84,6 +85,7 @@ class PickupConfig:
     success_hold_seconds: float = 0.5
     max_linear_speed: float = 0.3
     max_angular_speed: float = 1.5
+    wrist_force_limit: float = DEFAULT_WRIST_FORCE_LIMIT
     obs_type: str = "state"
     action_mode: str = "delta"
     gripper: GripperConfig = field(default_factory=GripperConfig)
@@ -107,6 +109,7 @@ class PickupConfig:
         check_range("success_tolerance", self.success_tolerance, 0.0, 1.0, "m")
         check_range("success_hold_seconds", self.success_hold_seconds, 0.0, 60.0, "s", low_open=False)
         check_range("max_linear_speed", self.max_linear_speed, 0.0, 2.0, "m/s", high_open=False)
+        check_range("wrist_force_limit", self.wrist_force_limit, 0.0, math.inf, "N", high_open=False)
         check_range("max_angular_speed", self.max_angular_speed, 0.0, 2 * math.pi, "rad/s", high_open=False)
         if len(self.goal) != 3 or not all(math.isfinite(float(g)) for g in self.goal):
             raise ValueError(f"goal must be 3 finite numbers in m, got {self.goal!r}")

@@ -46,7 +46,12 @@ class DeformablePickupEnv(gym.Env):
     ground (y = 0, world y up) at the paper's initial pose [0, 0, 0] (plus seeded noise); the goal
     is [0, 0.6, 0] m. The gripper hangs on an invisible 6-DOF wrist (3 prismatic + 3 revolute
     joints, ``defgrasp_env/assets/wrist_6dof.urdf``); its pads are kinematic boxes with Coulomb
-    friction. One step is one control period (default 1/20 s).
+    friction. One step is one control period (default 1/20 s). The wrist is force-limited like a
+    collaborative arm: it stops moving while the net force its pads exert on the object would
+    exceed ``wrist_force_limit`` (default 150 N, a UR e-Series default safety limit), as the jaw
+    stops at ``gripper.grip_force_limit``; so a tip force stays within about grip limit + wrist
+    limit. No node goes through a pad at any legal speed; a state with a node deeper than 1 mm
+    in a pad or the ground is flagged (``sim_penetrated``).
 
     **Action space** (``action_mode``; names, slices, units and bounds in ``defgrasp_env.layout``):
       * ``"delta"`` (default, ``DELTA_ACTION``): Box [-1, 1]^7 = flange linear velocity (3) x
@@ -77,14 +82,19 @@ class DeformablePickupEnv(gym.Env):
     diverges (``info["sim_diverged"]``: the state is then kept at its last finite value).
 
     **Info**: ``is_success``, ``grasped``, ``pierced``, ``goal_distance`` (m), reward terms, tip
-    forces (N), jaw gap (m), mean von Mises stress (Pa), solver iterations/residual/penetration,
-    ``sim_diverged``; ``reset`` returns ``is_success``, ``object``, ``youngs_modulus`` (Pa) and
-    ``replay_spec`` (a ``ReplaySpec``: seed or RNG state, options, object, material, initial pose
-    and the reset that built the simulation; ``spec.reset(env)`` repeats the reset bit for bit).
+    forces (N), ``wrist_force`` (N, net force of the pads on the object), jaw gap (m), mean von
+    Mises stress (Pa), solver iterations/residual/penetration (m), ``sim_diverged``,
+    ``sim_converged`` (Newton met its tolerance in every substep), ``sim_penetrated`` (a node ended
+    deeper than ``solver.penetration_bound``, 1 mm, in a pad or the ground); ``reset`` returns
+    ``is_success``, ``object``, ``youngs_modulus`` (Pa) and ``replay_spec`` (a ``ReplaySpec``: seed
+    or RNG state, options, object, material, initial pose and the reset that built the simulation;
+    ``spec.reset(env)`` repeats the reset bit for bit).
 
     **Arguments**: every field of ``PickupConfig`` as a keyword (``object``, ``youngs_modulus``
     (value or tuple to sample), ``poisson_ratio``, ``density``, ``ground_friction``,
-    ``pad_friction``, ``init_position_noise``, ``init_yaw_noise``, ``control_hz``, ``camera``,
+    ``pad_friction``, ``init_position_noise``, ``init_yaw_noise``, ``control_hz``,
+    ``max_linear_speed`` (m/s, <= 2), ``max_angular_speed`` (rad/s), ``wrist_force_limit`` (N),
+    ``camera``,
     ``gripper``, ``solver``, ``obs_type``, ``action_mode``, ``device``), plus ``render_mode``
     ("rgb_array").
 

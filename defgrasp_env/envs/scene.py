@@ -4,10 +4,11 @@ the gripper and the FEM together and reads back what the env observes. Shared by
 (W = 1) and the native vector env.
 
 Physics substeps have one owner, :meth:`PickupScene.step`: a control period is
-``config.solver.substeps`` substeps of ``dt / substeps`` s, and in each the gripper's jaw driver and
-wrist move on the pad forces of the one before, then the solver takes ONE backward-Euler step (the
-solver is built with ``substeps=1``; its own substep loop is not used, because the jaw driver must
-see the forces of every substep).
+``config.solver.substeps`` equal substeps (more when the pads travel far, ``sim.pad_motion``), and
+in each the gripper's jaw driver and wrist move on the pad forces of the one before, then the
+solver takes ONE backward-Euler step (the solver is built with ``substeps=1``; its own substep loop
+is not used, because the jaw driver and the wrist force limit must see the forces of every
+substep).
 """
 
 from __future__ import annotations
@@ -23,9 +24,11 @@ from ..layout import NUM_KEYPOINTS
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.model import ContactParams, build_model, set_world_material
+from ..sim.pad_motion import corner_travel, substeps_for_travel
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
 from ..transforms import quat_to_matrix
+from ..wrist.force_limit import limited_substep, wrist_force
 from .config import PickupConfig
 
 
@@ -85,6 +88,7 @@ class PickupScene:
         self.substeps = config.solver.substeps
         self.solver = ImplicitSolver(self.model, dataclasses.replace(config.solver, substeps=1))
         self.state = State.from_model(self.model)
+        self._substep_start = State.from_model(self.model)  # a substep's start, for wrist-limit retries
         self._control = Control.from_model(self.model)
         self._keypoints = [keypoint_indices(m.nodes, m.surface) for m in self._meshes]
         self.gripper = Gripper(config.gripper, self.num_worlds)
@@ -155,29 +159,39 @@ class PickupScene:
     def step(self, target_pos: np.ndarray, target_quat: np.ndarray, target_gap: np.ndarray,
              active: np.ndarray | None = None) -> SolveStats:
         """Move wrists and jaws toward the targets (flange pos [W, 3] m, quat [W, 4] xyzw, gap [W] m;
-        limits enforced) and advance the FEM by one control period in ``substeps`` physics
-        substeps: per substep the gripper drives jaw and wrist on the pad forces of the previous
-        one (``Gripper.substep``), the solver takes one step, and the gripper reads the new pad
-        forces (``Gripper.sense``). Worlds with ``active == False`` keep their wrist and jaw still."""
+        limits enforced) and advance the FEM by one control period in at least ``substeps`` physics
+        substeps (more when a pad point would travel more than ``sim.pad_motion.MAX_PAD_TRAVEL`` in
+        one): per substep the gripper plans jaw and wrist on the pad forces of the previous one
+        (``Gripper.plan_substep``), the solver takes one step with the pads moved there
+        (``Gripper.move``; retried with a fraction of the wrist motion while the pads' net force
+        exceeds ``config.wrist_force_limit``, ``wrist.force_limit``), and the gripper reads the new
+        pad forces (``Gripper.sense``). Worlds with ``active == False`` keep their wrist and jaw
+        still."""
         active = np.ones(self.num_worlds, bool) if active is None else active
         self.gripper.begin_step(target_pos, target_quat)
-        count = self.substeps
+        # substeps adapted to the pad travel (sim.pad_motion; the jaw's half-period travel included)
+        travel = self.gripper.planned_pad_travel() + self.config.gripper.closing_speed * self.config.dt / 2
+        count = substeps_for_travel(travel, self.substeps)
         h = self.config.dt / count
         reports = []
         for k in range(count):
-            pos, quat = self.gripper.substep(k, count, h, target_gap, active)
-            self._control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
-            self._control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
-            reports.append(self.solver.step(self.state, self.state, self._control, h))
-            self.gripper.sense(self.state.pad_normal_force.numpy().reshape(-1, 2))
-        return SolveStats(
-            newton_iterations=np.sum([r.newton_iterations for r in reports], axis=0),
-            cg_iterations=np.sum([r.cg_iterations for r in reports], axis=0),
-            last_update=reports[-1].last_update,
-            residual_force=reports[-1].residual_force,
-            penetration=np.max([r.penetration for r in reports], axis=0),
-            diverged=np.any([r.diverged for r in reports], axis=0),
-        )
+            self.gripper.plan_substep(k, count, h, target_gap, active)
+            self._substep_start.copy_from(self.state)
+            report, force, _ = limited_substep(lambda fraction: self._solve_substep(fraction, h),
+                                               self.gripper.wrist_force, self.config.wrist_force_limit)
+            reports.append(report)
+            self.gripper.sense(self.state.pad_normal_force.numpy().reshape(-1, 2), force)
+        return SolveStats.combine(reports)
+
+    def _solve_substep(self, wrist_fraction: np.ndarray, h: float):
+        """One solve of the planned substep from its start state with ``wrist_fraction`` [W] of the
+        wrist motion (the wrist force limit's retry); returns (solver report, wrist force [W] N)."""
+        self.state.copy_from(self._substep_start)
+        pos, quat = self.gripper.move(wrist_fraction)
+        self._control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
+        self._control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
+        report = self.solver.step(self.state, self.state, self._control, h)
+        return report, wrist_force(self.state.pad_force.numpy().reshape(-1, 2, 3))
 
     # -- readouts --------------------------------------------------------------------------
     def node_positions(self, w: int) -> np.ndarray:

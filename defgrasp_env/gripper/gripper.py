@@ -7,10 +7,11 @@ physics substep the scene (which owns the substep loop) asks it for the pad box 
 (:meth:`Gripper.substep`) and hands it the pad normal forces the solver measured there
 (:meth:`Gripper.sense`).
 
-Force hooks: the jaw driver's force limit runs in :meth:`Gripper.substep` on the forces of the
-previous :meth:`Gripper.sense`; a limit on the force the *wrist* exerts through the pads belongs
-next to it, in :meth:`Gripper._wrist_joints` (the joints the wrist moves to in a substep), fed by
-the pad forces that :meth:`Gripper.sense` receives.
+Force limits: the jaw driver's grip-force limit runs in :meth:`Gripper.plan_substep` on the forces
+of the previous :meth:`Gripper.sense`. The wrist's force limit (``wrist.force_limit``) needs the
+solver: the scene may apply a planned substep several times with a fraction of the wrist motion
+(:meth:`Gripper.move`) and keeps the solve whose net pad force, handed to :meth:`Gripper.sense`,
+is within the limit.
 
 Frames and units: world frame (y up), m, rad, N; quaternions xyzw; joints
 ``q = (x, y, z, roll, pitch, yaw)`` of ``defgrasp_env.wrist``; pad index 0 = left (+x_G), 1 = right.
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..sim.pad_motion import corner_travel
 from ..transforms import quat_rotate
 from ..wrist import clamp_joints, fk_analytic, ik_analytic
 from .driver import GripperConfig, GripperDriver, update_grip_stiffness
@@ -50,10 +52,14 @@ class Gripper:
     * ``q`` [W, 6]: wrist joints (m, m, m, rad, rad, rad);
     * ``gap`` [W]: jaw gap between the pad inner faces, m, in [GAP_MIN, GAP_MAX];
     * ``tip_force`` [W, 2]: normal force on the left and right pad inner face, N (last substep);
-    * ``grip_stiffness`` [W]: the jaw driver's estimate of d(grip force)/d(closing), N/m (0: unknown).
+    * ``grip_stiffness`` [W]: the jaw driver's estimate of d(grip force)/d(closing), N/m (0: unknown);
+    * ``wrist_force`` [W]: magnitude of the net force of both pads on the object, N (last substep):
+      the force the wrist carries, limited by ``wrist.force_limit``.
 
     One control period: :meth:`begin_step` (wrist targets), then per physics substep
-    :meth:`substep` (drive the jaw and wrist, returns the pad poses) and :meth:`sense` (pad forces).
+    :meth:`plan_substep` (the jaw driver's move and the wrist's planned joints), :meth:`move` (apply
+    them, possibly again with a fraction of the wrist motion; returns the pad poses) and
+    :meth:`sense` (pad forces). :meth:`substep` is plan + move of the whole motion.
     """
 
     pad_half_extents = PAD_BOX_HALF_EXTENTS
@@ -65,7 +71,9 @@ class Gripper:
         self._gap = np.full(num_worlds, GAP_MAX)
         self._tip_force = np.zeros((num_worlds, 2))
         self._grip_stiffness = np.zeros(num_worlds)
+        self._wrist_force = np.zeros(num_worlds)
         self._q_start = self._q_move = None
+        self._plan = None   # (joints before, gap after, joints after) of the planned substep
         self._before = None  # (gap, grip force, target gap) at the start of the running substep
 
     # -- state -----------------------------------------------------------------------------
@@ -85,6 +93,10 @@ class Gripper:
     def grip_stiffness(self) -> np.ndarray:
         return _read_only(self._grip_stiffness)
 
+    @property
+    def wrist_force(self) -> np.ndarray:
+        return _read_only(self._wrist_force)
+
     def reset(self, mask: np.ndarray, flange_xz: np.ndarray) -> None:
         """Worlds in ``mask`` [W]: flange at ``flange_xz`` [W, 2] (m, world x and z; rows outside the
         mask are ignored) and ``START_FLANGE_HEIGHT``, pointing down, jaw open, no force."""
@@ -93,6 +105,7 @@ class Gripper:
             self._gap[w] = GAP_MAX
             self._tip_force[w] = 0.0
             self._grip_stiffness[w] = 0.0
+            self._wrist_force[w] = 0.0
 
     # -- kinematics ------------------------------------------------------------------------
     def flange_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -141,25 +154,50 @@ class Gripper:
         """Joints [W, 6] a ``fraction`` of the way through the control period's wrist motion."""
         return clamp_joints(self._q_start + self._q_move * fraction)
 
-    def substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray):
-        """Substep ``k`` of ``count`` (length ``h`` s): the jaw driver moves the gap toward
+    def planned_pad_travel(self) -> np.ndarray:
+        """Largest travel (m) [W] of a pad-box corner over the control period's wrist motion (jaw
+        excluded), from :meth:`begin_step`'s start to its target joints."""
+        start = self.pad_poses(self._q_start)
+        end = self.pad_poses(self._wrist_joints(1.0))
+        return corner_travel(*start, *end, PAD_BOX_HALF_EXTENTS)
+
+    def plan_substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray) -> None:
+        """Plan substep ``k`` of ``count`` (length ``h`` s): the jaw driver moves the gap toward
         ``target_gap`` [W] (m) on the forces of the last :meth:`sense` (speed and force limits,
-        ``gripper.driver``), the wrist moves ``(k + 1) / count`` of the way, and the flange is lifted
-        so that the pads stay above the ground. Worlds with ``active == False`` keep wrist and jaw.
-        Returns the pad box centres [W, 2, 3] and orientations [W, 2, 4] to move to."""
+        ``gripper.driver``) and the wrist is to move ``(k + 1) / count`` of the way. Worlds with
+        ``active == False`` keep wrist and jaw. Nothing moves until :meth:`move`."""
         self._before = (self._gap, self._tip_force.mean(axis=1), target_gap)
         gap = self.driver.step(target_gap, self._gap, h, self._tip_force[:, 0], self._tip_force[:, 1],
                                self._grip_stiffness)
         q = np.where(active[:, None], self._wrist_joints((k + 1) / count), self._q)
+        self._plan = (self._q, np.where(active, gap, self._gap), q)
+
+    def move(self, wrist_fraction: np.ndarray | None = None):
+        """Apply the planned substep: the jaw to its planned gap and the wrist ``wrist_fraction`` [W]
+        (in [0, 1]; default 1) of its planned substep motion, lifted so that the pads stay above the
+        ground. May be called again (a retry from the same start) with another fraction. Returns the
+        pad box centres [W, 2, 3] (m) and orientations [W, 2, 4] (xyzw) to move to."""
+        q_before, gap, q = self._plan
+        if wrist_fraction is not None:
+            f = np.asarray(wrist_fraction, dtype=np.float64)[:, None]
+            q = np.where(f < 1.0, q_before + (q - q_before) * f, q)
         # an inactive world keeps q, already above the ground: the lift leaves it as it is
-        self._q, pos, quat = self.lift_above_ground(q, np.where(active, gap, self._gap))
-        self._gap = np.where(active, gap, self._gap)
+        self._q, pos, quat = self.lift_above_ground(q, gap)
+        self._gap = gap
         return pos, quat
 
-    def sense(self, pad_normal_force: np.ndarray) -> None:
-        """The pad normal forces [W, 2] (N, left and right) measured at the end of the substep:
-        the tip-force readout and the grip-stiffness estimate follow them."""
+    def substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray):
+        """:meth:`plan_substep` then :meth:`move` with the whole wrist motion; returns the pad poses."""
+        self.plan_substep(k, count, h, target_gap, active)
+        return self.move()
+
+    def sense(self, pad_normal_force: np.ndarray, wrist_force: np.ndarray | None = None) -> None:
+        """The pad normal forces [W, 2] (N, left and right) and the net pad force magnitude [W] (N;
+        default: unchanged) measured at the end of the substep: the readouts and the
+        grip-stiffness estimate follow them."""
         gap_before, force_before, target_gap = self._before
         self._tip_force = np.array(pad_normal_force, dtype=np.float64).reshape(self.num_worlds, 2)
+        if wrist_force is not None:
+            self._wrist_force = np.array(wrist_force, dtype=np.float64).reshape(self.num_worlds)
         self._grip_stiffness = update_grip_stiffness(self._grip_stiffness, gap_before, self._gap, force_before,
                                                      self._tip_force.mean(axis=1), target_gap)

@@ -1,6 +1,12 @@
 """Penalty contact with the ground plane y = 0 and kinematic oriented boxes, with smoothed Coulomb friction.
 
-Normal: energy k/2 d^2 for penetration depth d, so the normal force is k d and its Hessian k n n^T.
+Each node meets each box through one face per substep, chosen at the substep start by continuous
+collision detection of the node's motion relative to the box (``contact_face``); the penalty then
+pushes the node out through that face only, so a box that moves further than its half thickness in
+a substep cannot push nodes out of its far side (the nearest face of a deep node is the wrong one).
+
+Normal: energy k/2 d^2 for penetration depth d, so the normal force is k d and its Hessian k n n^T,
+stiffening cubically beyond a knee depth (``penalty_force``); k per node (``Model.node_contact_stiffness``).
 Friction (normal force f_n and normal lagged at the substep start, IPC-style smoothing): for a tangential slip u_T over the step,
 force = -mu f_n f1(|u_T|) u_T / |u_T| with f1(s) = 2 s/eps - s^2/eps^2 for s < eps and 1 beyond,
 eps = stick_velocity * dt. Its Hessian is approximated by mu f_n f1(s)/s times the tangent projector
@@ -41,6 +47,102 @@ def box_penetration(local: wp.vec3, half: wp.vec3):
     return depth, n
 
 
+@wp.func
+def penalty_force(k: float, depth: float, knee: float):
+    """Normal penalty force (N) of a depth (m) > 0: k d, plus k (d - knee)^3 / knee^2 beyond ``knee``."""
+    f = k * depth
+    if depth > knee:
+        e = depth - knee
+        f += k * e * e * e / (knee * knee)
+    return f
+
+
+@wp.func
+def penalty_stiffness(k: float, depth: float, knee: float):
+    """d(penalty_force)/d(depth), N/m."""
+    s = k
+    if depth > knee:
+        e = depth - knee
+        s += 3.0 * k * e * e / (knee * knee)
+    return s
+
+
+@wp.func
+def penalty_energy(k: float, depth: float, knee: float):
+    """Integral of penalty_force over the depth, J."""
+    en = 0.5 * k * depth * depth
+    if depth > knee:
+        e = depth - knee
+        en += 0.25 * k * e * e * e * e / (knee * knee)
+    return en
+
+
+@wp.func
+def axis_normal(axis: int, sign: float):
+    n = wp.vec3(0.0)
+    n[axis] = sign
+    return n
+
+
+@wp.func
+def contact_face(start: wp.vec3, guess: wp.vec3, half: wp.vec3):
+    """Outward normal (box frame) of the face through which a node meets the box in a substep.
+
+    ``start``: the node at the substep start in the box's start frame; ``guess``: its predicted
+    end position in the box's end frame (both m). A node inside at the start (shallow, as every
+    returned state is) keeps its nearest face. Otherwise the segment start -> guess, the node's
+    motion relative to the box, is clipped against the three slabs (continuous collision
+    detection): the slab entered last is the face it crosses first. A node the segment does not
+    bring into the box gets the face of its largest separation (the side it is on)."""
+    if wp.abs(start[0]) < half[0] and wp.abs(start[1]) < half[1] and wp.abs(start[2]) < half[2]:
+        depth, n = box_penetration(start, half)
+        return n
+    d = guess - start
+    t_enter = float(0.0)
+    t_exit = float(1.0)
+    entry = int(-1)
+    hit = int(1)
+    best = int(0)
+    separation = float(-1.0e30)
+    for j in range(3):
+        gap = wp.abs(start[j]) - half[j]
+        if gap > separation:
+            separation = gap
+            best = j
+        if wp.abs(d[j]) < 1.0e-12:
+            if gap >= 0.0:
+                hit = 0
+        else:
+            t0 = (-half[j] - start[j]) / d[j]
+            t1 = (half[j] - start[j]) / d[j]
+            if t0 > t1:
+                tmp = t0
+                t0 = t1
+                t1 = tmp
+            if t0 > t_enter:
+                t_enter = t0
+                entry = j
+            t_exit = wp.min(t_exit, t1)
+    if hit == 1 and entry >= 0 and t_enter <= t_exit:
+        best = entry
+    return axis_normal(best, wp.sign(start[best]))
+
+
+@wp.func
+def face_penetration(local: wp.vec3, half: wp.vec3, n: wp.vec3):
+    """Depth (m, > 0 inside) of a point (box frame) behind the face with outward normal ``n`` (a
+    box axis), counted only inside the face's lateral extent; the point is pushed out through
+    that face however deep it is, never through the opposite one."""
+    depth = float(-1.0)
+    for j in range(3):
+        if n[j] != 0.0:
+            depth = half[j] - n[j] * local[j]
+    for j in range(3):
+        if n[j] == 0.0 and wp.abs(local[j]) >= half[j]:
+            depth = -1.0
+    return depth
+
+
 @wp.kernel
 def interpolate_pads(
     start_pos: wp.array(dtype=wp.vec3),
@@ -67,29 +169,37 @@ def interpolate_pads(
 @wp.kernel
 def lag_contacts(
     x_start: wp.array(dtype=wp.vec3),
+    x_guess: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     pad_pos0: wp.array(dtype=wp.vec3),
     pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
     pad_half: wp.array(dtype=wp.vec3),
     pads_per_world: int,
-    stiffness: float,
+    stiffness: wp.array(dtype=float),
+    knee: float,
     lag_normal_force: wp.array(dtype=float),
     lag_normal: wp.array(dtype=wp.vec3),
 ):
-    """Normal force (N) and normal of every node's contacts at the substep start, which the friction
-    law holds fixed during the substep's Newton solve (slot 0: ground; slot 1 + k: pad k, normal in
-    the pad's frame)."""
+    """Contact face of every node with every pad for the substep (``contact_face``: CCD of the
+    node's motion relative to the pad), and the normal force (N) and normal at the substep start,
+    which the friction law holds fixed during the substep's Newton solve (slot 0: ground; slot
+    1 + k: pad k, normal in the pad's frame; the contact terms use that face all substep long)."""
     i = wp.tid()
     w = node_world[i]
     slots = pads_per_world + 1
     xi = x_start[i]
-    lag_normal_force[i * slots] = stiffness * wp.max(-xi[1], 0.0)
+    k_i = stiffness[i]
+    lag_normal_force[i * slots] = penalty_force(k_i, wp.max(-xi[1], 0.0), knee)
     lag_normal[i * slots] = wp.vec3(0.0, 1.0, 0.0)
     for k in range(pads_per_world):
         pad = w * pads_per_world + k
         local = wp.quat_rotate_inv(pad_rot0[pad], xi - pad_pos0[pad])
-        depth, n_local = box_penetration(local, pad_half[pad])
-        lag_normal_force[i * slots + 1 + k] = stiffness * wp.max(depth, 0.0)
+        guess = wp.quat_rotate_inv(pad_rot1[pad], x_guess[i] - pad_pos1[pad])
+        n_local = contact_face(local, guess, pad_half[pad])
+        depth = face_penetration(local, pad_half[pad], n_local)
+        lag_normal_force[i * slots + 1 + k] = penalty_force(k_i, wp.max(depth, 0.0), knee)
         lag_normal[i * slots + 1 + k] = n_local
 
 
@@ -128,7 +238,8 @@ def evaluate_nodes(
     pads_per_world: int,
     lag_normal_force: wp.array(dtype=float),
     lag_normal: wp.array(dtype=wp.vec3),
-    stiffness: float,
+    stiffness: wp.array(dtype=float),
+    knee: float,
     ground_mu: float,
     pad_mu: float,
     stick_velocity: float,
@@ -162,9 +273,10 @@ def evaluate_nodes(
     # ground plane y = 0, normal +y
     n = wp.vec3(0.0, 1.0, 0.0)
     depth = -xi[1]
+    k_i = stiffness[i]
     if depth > 0.0:
-        force += stiffness * depth * n
-        hess += stiffness * wp.outer(n, n)
+        force += penalty_force(k_i, depth, knee) * n
+        hess += penalty_stiffness(k_i, depth, knee) * wp.outer(n, n)
         if record_pads != 0:  # only at the returned state, not at trial Newton iterates
             wp.atomic_max(penetration, w, depth)
     lag_fn = lag_normal_force[i * slots]
@@ -176,19 +288,21 @@ def evaluate_nodes(
         pad = w * pads_per_world + k
         rot1 = pad_rot1[pad]
         local = wp.quat_rotate_inv(rot1, xi - pad_pos1[pad])
-        depth, n_local = box_penetration(local, pad_half[pad])
+        n_local = lag_normal[i * slots + 1 + k]
+        depth = face_penetration(local, pad_half[pad], n_local)
         f_pad = wp.vec3(0.0)
         if depth > 0.0:
             n = wp.quat_rotate(rot1, n_local)
-            f_pad = stiffness * depth * n
-            hess += stiffness * wp.outer(n, n)
+            f_n = penalty_force(k_i, depth, knee)
+            f_pad = f_n * n
+            hess += penalty_stiffness(k_i, depth, knee) * wp.outer(n, n)
             if record_pads != 0:
                 wp.atomic_max(penetration, w, depth)
-                wp.atomic_add(pad_normal_force, pad, stiffness * depth)
+                wp.atomic_add(pad_normal_force, pad, f_n)
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
             slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
-            n_lag = wp.quat_rotate(rot1, lag_normal[i * slots + 1 + k])
+            n_lag = wp.quat_rotate(rot1, n_local)
             f_fric, h_fric = friction_force(pad_mu, lag_fn, slip, n_lag, eps)
             f_pad += f_fric
             hess += h_fric
@@ -212,6 +326,7 @@ def keep_pad_depth(
     pad_rot0: wp.array(dtype=wp.quat),
     pad_pos1: wp.array(dtype=wp.vec3),
     pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
     pads_per_world: int,
     lag_normal_force: wp.array(dtype=float),
     lag_normal: wp.array(dtype=wp.vec3),
@@ -219,7 +334,11 @@ def keep_pad_depth(
 ):
     """Initial Newton guess of a node touching a pad at the substep start: the guess x (x_start +
     dt v_start) with its depth along the pad normal put back to the depth it had at the start, in
-    the pad's moved frame; the tangential part (sliding or sticking) is kept.
+    the pad's moved frame; the tangential part (sliding or sticking) is kept. A node the moving pad
+    (or its own motion) brings behind its contact face is put on that face, and a node that the
+    guess takes below the ground on the ground: Newton starts from a state without deep contacts
+    (a pad moving 10 mm per substep would start it with nodes 10 mm deep: a huge, stiff residual
+    that 4 iterations do not resolve).
 
     The plain guess lets a node of a squeezed object that a turn or slide of the pad moves by
     micrometres start outside the pad; Newton sees no contact stiffness there, sends the node
@@ -227,13 +346,61 @@ def keep_pad_depth(
     i = wp.tid()
     w = node_world[i]
     slots = pads_per_world + 1
+    fr = free[i]
     for k in range(pads_per_world):
+        pad = w * pads_per_world + k
+        n = lag_normal[i * slots + 1 + k]  # pad frame
+        guess = wp.quat_rotate_inv(pad_rot1[pad], x[i] - pad_pos1[pad])
+        moved = int(0)
         if lag_normal_force[i * slots + 1 + k] > 0.0:
-            pad = w * pads_per_world + k
-            n = lag_normal[i * slots + 1 + k]  # pad frame
             start = wp.quat_rotate_inv(pad_rot0[pad], x_start[i] - pad_pos0[pad])
-            guess = wp.quat_rotate_inv(pad_rot1[pad], x[i] - pad_pos1[pad])
             guess = guess + wp.dot(start - guess, n) * n
-            fr = free[i]
+            moved = 1
+        else:
+            depth = face_penetration(guess, pad_half[pad], n)
+            if depth > 0.0:
+                guess = guess + depth * n
+                moved = 1
+        if moved == 1:
             kept = pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], guess)
             x[i] = wp.cw_mul(fr, kept) + wp.cw_mul(wp.vec3(1.0) - fr, x[i])
+    xi = x[i]
+    if xi[1] < 0.0 and x_start[i][1] >= 0.0 and fr[1] > 0.0:
+        x[i] = wp.vec3(xi[0], 0.0, xi[2])
+
+
+@wp.kernel
+def deepest_contact(
+    x: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    lag_normal: wp.array(dtype=wp.vec3),
+    depth_out: wp.array(dtype=float),
+):
+    """Deepest penetration (m) per world of the iterate x: below the ground or behind a node's
+    contact face of a pad (at the substep's end pose)."""
+    i = wp.tid()
+    w = node_world[i]
+    xi = x[i]
+    depth = -xi[1]
+    slots = pads_per_world + 1
+    for k in range(pads_per_world):
+        pad = w * pads_per_world + k
+        local = wp.quat_rotate_inv(pad_rot1[pad], xi - pad_pos1[pad])
+        depth = wp.max(depth, face_penetration(local, pad_half[pad], lag_normal[i * slots + 1 + k]))
+    if depth > 0.0:
+        wp.atomic_max(depth_out, w, depth)
+
+
+@wp.kernel
+def reactivate_deep_worlds(depth: wp.array(dtype=float), bound: float, newton_active: wp.array(dtype=int)):
+    """Switch Newton back on in the worlds whose iterate is deeper than ``bound`` (m); clear depth."""
+    w = wp.tid()
+    active = 0
+    if depth[w] > bound:
+        active = 1
+    newton_active[w] = active
+    depth[w] = 0.0

@@ -1,6 +1,6 @@
-"""Incremental potential of a backward-Euler substep and the per-world backtracking line search.
+"""Incremental potential of a backward-Euler substep (the line search's objective, ``kernels.line_search``).
 
-E(x) = sum_nodes [ m/(2 dt^2) |x - x_hat|^2 - (m g + f_ext) . (x - x_start) + k/2 d^2 (ground, pads)
+E(x) = sum_nodes [ m/(2 dt^2) |x - x_hat|^2 - (m g + f_ext) . (x - x_start) + penalty_energy(d) (ground, pads)
                    + mu f_n f0(|slip_t|) ]  +  sum_tets V0 psi(F),
 the function whose stationary point the Newton solve seeks; f0 is the integral of the smoothed
 Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums go to float64.
@@ -8,7 +8,7 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 
 import warp as wp
 
-from .contact import box_penetration, pad_slip
+from .contact import face_penetration, pad_slip, penalty_energy
 from .elastic import deformation_gradient, polar_rotation
 
 
@@ -30,18 +30,6 @@ def strain_energy_density(f: wp.mat33, rotation_guess: wp.quat, mu: float, lam: 
 
 
 @wp.kernel
-def trial_positions(
-    x: wp.array(dtype=wp.vec3),
-    dx: wp.array(dtype=wp.vec3),
-    node_world: wp.array(dtype=int),
-    step_length: wp.array(dtype=float),
-    x_trial: wp.array(dtype=wp.vec3),
-):
-    i = wp.tid()
-    x_trial[i] = x[i] + step_length[node_world[i]] * dx[i]
-
-
-@wp.kernel
 def node_energy(
     x: wp.array(dtype=wp.vec3),
     x_start: wp.array(dtype=wp.vec3),
@@ -60,7 +48,8 @@ def node_energy(
     pads_per_world: int,
     lag_normal_force: wp.array(dtype=float),
     lag_normal: wp.array(dtype=wp.vec3),
-    stiffness: float,
+    stiffness: wp.array(dtype=float),
+    knee: float,
     ground_mu: float,
     pad_mu: float,
     stick_velocity: float,
@@ -77,7 +66,8 @@ def node_energy(
     d = xi - (x_start[i] + dt * v_start[i])
     e = 0.5 * m / (dt * dt) * wp.dot(d, d) - wp.dot(m * gravity + external_force[i], xi - x_start[i])
     depth = wp.max(-xi[1], 0.0)
-    e += 0.5 * stiffness * depth * depth
+    k_i = stiffness[i]
+    e += penalty_energy(k_i, depth, knee)
     lag_fn = lag_normal_force[i * slots]
     if lag_fn > 0.0:
         e += friction_potential(ground_mu, lag_fn, xi - x_start[i], wp.vec3(0.0, 1.0, 0.0), eps)
@@ -85,13 +75,14 @@ def node_energy(
         pad = w * pads_per_world + k
         rot1 = pad_rot1[pad]
         local = wp.quat_rotate_inv(rot1, xi - pad_pos1[pad])
-        depth, n_local = box_penetration(local, pad_half[pad])
+        n_local = lag_normal[i * slots + 1 + k]
+        depth = face_penetration(local, pad_half[pad], n_local)
         if depth > 0.0:
-            e += 0.5 * stiffness * depth * depth
+            e += penalty_energy(k_i, depth, knee)
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
             slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
-            n_lag = wp.quat_rotate(rot1, lag_normal[i * slots + 1 + k])
+            n_lag = wp.quat_rotate(rot1, n_local)
             e += friction_potential(pad_mu, lag_fn, slip, n_lag, eps)
     wp.atomic_add(energy, w, wp.float64(e))
 
@@ -119,41 +110,3 @@ def tet_energy(
     f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t])
     e = rest_volume[t] * strain_energy_density(f, tet_rotation[t], tet_mu[t], tet_lambda[t])
     wp.atomic_add(energy, w, wp.float64(e))
-
-
-@wp.kernel
-def begin_line_search(
-    newton_active: wp.array(dtype=int),
-    step_length: wp.array(dtype=float),
-    searching: wp.array(dtype=int),
-    trial_energy: wp.array(dtype=wp.float64),
-):
-    w = wp.tid()
-    step_length[w] = 1.0
-    searching[w] = newton_active[w]
-    trial_energy[w] = wp.float64(0.0)
-
-
-@wp.kernel
-def end_line_search_trial(
-    start_energy: wp.array(dtype=wp.float64),
-    rel_tol: float,
-    min_step: float,
-    trial_energy: wp.array(dtype=wp.float64),
-    step_length: wp.array(dtype=float),
-    searching: wp.array(dtype=int),
-):
-    """Accept the trial if it does not raise the energy (within float32 rounding of its terms),
-    else halve the step; stop halving at ``min_step``. An accepted trial's energy becomes the
-    start energy of the next Newton iteration (the step applied is the trial's, bit for bit)."""
-    w = wp.tid()
-    if searching[w] == 0:
-        return
-    e0 = start_energy[w]
-    tol = wp.float64(rel_tol) * wp.abs(e0) + wp.float64(1.0e-12)
-    if trial_energy[w] <= e0 + tol or step_length[w] <= min_step:
-        searching[w] = 0
-        start_energy[w] = trial_energy[w]
-    else:
-        step_length[w] = 0.5 * step_length[w]
-    trial_energy[w] = wp.float64(0.0)

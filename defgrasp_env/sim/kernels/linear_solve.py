@@ -1,4 +1,5 @@
-"""Per-world Newton iterations with block-Jacobi preconditioned conjugate gradients.
+"""Per-world linear solves of the Newton systems: block-Jacobi preconditioned conjugate gradients
+with a coarse correction on the rigid translations.
 
 Every world runs its own CG (its own alpha, beta and stopping test) inside one set of flat arrays,
 so a world's result never depends on the other worlds. Per-world flags switch finished worlds off.
@@ -12,28 +13,6 @@ def masked_block(block: wp.mat33, free: wp.vec3):
     """Block with fixed rows/columns replaced by identity rows/columns."""
     m = wp.diag(free)
     return m * block * m + wp.diag(wp.vec3(1.0) - free)
-
-
-@wp.kernel
-def begin_substep(
-    x: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-    step_start: wp.array(dtype=wp.vec3),
-    prescribed: wp.array(dtype=wp.vec3),
-    free: wp.array(dtype=wp.vec3),
-    s1: float,
-    dt: float,
-    x_start: wp.array(dtype=wp.vec3),
-):
-    """Save the substep's start positions and move x to the initial guess x + dt v; prescribed axes
-    go to their target interpolated at fraction s1 of the step."""
-    i = wp.tid()
-    xi = x[i]
-    x_start[i] = xi
-    target = wp.lerp(step_start[i], prescribed[i], s1)
-    fr = free[i]
-    guess = xi + dt * v[i]
-    x[i] = wp.cw_mul(fr, guess) + wp.cw_mul(wp.vec3(1.0) - fr, target)
 
 
 @wp.kernel
@@ -194,92 +173,6 @@ def cg_end_iteration(
     rz[w] = rz_new[w]
     rz_new[w] = 0.0
     p_ap[w] = 0.0
-
-
-@wp.kernel
-def apply_newton_step(
-    dx: wp.array(dtype=wp.vec3),
-    node_world: wp.array(dtype=int),
-    newton_active: wp.array(dtype=int),
-    step_length: wp.array(dtype=float),
-    max_step: float,
-    x: wp.array(dtype=wp.vec3),
-    dx_norm: wp.array(dtype=float),
-    diverged: wp.array(dtype=int),
-):
-    """x += step_length * dx; record the largest update per world; flag NaN/inf or an update longer
-    than ``max_step`` (m)."""
-    i = wp.tid()
-    w = node_world[i]
-    if newton_active[w] == 0:
-        return
-    d = step_length[w] * dx[i]
-    size = wp.max(wp.abs(d))
-    if not wp.isfinite(size) or size > max_step:
-        diverged[w] = 1
-        return
-    x[i] = x[i] + d
-    # convergence is judged on the full Newton direction: a step cut short by the line search
-    # (e.g. a contact that the linearisation missed) must not pass for a converged one
-    wp.atomic_max(dx_norm, w, wp.max(wp.abs(dx[i])))
-
-
-@wp.kernel
-def end_newton_iteration(
-    dx_norm: wp.array(dtype=float),
-    tol: float,
-    max_iterations: int,
-    diverged: wp.array(dtype=int),
-    newton_iterations: wp.array(dtype=int),
-    newton_active: wp.array(dtype=int),
-    rz: wp.array(dtype=float),
-    residual_norm: wp.array(dtype=float),
-    cg_iterations: wp.array(dtype=int),
-    last_dx_norm: wp.array(dtype=float),
-):
-    w = wp.tid()
-    if newton_active[w] == 0:
-        return
-    it = newton_iterations[w] + 1
-    newton_iterations[w] = it
-    last_dx_norm[w] = dx_norm[w]
-    if dx_norm[w] <= tol or it >= max_iterations or diverged[w] != 0:
-        newton_active[w] = 0
-    dx_norm[w] = 0.0
-    rz[w] = 0.0
-    residual_norm[w] = 0.0
-    cg_iterations[w] = 0
-
-
-@wp.kernel
-def end_substep(
-    x_start: wp.array(dtype=wp.vec3),
-    node_world: wp.array(dtype=int),
-    diverged: wp.array(dtype=int),
-    inv_dt: float,
-    x: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-):
-    """v = (x - x_start) / dt; a diverged world is put back to its start positions at rest."""
-    i = wp.tid()
-    if diverged[node_world[i]] != 0:
-        x[i] = x_start[i]
-        v[i] = wp.vec3(0.0)
-        return
-    v[i] = (x[i] - x_start[i]) * inv_dt
-
-
-@wp.kernel
-def mean_stress(
-    von_mises: wp.array(dtype=float),
-    rest_volume: wp.array(dtype=float),
-    tet_world: wp.array(dtype=int),
-    world_volume: wp.array(dtype=float),
-    mean: wp.array(dtype=float),
-):
-    t = wp.tid()
-    w = tet_world[t]
-    wp.atomic_add(mean, w, von_mises[t] * rest_volume[t] / world_volume[w])
 
 
 # -- coarse (rigid translation) correction of the linear solve ------------------------------------

@@ -1,0 +1,120 @@
+"""Substep and Newton-iteration bookkeeping of the implicit solver: the substep's start (initial
+guess) and end (velocities), applying a Newton update, the per-world stopping tests, mean stress."""
+
+import warp as wp
+
+
+@wp.kernel
+def begin_substep(
+    x: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+    step_start: wp.array(dtype=wp.vec3),
+    prescribed: wp.array(dtype=wp.vec3),
+    free: wp.array(dtype=wp.vec3),
+    s1: float,
+    dt: float,
+    x_start: wp.array(dtype=wp.vec3),
+):
+    """Save the substep's start positions and move x to the initial guess x + dt v; prescribed axes
+    go to their target interpolated at fraction s1 of the step."""
+    i = wp.tid()
+    xi = x[i]
+    x_start[i] = xi
+    target = wp.lerp(step_start[i], prescribed[i], s1)
+    fr = free[i]
+    guess = xi + dt * v[i]
+    x[i] = wp.cw_mul(fr, guess) + wp.cw_mul(wp.vec3(1.0) - fr, target)
+
+
+@wp.kernel
+def apply_newton_step(
+    dx: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    newton_active: wp.array(dtype=int),
+    step_length: wp.array(dtype=float),
+    max_step: float,
+    x: wp.array(dtype=wp.vec3),
+    dx_norm: wp.array(dtype=float),
+    diverged: wp.array(dtype=int),
+):
+    """x += step_length * dx; record the largest update per world; flag NaN/inf or an update longer
+    than ``max_step`` (m)."""
+    i = wp.tid()
+    w = node_world[i]
+    if newton_active[w] == 0:
+        return
+    d = step_length[w] * dx[i]
+    size = wp.max(wp.abs(d))
+    if not wp.isfinite(size) or size > max_step:
+        diverged[w] = 1
+        return
+    x[i] = x[i] + d
+    # convergence is judged on the full Newton direction: a step cut short by the line search
+    # (e.g. a contact that the linearisation missed) must not pass for a converged one
+    wp.atomic_max(dx_norm, w, wp.max(wp.abs(dx[i])))
+
+
+@wp.kernel
+def end_newton_iteration(
+    dx_norm: wp.array(dtype=float),
+    tol: float,
+    max_iterations: int,
+    diverged: wp.array(dtype=int),
+    substep_iterations: wp.array(dtype=int),
+    newton_iterations: wp.array(dtype=int),
+    newton_active: wp.array(dtype=int),
+    rz: wp.array(dtype=float),
+    residual_norm: wp.array(dtype=float),
+    cg_iterations: wp.array(dtype=int),
+    last_dx_norm: wp.array(dtype=float),
+    unconverged: wp.array(dtype=int),
+):
+    """Count the iteration (this substep's, for the limit, and the step's total) and stop a world
+    on the update tolerance, at the per-substep limit (flagged ``unconverged``) or on divergence."""
+    w = wp.tid()
+    if newton_active[w] == 0:
+        return
+    it = substep_iterations[w] + 1
+    substep_iterations[w] = it
+    newton_iterations[w] = newton_iterations[w] + 1
+    last_dx_norm[w] = dx_norm[w]
+    if dx_norm[w] <= tol or diverged[w] != 0:
+        newton_active[w] = 0
+    elif it >= max_iterations:
+        newton_active[w] = 0
+        unconverged[w] = 1
+    dx_norm[w] = 0.0
+    rz[w] = 0.0
+    residual_norm[w] = 0.0
+    cg_iterations[w] = 0
+
+
+@wp.kernel
+def end_substep(
+    x_start: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    diverged: wp.array(dtype=int),
+    inv_dt: float,
+    x: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+):
+    """v = (x - x_start) / dt; a diverged world is put back to its start positions at rest."""
+    i = wp.tid()
+    if diverged[node_world[i]] != 0:
+        x[i] = x_start[i]
+        v[i] = wp.vec3(0.0)
+        return
+    v[i] = (x[i] - x_start[i]) * inv_dt
+
+
+@wp.kernel
+def mean_stress(
+    von_mises: wp.array(dtype=float),
+    rest_volume: wp.array(dtype=float),
+    tet_world: wp.array(dtype=int),
+    world_volume: wp.array(dtype=float),
+    mean: wp.array(dtype=float),
+):
+    t = wp.tid()
+    w = tet_world[t]
+    wp.atomic_add(mean, w, von_mises[t] * rest_volume[t] / world_volume[w])

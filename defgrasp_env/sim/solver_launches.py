@@ -1,0 +1,213 @@
+"""Recorded kernel launches of one implicit-solver substep, one builder per phase.
+
+A substep of length h: ``pads`` (pad poses at the substep's start and end), ``begin`` (save the start,
+initial guess), ``lag`` (contact faces, lagged friction, guess fixes, rotation seeds), then Newton
+iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coarse correction),
+``cg`` (one CG iteration, repeated), ``coarse_post``, the line search (``energy0`` once,
+``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` decides the extra iterations;
+``end`` (velocities) and, after the last substep, ``outputs`` (forces, stresses, residual).
+Launches are recorded once per substep length (``wp.launch(record_cmd=True)``): replaying one costs
+a couple of microseconds of Python.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import warp as wp
+
+from .kernels import contact as kc
+from .kernels import elastic as ke
+from .kernels import energy as kenergy
+from .kernels import line_search as kls
+from .kernels import linear_solve as klin
+from .kernels import substep as ksub
+from .model import Model
+from .solver_scratch import SolverScratch
+from .state import Control, State
+
+
+@dataclass
+class SubstepLaunches:
+    """Recorded launches of each phase (lists are launched in order)."""
+
+    pads: list          # [substeps] lists: pad poses at fractions k/K and (k+1)/K of the step
+    begin: list         # [substeps] launches: substep start, initial guess (prescribed axes at (k+1)/K)
+    lag: list
+    evaluate: list
+    cg: list
+    coarse_post: list
+    energy0: list
+    begin_search: object
+    trial: list
+    apply: list
+    depth: list
+    end: object
+    outputs: list
+
+
+@dataclass
+class _Context:
+    model: Model
+    scratch: SolverScratch
+    work: State
+    control: Control
+    h: float
+    substeps: int
+
+    def rec(self, kernel, dim, *inputs):
+        return wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device, record_cmd=True)
+
+
+def _nodes(c: _Context, x, active, record_pads, energy=None):
+    """Inertia, gravity and contact terms of every node at ``x`` (or their energy)."""
+    m, s, work, ctl = c.model, c.scratch, c.work, c.control
+    common = (m.node_mass, m.node_world, active, ctl.external_force, m.gravity, c.h, *s.pads, m.pad_half_extents,
+              m.pads_per_world, s.lag_normal_force, s.lag_normal, m.node_contact_stiffness,
+              m.contact.stiffening_depth, m.contact.ground_friction, m.contact.pad_friction,
+              m.contact.stick_velocity)
+    if energy is not None:
+        return c.rec(kenergy.node_energy, m.num_nodes, x, s.x_start, work.velocities, *common, energy)
+    return c.rec(kc.evaluate_nodes, m.num_nodes, x, s.x_start, work.velocities, *common, record_pads, s.residual,
+                 s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force, work.pad_normal_force,
+                 work.pad_force, s.penetration)
+
+
+def _tets(c: _Context, x, active, energy=None):
+    """Elastic terms of every tet at ``x`` (or their energy)."""
+    m, s, work = c.model, c.scratch, c.work
+    if energy is not None:
+        return c.rec(kenergy.tet_energy, m.num_tets, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
+                     m.tet_lambda, m.tet_world, active, s.tet_rotation, energy)
+    return c.rec(ke.evaluate_tets, m.num_tets, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda,
+                 m.tet_world, active, s.tet_rotation, s.residual, s.diag_block, work.elastic_force, s.cofactor,
+                 work.von_mises, s.tet_r, s.tet_twist)
+
+
+def _begin_solve(c: _Context, active):
+    m, s = c.model, c.scratch
+    return c.rec(klin.begin_linear_solve, m.num_nodes, s.residual, s.diag_block, m.free_axes, m.node_world, active,
+                 s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm)
+
+
+def _coarse(c: _Context, active, with_matrix: int) -> list:
+    """Coarse solve on the rigid translations: before CG (with_matrix=1: builds T^T A T, starts CG
+    from dx = T c) and after it (corrects dx with the CG residual)."""
+    m, s, n = c.model, c.scratch, c.model.num_nodes
+    cmds = []
+    if with_matrix:
+        cmds.append(c.rec(klin.coarse_clear, n, m.node_world, active, *s.coarse_at))
+        for k in range(3):
+            if not s.all_free:  # a uniform translation does not strain a tet: K T_k = 0
+                cmds.append(c.rec(ke.hessian_product_tets, m.num_tets, s.coarse_t[k], m.tets, m.tet_rest_inv,
+                                  m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active,
+                                  s.coarse_at[k], s.tet_r, s.tet_twist))
+            cmds.append(c.rec(klin.cg_node_product, n, s.coarse_t[k], m.node_mass, s.contact_hessian, m.free_axes,
+                              m.node_world, active, 1.0 / (c.h * c.h), s.coarse_at[k], s.coarse_scratch))
+    cmds += [
+        c.rec(klin.coarse_reduce, n, *s.coarse_at, s.residual, m.free_axes, m.node_world, active, with_matrix,
+              s.coarse_m, s.coarse_rhs),
+        c.rec(klin.coarse_solve, m.num_worlds, active, with_matrix, s.coarse_m, s.coarse_rhs, s.coarse_inv,
+              s.coarse_coef, s.rz if with_matrix else s.coarse_scratch),
+        c.rec(klin.coarse_apply, n, *s.coarse_at, s.precond, m.free_axes, m.node_world, active, s.coarse_coef,
+              with_matrix, s.dx, s.residual, s.z, s.p, s.rz)]
+    return cmds
+
+
+def _pads(c: _Context) -> list:
+    m, s, work, ctl, k_sub = c.model, c.scratch, c.work, c.control, c.substeps
+    if not m.pads_per_world:
+        return [[] for _ in range(k_sub)]
+    return [[c.rec(kc.interpolate_pads, m.num_worlds * m.pads_per_world, work.pad_positions, work.pad_orientations,
+                   ctl.pad_target_positions, ctl.pad_target_orientations, k / k_sub, (k + 1) / k_sub, *s.pads)]
+            for k in range(k_sub)]
+
+
+def _begin(c: _Context) -> list:
+    m, s, work = c.model, c.scratch, c.work
+    return [c.rec(ksub.begin_substep, m.num_nodes, work.positions, work.velocities, s.step_start,
+                  c.control.prescribed_positions, m.free_axes, (k + 1) / c.substeps, c.h, s.x_start)
+            for k in range(c.substeps)]
+
+
+def _lag(c: _Context) -> list:
+    m, s, x = c.model, c.scratch, c.work.positions
+    return [c.rec(kc.lag_contacts, m.num_nodes, s.x_start, x, m.node_world, *s.pads, m.pad_half_extents,
+                  m.pads_per_world, m.node_contact_stiffness, m.contact.stiffening_depth, s.lag_normal_force,
+                  s.lag_normal),
+            c.rec(kc.keep_pad_depth, m.num_nodes, s.x_start, m.node_world, m.free_axes, *s.pads, m.pad_half_extents,
+                  m.pads_per_world, s.lag_normal_force, s.lag_normal, x),
+            c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
+
+
+def _evaluate(c: _Context) -> list:
+    s, x = c.scratch, c.work.positions
+    return [_nodes(c, x, s.newton_active, 0), _tets(c, x, s.newton_active), _begin_solve(c, s.newton_active),
+            *_coarse(c, s.newton_active, 1),
+            c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.rz, s.rz0, s.cg_active)]
+
+
+def _cg(c: _Context, config) -> list:
+    m, s = c.model, c.scratch
+    n, active = m.num_nodes, s.cg_active
+    return [
+        c.rec(ke.hessian_product_tets, m.num_tets, s.p, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
+              m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
+        c.rec(klin.cg_node_product, n, s.p, m.node_mass, s.contact_hessian, m.free_axes, m.node_world, active,
+              1.0 / (c.h * c.h), s.ap, s.p_ap),
+        c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, active, s.rz, s.p_ap,
+              s.dx, s.residual, s.z, s.rz_new, s.cg_update),
+        c.rec(klin.cg_update_direction, n, s.z, m.node_world, active, s.rz, s.rz_new, s.p, s.ap),
+        c.rec(klin.cg_end_iteration, m.num_worlds, s.rz, s.rz_new, s.rz0, s.p_ap, config.cg_tolerance ** 2,
+              config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.cg_it, s.cg_total,
+              active, s.cg_update)]
+
+
+def _trial(c: _Context, config) -> list:
+    m, s = c.model, c.scratch
+    return [c.rec(kls.trial_positions, m.num_nodes, c.work.positions, s.dx, m.node_world, s.step_length, s.x_trial),
+            _nodes(c, s.x_trial, s.searching, 0, s.energy_trial),
+            _tets(c, s.x_trial, s.searching, s.energy_trial),
+            c.rec(kls.end_line_search_trial, m.num_worlds, s.energy0, 1e-6, 0.5 ** config.line_search_steps,
+                  s.energy_trial, s.step_length, s.searching)]
+
+
+def _apply(c: _Context, config) -> list:
+    m, s = c.model, c.scratch
+    return [c.rec(ksub.apply_newton_step, m.num_nodes, s.dx, m.node_world, s.newton_active, s.step_length,
+                  config.max_node_step, c.work.positions, s.dx_norm, s.diverged),
+            c.rec(ksub.end_newton_iteration, m.num_worlds, s.dx_norm, config.newton_tolerance,
+                  config.newton_iterations, s.diverged, s.substep_newton_it, s.newton_it, s.newton_active, s.rz,
+                  s.res_norm, s.cg_it, s.last_dx, s.unconverged)]
+
+
+def _depth(c: _Context, config) -> list:
+    m, s = c.model, c.scratch
+    return [c.rec(kc.deepest_contact, m.num_nodes, c.work.positions, m.node_world, s.pad_pos1, s.pad_rot1,
+                  m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth),
+            c.rec(kc.reactivate_deep_worlds, m.num_worlds, s.depth, 0.5 * config.penetration_bound,
+                  s.newton_active)]
+
+
+def _outputs(c: _Context) -> list:
+    m, s, work, x = c.model, c.scratch, c.work, c.work.positions
+    return [_nodes(c, x, s.all_on, 1), _tets(c, x, s.all_on), _begin_solve(c, s.all_on),
+            c.rec(ksub.mean_stress, m.num_tets, work.von_mises, m.tet_rest_volume, m.tet_world, m.world_volume,
+                  work.mean_von_mises)]
+
+
+def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
+                            h: float) -> SubstepLaunches:
+    """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step."""
+    c = _Context(model, scratch, work, control, h, config.substeps)
+    s, x = scratch, work.positions
+    return SubstepLaunches(
+        pads=_pads(c), begin=_begin(c), lag=_lag(c), evaluate=_evaluate(c), cg=_cg(c, config),
+        coarse_post=_coarse(c, s.newton_active, 0),
+        energy0=[_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)],
+        begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
+                           s.energy_trial),
+        trial=_trial(c, config), apply=_apply(c, config), depth=_depth(c, config),
+        end=c.rec(ksub.end_substep, model.num_nodes, s.x_start, model.node_world, s.diverged, 1.0 / h, x, s.v_new),
+        outputs=_outputs(c),
+    )

@@ -1,0 +1,127 @@
+"""Scratch arrays of the implicit solver: everything a step writes besides the ``State``.
+
+Made once per model. N nodes, T tets, W worlds, P pads per world; world frame, SI units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .model import Model
+
+
+@dataclass
+class SolverScratch:
+    """Per-node, per-tet and per-world work arrays of ``ImplicitSolver`` (device arrays).
+
+    Newton's iterate is the work state's ``positions``; each Newton iteration solves
+    ``A dx = r`` (A = M/h^2 + contact Hessian + elastic Hessian) by block-Jacobi preconditioned CG
+    with a coarse correction on the rigid translations, then line-searches along ``dx``.
+    """
+
+    # substep bookkeeping
+    step_start: wp.array        # [N] vec3, m: positions at the start of the step (prescribed-axis lerp)
+    x_start: wp.array           # [N] vec3, m: positions at the start of the substep
+    v_new: wp.array             # [N] vec3, m/s: velocities at the end of the substep
+    x_trial: wp.array           # [N] vec3, m: line-search trial positions
+    # linear solve
+    residual: wp.array          # [N] vec3, N: r = -grad E (then the CG residual)
+    z: wp.array                 # [N] vec3: preconditioned residual
+    p: wp.array                 # [N] vec3: CG direction
+    ap: wp.array                # [N] vec3: A p
+    dx: wp.array                # [N] vec3, m: Newton update
+    diag_block: wp.array        # [N] mat33, N/m: diagonal blocks of A
+    precond: wp.array           # [N] mat33, m/N: their inverses (masked by the free axes)
+    contact_hessian: wp.array   # [N] mat33, N/m: contact part of the diagonal blocks
+    cofactor: wp.array          # [T] mat33: d(det F)/dF of each tet
+    tet_rotation: wp.array      # [T] quat: polar rotation of each tet (warm start of the next solve)
+    tet_r: wp.array             # [T] mat33: that rotation as a matrix
+    tet_twist: wp.array         # [T] float: twist factor of the fixed-corotated Hessian
+    # contact, lagged at the substep start
+    lag_normal_force: wp.array  # [N*(P+1)] float, N: normal force per node and contact (0: ground, 1+k: pad k)
+    lag_normal: wp.array        # [N*(P+1)] vec3: normal of that contact (pad frame for pads: the contact face)
+    pad_pos0: wp.array          # [W*P] vec3, m: pad centres at the substep start
+    pad_rot0: wp.array          # [W*P] quat: pad orientations at the substep start
+    pad_pos1: wp.array          # [W*P] vec3, m: pad centres at the substep end
+    pad_rot1: wp.array          # [W*P] quat: pad orientations at the substep end
+    # per-world reductions and flags [W]
+    rz: wp.array                # float: r . z of CG
+    rz_new: wp.array            # float
+    rz0: wp.array               # float: r . z at the start of CG
+    p_ap: wp.array              # float: p . A p
+    dx_norm: wp.array           # float, m: largest component of the current Newton direction
+    last_dx: wp.array           # float, m: that of the last Newton iteration (SolveStats.last_update)
+    res_norm: wp.array          # float, N: largest residual component
+    penetration: wp.array       # float, m: deepest contact at the returned state
+    step_length: wp.array       # float: line-search step length
+    cg_update: wp.array         # float, m: largest node move of the last CG iteration
+    depth: wp.array             # float, m: deepest contact of the iterate (extra iterations)
+    newton_active: wp.array     # int: world still iterating Newton
+    cg_active: wp.array         # int: world still iterating CG
+    newton_it: wp.array         # int: Newton iterations of the step (SolveStats)
+    substep_newton_it: wp.array  # int: Newton iterations of the substep (the limit)
+    cg_it: wp.array             # int: CG iterations of the current Newton iteration
+    cg_total: wp.array          # int: CG iterations of the step (SolveStats)
+    diverged: wp.array          # int: world blew up
+    unconverged: wp.array       # int: a substep stopped at the iteration limit
+    all_on: wp.array            # int: all ones
+    searching: wp.array         # int: world still line-searching
+    energy0: wp.array           # float64: incremental potential of the accepted iterate
+    energy_trial: wp.array      # float64: that of the trial
+    # coarse correction on the rigid translations T_k = e_k (masked by the free axes)
+    all_free: bool              # host: no prescribed axis (K T_k = 0)
+    coarse_t: list              # 3 x [N] vec3: T_k
+    coarse_at: list             # 3 x [N] vec3: A T_k
+    coarse_m: wp.array          # [W] mat33: T^T A T
+    coarse_inv: wp.array        # [W] mat33: its inverse
+    coarse_rhs: wp.array        # [W] vec3: T^T r
+    coarse_coef: wp.array       # [W] vec3: coarse solution
+    coarse_scratch: wp.array    # [W] float
+
+    @classmethod
+    def from_model(cls, model: Model) -> "SolverScratch":
+        d, n, t, w = model.device, model.num_nodes, model.num_tets, model.num_worlds
+        pads = max(w * model.pads_per_world, 1)
+        slots = n * (model.pads_per_world + 1)
+
+        def vec(count=n):
+            return wp.zeros(count, dtype=wp.vec3, device=d)
+
+        def mat(count=n):
+            return wp.zeros(count, dtype=wp.mat33, device=d)
+
+        def quat(count):
+            return wp.zeros(count, dtype=wp.quat, device=d)
+
+        def per_world(dtype):
+            return wp.zeros(w, dtype=dtype, device=d)
+
+        free = model.free_axes.numpy()
+        names = [f.name for f in cls.__dataclass_fields__.values()]
+        floats = names[names.index("rz"):names.index("newton_active")]
+        ints = names[names.index("newton_active"):names.index("energy0")]
+        scratch = cls(
+            step_start=vec(), x_start=vec(), v_new=vec(), x_trial=vec(),
+            residual=vec(), z=vec(), p=vec(), ap=vec(), dx=vec(),
+            diag_block=mat(), precond=mat(), contact_hessian=mat(), cofactor=mat(t),
+            tet_rotation=quat(t), tet_r=mat(t), tet_twist=wp.zeros(t, dtype=float, device=d),
+            lag_normal_force=wp.zeros(slots, dtype=float, device=d), lag_normal=vec(slots),
+            pad_pos0=vec(pads), pad_rot0=quat(pads), pad_pos1=vec(pads), pad_rot1=quat(pads),
+            **{k: per_world(float) for k in floats}, **{k: per_world(int) for k in ints},
+            energy0=per_world(wp.float64), energy_trial=per_world(wp.float64),
+            all_free=bool(free.all()),
+            coarse_t=[wp.array(free * np.eye(3, dtype=np.float32)[k], dtype=wp.vec3, device=d) for k in range(3)],
+            coarse_at=[vec(), vec(), vec()], coarse_m=mat(w), coarse_inv=mat(w), coarse_rhs=vec(w),
+            coarse_coef=vec(w), coarse_scratch=wp.zeros(w, dtype=float, device=d),
+        )
+        scratch.all_on.fill_(1)
+        scratch.step_length.fill_(1.0)  # begin_line_search resets it; with no line search it stays 1
+        return scratch
+
+    @property
+    def pads(self) -> list:
+        """Pad poses at the substep start and end, in the kernels' argument order."""
+        return [self.pad_pos0, self.pad_rot0, self.pad_pos1, self.pad_rot1]

@@ -1,0 +1,80 @@
+"""Wrist force limit (``defgrasp_env.wrist.force_limit``): pure functions against a spring contact
+whose force is known in closed form, and the env's wrist pressing a stiff object into the ground."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import defgrasp_env  # noqa: F401
+from defgrasp_env.wrist.force_limit import (DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE, limited_substep,
+                                            wrist_force)
+
+
+def spring_contact(gap, stiffness, travel, calls, preload=0.0):
+    """solve(scale): the wrist moves scale * travel (m) toward a spring (N/m) ``gap`` (m) away
+    (or already pressing it with ``preload``, N, where gap = 0)."""
+    def solve(scale):
+        calls.append(scale.copy())
+        force = preload + stiffness * np.maximum(scale * travel - gap, 0.0)
+        return "report", force
+    return solve
+
+
+def test_wrist_force_is_the_net_pad_force():
+    """Equal and opposite pad forces (a pure squeeze) carry nothing; a push adds up."""
+    pad_force = np.array([[[5.0, 1.0, 0.0], [-5.0, 1.0, 0.0]], [[0.0, 3.0, 4.0], [0.0, 0.0, 0.0]]])
+    np.testing.assert_allclose(wrist_force(pad_force), [2.0, 5.0])
+
+
+def test_free_motion_is_one_solve_at_full_scale():
+    calls = []
+    report, force, scale = limited_substep(spring_contact(np.array([0.01]), 1e5, np.array([0.005]), calls),
+                                           np.zeros(1), 150.0)
+    assert len(calls) == 1 and scale.tolist() == [1.0] and force.tolist() == [0.0]
+
+
+@pytest.mark.parametrize("stiffness", [1e3, 1e5, 1e7])
+def test_stiff_contact_is_stopped_at_the_limit(stiffness):
+    """Worlds of one batch: 0 moves freely, 1 hits a spring mid-move (force at full move far above
+    the limit), 2 already pressed at the limit (stops at once). The accepted force is within the
+    tolerance of the limit (1 by bracketing, independently of the stiffness), never above it."""
+    limit, calls = 150.0, []
+    gap = np.array([0.02, 0.004, 0.0])
+    solve = spring_contact(gap, stiffness, np.array([0.01, 0.01, 0.01]), calls, np.array([0.0, 0.0, limit]))
+    _, force, scale = limited_substep(solve, np.array([0.0, 0.0, limit]), limit)
+    assert scale[0] == 1.0 and force[0] == 0.0
+    assert force[1] <= limit * (1 + FORCE_TOLERANCE)
+    if stiffness * 0.006 > limit * (1 + FORCE_TOLERANCE):   # the full move would exceed the limit
+        assert force[1] >= limit * (1 - FORCE_TOLERANCE) or scale[1] * 0.01 <= gap[1]
+        assert scale[1] < 1.0
+    if stiffness * 0.01 > limit * FORCE_TOLERANCE:
+        assert scale[2] == 0.0 and force[2] == limit
+    else:  # a soft spring: the full move stays within the tolerance
+        assert scale[2] == 1.0
+    # the returned force is that of the last solve, whose scales are the returned ones
+    np.testing.assert_array_equal(calls[-1], scale)
+
+
+def test_env_wrist_pressing_down_is_limited():
+    """The env's wrist drives the closed gripper (closed first, in the air, for 0.6 s) straight
+    down at 2 m/s onto an E = 1e7 cuboid
+    (which the ground holds): the wrist force in info stays within the limit + 10 % tolerance
+    (+5 N for the object's weight and dynamics), and each tip force within grip-force limit +
+    wrist limit (the two bounds add at most, one pad carrying all the push)."""
+    env = gym.make("DeformablePickup-v0", object="cuboid", youngs_modulus=1e7, max_linear_speed=2.0)
+    env.reset(seed=0)
+    grip = env.unwrapped.config.gripper.grip_force_limit
+    for _ in range(12):
+        env.step(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], np.float32))
+    worst_wrist, worst_tip = 0.0, 0.0
+    for _ in range(6):
+        _, _, _, _, info = env.step(np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0], np.float32))
+        worst_wrist = max(worst_wrist, info["wrist_force"])
+        worst_tip = max(worst_tip, info["left_tip_normal_force"], info["right_tip_normal_force"])
+        assert info["penetration"] < 1e-3 and not info["sim_penetrated"]
+    env.close()
+    assert worst_wrist > 0.5 * DEFAULT_WRIST_FORCE_LIMIT      # it did press
+    assert worst_wrist <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + 5.0
+    assert worst_tip <= grip + DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + 5.0
