@@ -127,6 +127,13 @@ def test_bad_arguments_are_reported_before_ray_starts(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+def _ctrl_c_as_in_a_terminal() -> None:
+    """In the child before exec: SIGINT delivered and not ignored, whatever the test process's state
+    (in a full-suite run it is inherited ignored or blocked: the child then never saw Ctrl-C)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 @pytest.mark.slow
 def test_interrupted_ray_run_resumes_to_the_full_set(tmp_path):
     """The CLI in its own process (it starts its own local Ray), interrupted by Ctrl-C after the
@@ -135,7 +142,8 @@ def test_interrupted_ray_run_resumes_to_the_full_set(tmp_path):
     cmd = [sys.executable, "-m", "defgrasp_env.recording.generate", str(tmp_path), *_args(40), "--policy", "random",
            "--ray", "--workers", "2"]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_ctrl_c_as_in_a_terminal)
     try:
         deadline = time.monotonic() + 300
         while not list_episodes(tmp_path) and proc.poll() is None and time.monotonic() < deadline:
@@ -147,7 +155,8 @@ def test_interrupted_ray_run_resumes_to_the_full_set(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 130, (out, err)
+    assert proc.returncode == 130, (signal.getsignal(signal.SIGINT), signal.pthread_sigmask(signal.SIG_BLOCK, []),
+                                    out, err)
     finished = list_episodes(tmp_path)
     assert 1 <= len(finished) < len(NAMES), finished
     assert validate_path(tmp_path).ok
