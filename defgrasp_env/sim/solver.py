@@ -39,8 +39,9 @@ class SolverConfig:
             float32 noise near a solution).
         max_node_step: a Newton update longer than this (m) marks the world as diverged.
         line_search_steps: halvings of a Newton step at most while it raises the energy.
-        penetration_bound: a returned state with a node deeper than this (m) inside a pad's
-            collision box or below the ground is flagged (``SolveStats.penetrated``).
+        penetration_bound: no node ends a substep deeper than this (m) inside a pad's collision box
+            (behind its contact face) or below the ground: a solve that leaves one deeper has it put
+            back to 90 % of this depth and is flagged (``SolveStats.penetrated``).
         penetration_iterations: extra Newton iterations at most per substep, after
             ``newton_iterations``, in the worlds whose iterate is still deeper than half of
             ``penetration_bound`` (a violent contact the regular iterations did not resolve).
@@ -85,7 +86,9 @@ class SolveStats:
     penetration: np.ndarray         # float, m: deepest ground/pad penetration at the returned state
     diverged: np.ndarray            # bool: the world blew up (NaN, runaway update); its state was kept
     converged: np.ndarray           # bool: every substep's Newton loop met newton_tolerance, not diverged
-    penetrated: np.ndarray          # bool: penetration > SolverConfig.penetration_bound
+    penetrated: np.ndarray          # bool: a substep's solve left a node deeper than
+    #                                 SolverConfig.penetration_bound (put back to 0.9 x it: positions
+    #                                 clamped, velocities follow), or the returned state is deeper
 
     @classmethod
     def combine(cls, reports: "list[SolveStats]") -> "SolveStats":
@@ -133,7 +136,7 @@ class ImplicitSolver:
         for name in self.work_control.__dataclass_fields__:
             wp.copy(getattr(self.work_control, name), getattr(control, name))
         wp.copy(s.step_start, state_in.positions)
-        for a in (s.newton_it, s.cg_total, s.diverged, s.unconverged, s.penetration):
+        for a in (s.newton_it, s.cg_total, s.diverged, s.unconverged, s.clamped, s.penetration):
             a.zero_()
         for k in range(cfg.substeps):
             for cmd in run.pads[k]:
@@ -142,6 +145,7 @@ class ImplicitSolver:
             for cmd in run.lag:
                 cmd.launch()
             self._newton(run)
+            run.clamp.launch()
             run.end.launch()
             if k == cfg.substeps - 1:
                 self._evaluate_outputs(run)
@@ -159,7 +163,7 @@ class ImplicitSolver:
             penetration=penetration,
             diverged=diverged,
             converged=~diverged & (s.unconverged.numpy() == 0),
-            penetrated=penetration > cfg.penetration_bound,
+            penetrated=(penetration > cfg.penetration_bound) | (s.clamped.numpy() != 0),
         )
 
     # -- internals ---------------------------------------------------------------------------

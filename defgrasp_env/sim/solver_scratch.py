@@ -67,6 +67,7 @@ class SolverScratch:
     cg_total: wp.array          # int: CG iterations of the step (SolveStats)
     diverged: wp.array          # int: world blew up
     unconverged: wp.array       # int: a substep stopped at the iteration limit
+    clamped: wp.array           # int: a substep's solve left a node deeper than the penetration bound
     all_on: wp.array            # int: all ones
     searching: wp.array         # int: world still line-searching
     energy0: wp.array           # float64: incremental potential of the accepted iterate

@@ -404,3 +404,42 @@ def reactivate_deep_worlds(depth: wp.array(dtype=float), bound: float, newton_ac
         active = 1
     newton_active[w] = active
     depth[w] = 0.0
+
+
+@wp.kernel
+def clamp_depth(
+    node_world: wp.array(dtype=int),
+    free: wp.array(dtype=wp.vec3),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    lag_normal: wp.array(dtype=wp.vec3),
+    bound: float,
+    target: float,
+    x: wp.array(dtype=wp.vec3),
+    clamped: wp.array(dtype=int),
+):
+    """Put a node that the substep's solve left deeper than ``bound`` (m) behind its contact face of
+    a pad, or below the ground, back to depth ``target`` (m, < bound: float32 rounding of the moved
+    position stays within the bound) along that face's normal (free axes only),
+    and flag its world: a solve that did not resolve a violent contact returns a state within the
+    bound, reported (``SolveStats.penetrated``) rather than silently penetrated."""
+    i = wp.tid()
+    w = node_world[i]
+    fr = free[i]
+    slots = pads_per_world + 1
+    for k in range(pads_per_world):
+        pad = w * pads_per_world + k
+        rot = pad_rot1[pad]
+        local = wp.quat_rotate_inv(rot, x[i] - pad_pos1[pad])
+        n = lag_normal[i * slots + 1 + k]
+        depth = face_penetration(local, pad_half[pad], n)
+        if depth > bound:
+            moved = pad_pos1[pad] + wp.quat_rotate(rot, local + (depth - target) * n)
+            x[i] = wp.cw_mul(fr, moved) + wp.cw_mul(wp.vec3(1.0) - fr, x[i])
+            clamped[w] = 1
+    xi = x[i]
+    if xi[1] < -bound and fr[1] > 0.0:
+        x[i] = wp.vec3(xi[0], -target, xi[2])
+        clamped[w] = 1
