@@ -4,6 +4,7 @@
     defgrasp-dataset to-lerobot SRC DST       # new LeRobot v3.0 dataset at DST
     defgrasp-dataset plot EPISODE [-o PNG]    # the paper's Fig. 5 panels
     defgrasp-dataset replay EPISODE           # re-simulate; exit 1 unless bit-exact
+    defgrasp-dataset view EPISODE [--port N]  # 3D playback in the browser, with a timeline ([viewer] extra)
     defgrasp-dataset schema                   # the schema table (Markdown)
 """
 
@@ -57,6 +58,13 @@ def _replay(args) -> int:
     return 0 if result.bit_exact else 1
 
 
+def _view(args) -> int:
+    from ..viewer.playback import view_episode
+
+    view_episode(args.episode, host=args.host, port=args.port)
+    return 0
+
+
 def _schema(args) -> int:
     from .schema import schema_markdown
 
@@ -86,6 +94,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("episode")
     r.add_argument("--device", default=None, help="Warp device (default: the recorded one)")
     r.set_defaults(func=_replay)
+    w = sub.add_parser("view", help="replay an episode in a 3D browser view with a timeline")
+    w.add_argument("episode")
+    w.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1; 0.0.0.0: any)")
+    w.add_argument("--port", type=int, default=8080, help="port to serve on (default 8080; 0: any free)")
+    w.set_defaults(func=_view)
     s = sub.add_parser("schema", help="print the episode schema table")
     s.set_defaults(func=_schema)
     return p
@@ -96,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     default_caches()
     try:
         return args.func(args)
-    except (OSError, ValueError, TypeError, KeyError) as exc:
+    except (OSError, ValueError, TypeError, KeyError, ImportError) as exc:
         print(f"defgrasp-dataset {args.command}: error: {exc}", file=sys.stderr)
         return 2
 
