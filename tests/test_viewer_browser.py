@@ -90,3 +90,81 @@ def test_live_view_of_the_env_in_chromium(chromium):
     # the picture changed as the episode ran (pads moved, object squeezed)
     changed = np.abs(rest.astype(int) - grasp.astype(int)).max(axis=2) > 40
     assert changed.mean() > 0.005, changed.mean()
+
+
+@pytest.fixture(scope="module")
+def episode_file(tmp_path_factory):
+    """A recorded expert episode (soft cuboid, until it has been squeezed for a while)."""
+    import gymnasium as gym
+
+    import defgrasp_env  # noqa: F401
+    from defgrasp_env.policies import RECOMMENDED_ENV_KWARGS, ScriptedPickupExpert
+    from defgrasp_env.recording import HDF5Recorder
+
+    out = tmp_path_factory.mktemp("episodes")
+    env = HDF5Recorder(gym.make("DeformablePickup-v0", object="cuboid", youngs_modulus=1e4, init_yaw_noise=0.0,
+                                **RECOMMENDED_ENV_KWARGS), out)
+    expert = ScriptedPickupExpert.from_env(env)
+    obs, _ = env.reset(seed=1)
+    expert.reset()
+    squeezed = 0
+    for _ in range(200):
+        obs, _, terminated, truncated, info = env.step(expert(obs))
+        squeezed += min(info["left_tip_normal_force"], info["right_tip_normal_force"]) > 2.0
+        if squeezed >= 8 or terminated or truncated:
+            break
+    env.close()
+    (path,) = sorted(out.glob("*.h5"))
+    return path
+
+
+def test_playback_timeline_in_chromium(chromium, episode_file):
+    pytest.importorskip("viser", reason="needs the [viewer] extra (viser)")
+    from defgrasp_env.viewer.playback import EpisodePlayer
+
+    ART.mkdir(parents=True, exist_ok=True)
+    player = EpisodePlayer(episode_file, port=0)
+    try:
+        last = player.frames.num_steps - 1
+        assert int(player.slider.value) == 0 and player.slider.max == last
+        first = screenshot(player.url, ART / "playback_first.png")
+        player.slider.value = last
+        player.show_step(last)
+        end = screenshot(player.url, ART / "playback_last.png")
+    finally:
+        player.close()
+    assert pad_pixels(first) > 300 and pad_pixels(end) > 300
+    assert len(hue_bins(end)) >= 3, hue_bins(end)
+    assert (np.abs(first.astype(int) - end.astype(int)).max(axis=2) > 40).mean() > 0.005
+
+
+def test_dataset_view_command_serves_the_episode(chromium, episode_file, tmp_path):
+    """``defgrasp-dataset view EPISODE --port 0`` prints the URL, serves the episode, stops on Ctrl-C."""
+    pytest.importorskip("viser", reason="needs the [viewer] extra (viser)")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "defgrasp_env.recording.cli", "view", str(episode_file), "--port", "0"],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        url, lines, t0 = None, [], time.monotonic()
+        while url is None and time.monotonic() - t0 < 120:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            m = re.search(r"viewing .* at (http://127\.0\.0\.1:\d+/)", line)
+            url = m.group(1) if m else None
+        assert url, "".join(lines)
+        img = screenshot(url, ART / "dataset_view.png")
+        assert pad_pixels(img) > 300
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_dataset_view_errors_are_clear(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    r = subprocess.run([sys.executable, "-m", "defgrasp_env.recording.cli", "view", str(tmp_path / "none.h5")],
+                       cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "none.h5" in r.stderr and "not found" in r.stderr

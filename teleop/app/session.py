@@ -331,14 +331,15 @@ class CollectionSession:
 
     def _track_device_state(self) -> None:
         """Announce a loss of device data (the agent holds the gripper) and its return."""
-        state = getattr(self.device, "status", "-")
-        if state == "hold" and self._device_state != "hold":
+        state, before = getattr(self.device, "status", "-"), self._device_state
+        self._device_state = state
+        if state == "hold" and before != "hold":
             self.report.data_losses += 1
             self._say(f"DEVICE DATA LOST at step {self._steps}: holding the gripper until data returns")
             self._publish(force=True)
-        elif state != "hold" and self._device_state == "hold":
+        elif state != "hold" and before == "hold":
             self._say(f"device data back at step {self._steps}: continuing from the held pose")
-        self._device_state = state
+            self._publish(force=True)
 
     def _headline(self) -> str:
         c = self.control
@@ -386,7 +387,7 @@ class CollectionSession:
             readouts = self._readouts()
             for view in self.views:
                 view.update(view.capture(self.env) if capture else None, readouts)
-        if c.status_hz > 0 and now - self._last_status >= 1.0 / c.status_hz:
+        if c.status_hz > 0 and (force or now - self._last_status >= 1.0 / c.status_hz):
             self._last_status = now
             r = self._readouts()
             lat = f"{r['latency_p50_ms']:.0f} ms" if r["latency_p50_ms"] is not None else "n/a"
@@ -414,7 +415,9 @@ class CollectionSession:
                 self._say("WARNING: not recording (no output folder or no recorder)")
             self._reset_env(keep_pending=False)
             self._say(f"recording episode 1/{c.num_episodes} with {self.controller.description}; "
-                      "keys: right arrow = end episode, left arrow = re-record, s = mark success, Esc = stop")
+                      "keys: right arrow = end episode, left arrow = re-record, s = mark success, Esc = stop, "
+                      "enter/space = start now"
+                      + ("; waiting for device data" if self._waiting else ""))
             next_tick = self._clock()
             last = self._clock()
             while not c.done:
