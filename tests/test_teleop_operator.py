@@ -114,3 +114,22 @@ def test_view_port_clash_names_the_port_and_the_flag(capsys, view):
         rc = main(["--tracker", "keyboard", "--keys", "none", "--no-record", "--view", view, "--view-port", str(port)])
     err = capsys.readouterr().err
     assert rc == 2 and f"port {port}" in err and "--view-port" in err, err
+
+
+def test_paced_loop_reports_when_it_cannot_keep_up():
+    """A clock on which every call takes 40 ms: each pass of the loop overruns the 50 ms period; the
+    session says BEHIND once per episode, counts the late steps and the achieved rate."""
+    from teleop.app.devices import DeviceContext, build_controller
+    from teleop.app.session import CollectionSession, SessionConfig, make_env_stack
+
+    ticks = iter(np.arange(0.0, 1e4, 0.04))
+    env, _, marks = make_env_stack({"object": "cuboid"}, out_dir=None)
+    ctrl = build_controller("keyboard", None, ctx=DeviceContext(held_keys=set))
+    msgs = []
+    session = CollectionSession(env, ctrl, ScriptedKeySource([(12, "esc")]), marks=marks,
+                                config=SessionConfig(num_episodes=1, realtime=True), clock=lambda: float(next(ticks)),
+                                sleep=lambda s: None, say=msgs.append, status=lambda line: None)
+    report = session.run()
+    assert report.late_steps >= 3
+    assert sum("BEHIND real time" in m for m in msgs) == 1, msgs
+    assert report.loop_rate_hz["p50"] < 20.0
