@@ -85,3 +85,25 @@ def test_human_render_mode_checks_its_port_at_make():
             gym.make("DeformablePickup-v0", render_mode="human", viewer_port=port)
     with pytest.raises(ValueError, match="render_mode must be None, 'rgb_array' or 'human'"):
         gym.make("DeformablePickup-v0", render_mode="window")
+
+
+def test_vector_env_human_mode_draws_the_chosen_world():
+    pytest.importorskip("viser", reason="needs the [viewer] extra (viser)")
+    import gymnasium as gym
+
+    import defgrasp_env  # noqa: F401
+
+    venv = gym.make_vec("DeformablePickup-v0", num_envs=2, render_mode="human", viewer_world=1, viewer_port=0,
+                        object="random", init_yaw_noise=0.0)
+    try:
+        venv.reset(seed=5)
+        venv.step(np.zeros((2, 7)))
+        viewer = venv.unwrapped._viewer.viewer
+        scene = venv.unwrapped.scene
+        assert scene.object_names == ["cylinder", "torus"]  # object="random" with seed 5: two different objects
+        np.testing.assert_array_equal(viewer.drawing.triangles, scene.meshes[1].surface)  # world 1's torus
+        assert viewer.url.startswith("http://127.0.0.1:")
+    finally:
+        venv.close()
+    with pytest.raises(ValueError, match=r"viewer_world must be an int in \[0, 1\], got 2"):
+        gym.make_vec("DeformablePickup-v0", num_envs=2, render_mode="human", viewer_world=2, viewer_port=0)

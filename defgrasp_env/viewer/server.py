@@ -20,10 +20,12 @@ from .frame import ViewerFrame
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
-#: Where the browser's camera starts (m, world frame): close to the object on the ground, the goal
-#: above the top edge; orbit (drag), zoom (wheel) and pan (right drag) from there.
-INITIAL_CAMERA_POSITION = (0.17, 0.15, 0.20)
-INITIAL_CAMERA_LOOK_AT = (0.0, 0.05, 0.0)
+#: Where the browser's camera starts (m, world frame; vertical field of view in rad): the whole task,
+#: the object on the ground to the goal at 0.6 m; orbit (drag), zoom (wheel) and pan (right drag)
+#: from there to look closer.
+INITIAL_CAMERA_POSITION = (0.48, 0.68, 0.82)
+INITIAL_CAMERA_LOOK_AT = (0.0, 0.34, 0.0)
+INITIAL_CAMERA_FOV = float(np.radians(45.0))
 
 
 def _viser():
@@ -92,6 +94,7 @@ class ViewerServer:
             cam.position = INITIAL_CAMERA_POSITION
             cam.look_at = INITIAL_CAMERA_LOOK_AT
             cam.up = (0.0, 1.0, 0.0)
+            cam.fov = INITIAL_CAMERA_FOV
             self.drawing = SceneDrawing(self._server, triangles, scale)
             gui = self._server.gui
             self._scale_bar = gui.add_html(self.drawing.scale.scale_bar_html())

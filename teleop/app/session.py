@@ -176,7 +176,9 @@ class Console:
 class CollectionSession:
     """Runs the collection loop (module doc). ``env``: the outer env (the recorder if any);
     ``controller``: a ``Controller`` (or a bare TeleopDevice); ``marks``: the ``OperatorMarks``
-    inside the recorder; ``sim_clock``: the clock replay devices run on."""
+    inside the recorder; ``view``: a live view or a list of them (``teleop.app.view``: objects with
+    ``capture(env)``, ``update(frame, readouts)``, ``new_episode()``, ``close()``); ``sim_clock``: the
+    clock replay devices run on."""
 
     def __init__(self, env: gym.Env, controller, keys: KeySource | None = None, *, recorder=None,
                  marks: OperatorMarks | None = None, view=None,
