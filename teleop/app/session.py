@@ -257,6 +257,7 @@ class CollectionSession:
         self._release_haptics()
         self._waiting = self.config.wait_for_devices
         self._behind_said = False
+        self._device_state = "-"
         for view in self.views:
             view.new_episode()
         self._publish(force=True, capture=self.control.phase is not Phase.REVIEW)
@@ -359,19 +360,22 @@ class CollectionSession:
         i, c = self._info, self.control
         lat = self.device.latency_stats() if self.controller.live_latency and hasattr(self.device, "latency_stats") else {}
         recent = np.diff(self._tick_times[-51:])
+        recent = recent[recent < 10 * self.dt + 1.0]  # a wait or a review between two steps is no period
         hz = 1.0 / float(np.mean(recent)) if len(recent) else None
         return {
             "headline": self._headline(),
             "phase": "waiting" if (self._waiting and c.phase is Phase.RECORDING) else c.phase.value, "episode": min(c.kept + 1, c.num_episodes), "episodes_kept": c.kept,
             "episodes_wanted": c.num_episodes, "step": self._steps, "sim_time_s": round(self.sim_clock(), 3),
             "teleop_status": getattr(self.device, "status", "-"),
-            "device_data": "LOST" if self._device_state == "hold" else ("waiting" if self._waiting else "ok"),
+            "device_data": "-" if c.phase is not Phase.RECORDING else (
+                "waiting" if self._waiting else "LOST" if self._device_state == "hold" else "ok"),
             "left_tip_force_N": i.get("left_tip_normal_force", 0.0), "right_tip_force_N": i.get("right_tip_normal_force", 0.0),
             "jaw_gap_mm": 1e3 * float(i.get("jaw_gap", np.nan)) if "jaw_gap" in i else None,
             "mean_von_mises_Pa": i.get("mean_von_mises"), "goal_distance_m": i.get("goal_distance"),
             "is_success": bool(i.get("is_success", False)), "operator_success": self.control.success_mark,
             "loop_hz": hz,
-            "behind": bool(hz is not None and self.config.realtime and hz < 0.95 / self.dt),
+            "behind": bool(hz is not None and self.config.realtime and hz < 0.95 / self.dt
+                           and c.phase is Phase.RECORDING and not self._waiting and self._steps > 1),
             "last_episode": self._last_result,
             "latency_p50_ms": 1e3 * lat["p50_s"] if lat.get("count") else None,
             "recording": str(self.recorder.directory) if self.recorder is not None else "off",
