@@ -32,8 +32,8 @@ class EpisodePlayer:
         self.playing = gui.add_checkbox("play", initial_value=False)
         self.speed = gui.add_number("speed", initial_value=1.0, min=0.05, max=20.0, step=0.05)
         self._lock = threading.Lock()
-        self._summary = {"headline": f"replay: {a.get('object_name', '?')}", "file": self.frames.path.name, "steps": self.frames.num_steps,
-                         "success": a.get("is_success"), "end": a.get("end_reason")}
+        self._summary = {"headline": f"replay: {a.get('object_name', '?')}", "file": self.frames.path.name,
+                         "steps": self.frames.num_steps, "success": a.get("is_success"), "end": a.get("end_reason")}
         self.slider.on_update(lambda _event: self.show_step(int(self.slider.value)))
         self.show_step(0)
 

@@ -21,6 +21,7 @@ atomically by defgrasp_env.recording.HDF5Recorder); check them with ``defgrasp-d
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import logging
 import os
 import pathlib
@@ -112,6 +113,9 @@ def run(args: argparse.Namespace, *, say=None):
     tell = say or print
     check_object(args.object)
     view_3d = not args.no_view and args.view == "3d"
+    if view_3d and importlib.util.find_spec("viser") is None:
+        tell("WARNING: the 3D view needs the [viewer] extra (pip install 'defgrasp[viewer]'); serving the 2D page")
+        args.view, view_3d = "2d", False
     view_hz = args.view_hz if args.view_hz is not None else (20.0 if view_3d else 5.0)
     config = SessionConfig(num_episodes=args.episodes, reset_time_s=args.reset_time_s, realtime=not args.no_realtime,
                            view_hz=view_hz, seed=args.seed, fixed_seed=args.fixed_seed,
