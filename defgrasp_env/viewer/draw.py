@@ -92,13 +92,16 @@ class SceneDrawing:
         vertices = np.asarray(frame.vertices, dtype=np.float32)
         with self.server.atomic():
             for k, handle in enumerate(self._bands):
-                faces = self.triangles[bands == k]
-                if len(faces) == 0:
+                in_band = bands == k
+                if not in_band.any():
                     handle.visible = False
                     continue
-                handle.vertices = vertices
-                if self._last_bands is None or not np.array_equal(bands == k, self._last_bands == k):
-                    handle.faces = faces
+                # each band carries only the vertices its faces use (what crosses the websocket per
+                # frame is then about one copy of the surface, not one per band)
+                used, local = np.unique(self.triangles[in_band], return_inverse=True)
+                handle.vertices = vertices[used]
+                if self._last_bands is None or not np.array_equal(in_band, self._last_bands == k):
+                    handle.faces = local.reshape(-1, 3).astype(np.uint32)
                 handle.visible = True
             self._last_bands = bands
             for i, pad in enumerate(self._pads):
