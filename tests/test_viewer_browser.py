@@ -68,6 +68,11 @@ def hue_bins(img: np.ndarray, min_pixels: int = 10) -> set[int]:
     return {int(i) for i in np.flatnonzero(counts >= min_pixels)}
 
 
+def drawn(img: np.ndarray) -> bool:
+    """The page has finished fading in: the pads are drawn in their full dark grey."""
+    return pad_pixels(img) > 100
+
+
 @pytest.fixture(scope="module")
 def chromium():
     return require_chromium()
@@ -89,7 +94,7 @@ def test_live_view_of_the_env_in_chromium(chromium):
         expert.reset()
         url = env.unwrapped._viewer.url
         assert re.fullmatch(r"http://127\.0\.0\.1:\d+/", url)
-        rest = screenshot(url, ART / "live_rest.png")
+        rest = screenshot(url, ART / "live_rest.png", ready=drawn)
         squeezed_steps = 0
         for _ in range(200):
             obs, _, terminated, truncated, info = env.step(expert(obs))
@@ -98,7 +103,7 @@ def test_live_view_of_the_env_in_chromium(chromium):
             if squeezed_steps >= 6 or terminated or truncated:
                 break
         assert squeezed_steps >= 6, "the expert should be squeezing the cuboid"
-        grasp = screenshot(url, ART / "live_grasp.png")
+        grasp = screenshot(url, ART / "live_grasp.png", ready=drawn)
     finally:
         env.close()
     # the pads are on screen in both; the squeezed object shows several stress colours
@@ -144,10 +149,10 @@ def test_playback_timeline_in_chromium(chromium, episode_file):
     try:
         last = player.frames.num_steps - 1
         assert int(player.slider.value) == 0 and player.slider.max == last
-        first = screenshot(player.url, ART / "playback_first.png")
+        first = screenshot(player.url, ART / "playback_first.png", ready=drawn)
         player.slider.value = last
         player.show_step(last)
-        end = screenshot(player.url, ART / "playback_last.png")
+        end = screenshot(player.url, ART / "playback_last.png", ready=drawn)
     finally:
         player.close()
     assert pad_pixels(first) > 100 and pad_pixels(end) > 100
@@ -171,7 +176,7 @@ def test_dataset_view_command_serves_the_episode(chromium, episode_file, tmp_pat
             m = re.search(r"viewing .* at (http://127\.0\.0\.1:\d+/)", line)
             url = m.group(1) if m else None
         assert url, "".join(lines)
-        img = screenshot(url, ART / "dataset_view.png")
+        img = screenshot(url, ART / "dataset_view.png", ready=drawn)
         assert pad_pixels(img) > 100
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0
@@ -219,11 +224,11 @@ def test_teleop_app_3d_view_in_chromium(chromium, tmp_path):
         t0 = time.monotonic()
         while session.report.steps < 10 and time.monotonic() - t0 < 120:
             time.sleep(0.1)
-        working = screenshot(view.url, ART / "teleop_recording.png")
+        working = screenshot(view.url, ART / "teleop_recording.png", ready=drawn)
         while session.control.phase.value != "review" and time.monotonic() - t0 < 600:
             time.sleep(0.2)
         assert session.control.phase.value == "review"
-        review = screenshot(view.url, ART / "teleop_review.png")
+        review = screenshot(view.url, ART / "teleop_review.png", ready=drawn)
     finally:
         session.request_stop()
         worker.join(timeout=60)
