@@ -94,9 +94,12 @@ class DeformablePickupEnv(gym.Env):
     (value or tuple to sample), ``poisson_ratio``, ``density``, ``ground_friction``,
     ``pad_friction``, ``init_position_noise``, ``init_yaw_noise``, ``control_hz``,
     ``max_linear_speed`` (m/s, <= 2), ``max_angular_speed`` (rad/s), ``wrist_force_limit`` (N),
-    ``camera``,
-    ``gripper``, ``solver``, ``obs_type``, ``action_mode``, ``device``), plus ``render_mode``
-    ("rgb_array").
+    ``camera``, ``gripper``, ``solver``, ``obs_type``, ``action_mode``, ``device``), plus
+    ``render_mode``: ``"rgb_array"`` (``render()`` returns the camera image) or ``"human"`` (a 3D
+    view in the browser, ``defgrasp_env.viewer``, needs the ``[viewer]`` extra: ``reset`` and every
+    ``step`` draw the scene; the URL is printed; no display needed; ``viewer_host`` (default
+    127.0.0.1) and ``viewer_port`` (default 8080, 0: any free port) set where it is served: forward
+    it over SSH with ``ssh -L 8080:127.0.0.1:8080 HOST``).
 
     **Reset options**: ``{"object": name}`` picks the episode's object among the configured ones
     (for ``object="random"``; the random draw is still made, so the other draws stay the same).
@@ -106,13 +109,20 @@ class DeformablePickupEnv(gym.Env):
     **Version history**: v0: first release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 20}
 
-    def __init__(self, render_mode: str | None = None, config: PickupConfig | None = None, **kwargs):
+    def __init__(self, render_mode: str | None = None, config: PickupConfig | None = None,
+                 viewer_host: str = "127.0.0.1", viewer_port: int = 8080, **kwargs):
         self.config = make_config(config, kwargs)
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if render_mode not in (None, "rgb_array", "human"):
+            raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
         self.render_mode = render_mode
+        self._viewer = None
+        if render_mode == "human":
+            from ..viewer import LiveSceneViewer, check_port_free
+
+            check_port_free(viewer_host, viewer_port, "viewer_port")
+            self._viewer = LiveSceneViewer(host=viewer_host, port=viewer_port)
         self.metadata = {**self.metadata, "render_fps": self.config.control_hz}
         self.observation_space = observation_spaces(self.config)
         self.action_space = action_space(self.config)
@@ -133,6 +143,9 @@ class DeformablePickupEnv(gym.Env):
             self.scene.reset_worlds(np.ones(1, bool), [setup])
             spec = dataclasses.replace(spec, scene_origin=self._scene_origin)
         self.task.reset(np.ones(1, bool))
+        if self._viewer is not None:
+            self._viewer.new_episode()
+            self.render()
         return self._obs(), {"is_success": False, "object": setup.object_name,
                              "youngs_modulus": setup.material.youngs_modulus, "replay_spec": spec}
 
@@ -146,14 +159,20 @@ class DeformablePickupEnv(gym.Env):
         info = {k: v[0].item() for k, v in step_infos(self.scene, result, stats, diverged).items()}
         terminated = bool(result["is_success"][0])
         truncated = bool(diverged[0])
+        if self._viewer is not None:
+            self.render()
         return self._obs(), float(result["reward"][0]), terminated, truncated, info
 
     def render(self):
+        if self.render_mode == "human" and self.scene is not None:
+            self._viewer.show(self.scene, 0, self.config.goal, time_s=float(self.task.elapsed[0]) * self.config.dt)
         if self.render_mode != "rgb_array":
             return None
         return self._render_world(0)
 
     def close(self):
+        if self._viewer is not None:
+            self._viewer.close()
         self._camera = SceneCamera(self.config)
         self.scene = None
 

@@ -42,11 +42,14 @@ class DeformablePickupVectorEnv(VectorEnv):
     ``full_state_torch()`` gives the complete FEM state as zero-copy torch views of the simulation's
     own arrays (on the GPU when ``device="cuda:0"``): node positions/velocities/forces [N, 3] and
     von Mises stress [T] of all worlds, with ``model.node_start`` / ``model.tet_start`` offsets.
+    ``render_mode="human"``: the 3D browser view of one world (``viewer_world``, default 0) at every
+    reset and step, served on ``viewer_host``/``viewer_port`` as for the single env.
     """
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, torch_outputs: bool = False,
-                 config: PickupConfig | None = None, **kwargs: Any):
+                 config: PickupConfig | None = None, viewer_world: int = 0, viewer_host: str = "127.0.0.1",
+                 viewer_port: int = 8080, **kwargs: Any):
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         self.config = make_config(config, kwargs)
@@ -55,12 +58,20 @@ class DeformablePickupVectorEnv(VectorEnv):
         except ValueError:
             raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
                              f"got {autoreset_mode!r}") from None
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if render_mode not in (None, "rgb_array", "human"):
+            raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
         self.num_envs = num_envs
         self.render_mode = render_mode
+        self._viewer, self._viewer_world = None, viewer_world
+        if render_mode == "human":
+            if isinstance(viewer_world, bool) or not isinstance(viewer_world, int) or not 0 <= viewer_world < num_envs:
+                raise ValueError(f"viewer_world must be an int in [0, {num_envs - 1}], got {viewer_world!r}")
+            from ..viewer import LiveSceneViewer, check_port_free
+
+            check_port_free(viewer_host, viewer_port, "viewer_port")
+            self._viewer = LiveSceneViewer(host=viewer_host, port=viewer_port)
         self.max_episode_steps = max_episode_steps if max_episode_steps is not None else self.config.max_episode_steps
-        self.metadata = {"render_modes": ["rgb_array"], "render_fps": self.config.control_hz,
+        self.metadata = {"render_modes": ["rgb_array", "human"], "render_fps": self.config.control_hz,
                          "autoreset_mode": self.autoreset_mode}
         self.single_observation_space = observation_spaces(self.config)
         self.single_action_space = action_space(self.config)
@@ -92,6 +103,10 @@ class DeformablePickupVectorEnv(VectorEnv):
         specs = self._reset_worlds(mask, seeds)
         info = {"is_success": np.zeros(self.num_envs, bool), "_is_success": mask.copy(),
                 "replay_spec": specs, "_replay_spec": np.array([spec is not None for spec in specs])}
+        if self._viewer is not None:
+            if mask[self._viewer_world]:
+                self._viewer.new_episode()
+            self.render()
         return self._obs(), info
 
     def step(self, actions):
@@ -127,9 +142,14 @@ class DeformablePickupVectorEnv(VectorEnv):
             specs = self._reset_worlds(done)
             info.update(replay_spec=specs, _replay_spec=done.copy())
             obs = self._obs()
+        if self._viewer is not None:
+            self.render()
         return obs, reward, terminated, truncated, info
 
     def render(self):
+        if self.render_mode == "human" and self.scene is not None:
+            w = self._viewer_world
+            self._viewer.show(self.scene, w, self.config.goal, time_s=float(self.task.elapsed[w]) * self.config.dt)
         if self.render_mode != "rgb_array":
             return None
         return np.stack([self._render_world(w) for w in range(self.num_envs)])
@@ -147,6 +167,8 @@ class DeformablePickupVectorEnv(VectorEnv):
             "pad_normal_force")}
 
     def close_extras(self, **kwargs):
+        if self._viewer is not None:
+            self._viewer.close()
         self.scene = None
         self._camera = SceneCamera(self.config)
 

@@ -4,6 +4,7 @@
     defgrasp-dataset to-lerobot SRC DST       # new LeRobot v3.0 dataset at DST
     defgrasp-dataset plot EPISODE [-o PNG]    # the paper's Fig. 5 panels
     defgrasp-dataset replay EPISODE           # re-simulate; exit 1 unless every step is bit-exact
+    defgrasp-dataset view EPISODE [--port N]  # 3D playback in the browser, with a timeline ([viewer] extra)
     defgrasp-dataset schema                   # the schema table (Markdown)
 """
 
@@ -57,6 +58,13 @@ def _replay(args) -> int:
     return 0 if result.bit_exact else 1
 
 
+def _view(args) -> int:
+    from ..viewer.playback import view_episode
+
+    view_episode(args.episode, host=args.host, port=args.port)
+    return 0
+
+
 def _schema(args) -> int:
     from .schema import schema_markdown
 
@@ -86,6 +94,12 @@ def _replay_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None, help="Warp device (default: the recorded one)")
 
 
+def _view_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("episode")
+    p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1; 0.0.0.0: any)")
+    p.add_argument("--port", type=int, default=8080, help="port to serve on (default 8080; 0: any free)")
+
+
 def _no_args(p: argparse.ArgumentParser) -> None:
     pass
 
@@ -96,6 +110,7 @@ COMMANDS = {
     "to-lerobot": ("convert episodes to a LeRobot dataset", _to_lerobot_args, _to_lerobot),
     "plot": ("draw the paper's Fig. 5 panels of one episode", _plot_args, _plot),
     "replay": ("re-simulate an episode and compare node positions bit for bit", _replay_args, _replay),
+    "view": ("replay an episode in a 3D browser view with a timeline", _view_args, _view),
     "schema": ("print the episode schema table", _no_args, _schema),
 }
 
@@ -116,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     default_caches()
     try:
         return args.func(args)
-    except (OSError, ValueError, TypeError, KeyError) as exc:
+    except (OSError, ValueError, TypeError, KeyError, ImportError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         print(f"defgrasp-dataset {args.command}: error: {' '.join(str(message).split())}", file=sys.stderr)
         return 2

@@ -57,14 +57,20 @@ class Camera:
         fov_y_deg: vertical field of view in degrees, in (1, 179).
         width, height: image size in pixels, ints in [16, 4096].
 
-    The default frames the pickup scene: an object of ~5 cm resting at the origin and the lift
-    path up to the goal at (0, 0.6, 0) m, seen obliquely from the front-right and above.
+    The default frames the whole pickup task: every object of the task (up to the 30 cm rope, any
+    yaw, with the reset's position noise) on the ground, and held at the goal (0, 0.6, 0) m, upright
+    or folded over the pads (the rope held at its middle: 0.52 to 0.68 m), lies inside the image
+    at 224 x 224 (seen from the front-right, 30 degrees above the horizon, 1.2 m from
+    (0, 0.34, 0), 41 degrees vertical field of view). The task's vertical extent sets the scale: a
+    4 cm object spans ~15 px at 224 px and ~32 px at 480 px (``Camera(width=480, height=480)``
+    keeps this framing: the field of view is vertical, so only the pixel count changes; a width
+    below the height narrows the view). For video or to see deformation, render larger.
     """
 
-    position: tuple[float, float, float] = (0.6, 0.45, 0.6)
-    look_at: tuple[float, float, float] = (0.0, 0.3, 0.0)
+    position: tuple[float, float, float] = (0.5196, 0.94, 0.9)
+    look_at: tuple[float, float, float] = (0.0, 0.34, 0.0)
     up: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    fov_y_deg: float = 45.0
+    fov_y_deg: float = 41.0
     width: int = 224
     height: int = 224
 

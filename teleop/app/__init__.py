@@ -5,7 +5,8 @@
   recording through ``HDF5Recorder``, live view, Ctrl-C safety);
 * ``control``: the episode flow as a pure state machine; ``keys``: the pure key -> command map and
   key sources (pynput, terminal, none, scripted);
-* ``devices``: ``--tracker``/``--glove`` specs -> a ``TeleopDevice``; ``view``: PNG / HTTP live view.
+* ``devices``: ``--tracker``/``--glove`` specs -> a ``TeleopDevice``; ``view``: the live views (3D browser
+  viewer, camera-image page, PNG file).
 
 Synthetic operator streams and playing recorded streams over UDP live in ``teleop.testing``.
 

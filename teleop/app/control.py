@@ -13,6 +13,7 @@ right arrow    SAVE (keep, reset) -> REVIEW                   START (end the rev
 left arrow     DISCARD (drop, reset), record again            DELETE_LAST (remove its file), START again
 s              TOGGLE_SUCCESS (operator's success mark)       ignored (the episode is already written)
 Esc            SAVE_AND_STOP (keep it, like LeRobot) -> DONE  STOP -> DONE
+enter / space  GO (start now, without waiting for devices)    START, GO (end the review, start now)
 env ended      SAVED (the recorder wrote it; reset) -> REVIEW -
 review timeout -                                              START (or STOP once enough are kept)
 interrupt      STOP_INTERRUPTED -> DONE                       STOP -> DONE
@@ -44,6 +45,7 @@ class Effect(enum.Enum):
     SAVE_AND_STOP = "save_and_stop"  # close, keeping the current episode
     STOP = "stop"  # close; nothing unsaved is pending
     STOP_INTERRUPTED = "stop_interrupted"  # close after Ctrl-C: the session's policy decides
+    GO = "go"  # start stepping now even if the devices have sent no data yet
 
 
 class EpisodeControl:
@@ -89,6 +91,8 @@ class EpisodeControl:
             if cmd is RecordCommand.MARK_SUCCESS:
                 self.success_mark = not self.success_mark
                 return [Effect.TOGGLE_SUCCESS]
+            if cmd is RecordCommand.START_NOW:
+                return [Effect.GO]
             self.phase = Phase.DONE
             if steps:
                 self.kept += 1
@@ -102,6 +106,9 @@ class EpisodeControl:
             return [Effect.DELETE_LAST, Effect.START]
         if cmd is RecordCommand.MARK_SUCCESS:
             return []
+        if cmd is RecordCommand.START_NOW:
+            effects = self._start()
+            return effects + [Effect.GO] if self.phase is Phase.RECORDING else effects
         self.phase = Phase.DONE
         return [Effect.STOP]
 

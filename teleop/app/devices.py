@@ -73,6 +73,15 @@ class Controller:
     live_latency: bool
     parts: dict = field(default_factory=dict)
 
+    def has_data(self) -> bool:
+        """True when the devices send usable data now: the pose tracker is tracking and the glove
+        (if any) connected. Devices without a stream (keyboard, SpaceMouse) always have data. Reads
+        the devices (they must be connected); reading does not consume samples."""
+        tracker, glove = self.parts.get("tracker"), self.parts.get("glove")
+        if tracker is None:
+            return True
+        return bool(tracker.read().valid) and (glove is None or bool(glove.read().connected))
+
 
 class KeyJawGlove(HapticGlove):
     """Stand-in glove when there is none: the pinch distance follows held keys (``open_key``

@@ -4,6 +4,7 @@ Keys (names are lower-case strings: ``"right"``, ``"left"``, ``"esc"``, single c
 
     right arrow   end the episode (keep it)          left arrow   discard it and record it again
     s             mark the episode a success (toggle) esc          stop (the current episode is kept)
+    enter/space   start the episode now (without waiting for device data; ends a review early)
 
 ``command_for_key`` is the whole mapping; a ``KeySource`` only turns a device into key names:
 
@@ -37,6 +38,7 @@ class RecordCommand(enum.Enum):
     RERECORD = "rerecord"
     MARK_SUCCESS = "mark_success"
     STOP = "stop"
+    START_NOW = "start_now"
 
 
 DEFAULT_RECORD_KEYS: Mapping[str, RecordCommand] = {
@@ -44,6 +46,8 @@ DEFAULT_RECORD_KEYS: Mapping[str, RecordCommand] = {
     "left": RecordCommand.RERECORD,
     "s": RecordCommand.MARK_SUCCESS,
     "esc": RecordCommand.STOP,
+    "enter": RecordCommand.START_NOW,
+    "space": RecordCommand.START_NOW,
 }
 
 

@@ -2,9 +2,16 @@
 
 Per control step while recording: poll the keys -> ``EpisodeControl`` -> effects; ``act(obs)`` of
 the teleop device (device read, retargeting, IK); ``env.step``; ``send_feedback(info)`` (haptics);
-live view and status line (throttled); then sleep to the control period (``realtime``; if the loop
-is slower than the period the simulation simply runs slower than real time and the status line
-shows the achieved rate).
+live view and status line (throttled); then sleep to the control period (``realtime``). When a step
+takes longer than the period the simulation runs slower than real time: the status line and the view
+show ``BEHIND`` with the achieved rate, and the session says so once per episode (``late_steps`` in the
+report counts such steps).
+
+Each episode starts in a *waiting* state (``wait_for_devices``): nothing is stepped and the episode
+clock stands still until the devices send usable data (``Controller.has_data``) or the operator
+presses enter/space. A loss of device data during an episode (the agent holds the gripper) is
+announced in the terminal, on the status line and on the page, and so is its return. During the
+review the view keeps the last frame of the episode just finished and shows its result.
 
 Recording goes through ``HDF5Recorder`` (``defgrasp_env.recording``), which writes each episode
 atomically when it ends; the session adds the operator's success mark to every step's info
@@ -34,7 +41,6 @@ import numpy as np
 from .control import Effect, EpisodeControl, Phase
 from .devices import Controller
 from .keys import KeySource, NullKeySource, RecordCommand, commands_for_keys
-from .view import LiveView
 
 log = logging.getLogger("teleop.app")
 
@@ -112,6 +118,7 @@ class SessionConfig:
     seed: int | None = None
     fixed_seed: bool = False
     keep_interrupted: bool = False
+    wait_for_devices: bool = True
 
     def __post_init__(self):
         EpisodeControl(self.num_episodes, self.reset_time_s)  # validates both
@@ -136,6 +143,9 @@ class SessionReport:
     loop_hz: float | None = None
     step_time_s: dict = field(default_factory=dict)
     latency: dict = field(default_factory=dict)
+    loop_rate_hz: dict = field(default_factory=dict)
+    late_steps: int = 0
+    data_losses: int = 0
 
 
 class Console:
@@ -166,10 +176,12 @@ class Console:
 class CollectionSession:
     """Runs the collection loop (module doc). ``env``: the outer env (the recorder if any);
     ``controller``: a ``Controller`` (or a bare TeleopDevice); ``marks``: the ``OperatorMarks``
-    inside the recorder; ``sim_clock``: the clock replay devices run on."""
+    inside the recorder; ``view``: a live view or a list of them (``teleop.app.view``: objects with
+    ``capture(env)``, ``update(frame, readouts)``, ``new_episode()``, ``close()``); ``sim_clock``: the
+    clock replay devices run on."""
 
     def __init__(self, env: gym.Env, controller, keys: KeySource | None = None, *, recorder=None,
-                 marks: OperatorMarks | None = None, view: LiveView | None = None,
+                 marks: OperatorMarks | None = None, view=None,
                  config: SessionConfig | None = None, sim_clock: SimClock | None = None,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  say: Callable[[str], None] | None = None, status: Callable[[str], None] | None = None,
@@ -178,7 +190,8 @@ class CollectionSession:
         self.controller = controller if isinstance(controller, Controller) else Controller(controller, type(controller).__name__, True)
         self.device = self.controller.device
         self.keys = keys or NullKeySource()
-        self.recorder, self.marks, self.view = recorder, marks, view
+        self.recorder, self.marks = recorder, marks
+        self.views = [] if view is None else list(view) if isinstance(view, (list, tuple)) else [view]
         self.config = config or SessionConfig()
         self.sim_clock = sim_clock or SimClock()
         console = Console()
@@ -196,6 +209,11 @@ class CollectionSession:
         self._step_times: list[float] = []
         self._last_view = self._last_status = -np.inf
         self._keep_current = False
+        self._waiting = False
+        self._device_state = "-"
+        self._last_result: str | None = None
+        self._tick_times: list[float] = []
+        self._behind_said = False
 
     # signals -------------------------------------------------------------------------------------
     def _on_sigint(self, signum, frame) -> None:
@@ -222,6 +240,9 @@ class CollectionSession:
     def _reset_env(self, keep_pending: bool) -> None:
         """Reset for the next episode; the recorder saves the pending episode iff keep_pending, else
         discards it."""
+        if self._steps:
+            self._last_result = f"{'kept' if keep_pending else 'ended'}: {self._describe_last()}"
+            self._publish(force=True, capture=True)  # the finished episode's last frame stays on the view
         if self.recorder is not None:
             if keep_pending:
                 self.recorder.save("reset")
@@ -234,7 +255,12 @@ class CollectionSession:
         self.sim_clock.reset()
         self.device.reset()
         self._release_haptics()
-        self._publish(force=True)
+        self._waiting = self.config.wait_for_devices
+        self._behind_said = False
+        self._device_state = "-"
+        for view in self.views:
+            view.new_episode()
+        self._publish(force=True, capture=self.control.phase is not Phase.REVIEW)
 
     def _collect_saved(self) -> None:
         if self.recorder is None:
@@ -245,8 +271,9 @@ class CollectionSession:
 
     def _describe_last(self) -> str:
         i = self._info
-        return (f"{self._steps} steps, success {bool(i.get('is_success', False))}, "
-                f"operator mark {bool(i.get('operator_success', False))}")
+        return (f"{self._steps} steps ({self._steps * self.dt:.2f} s), success {bool(i.get('is_success', False))}, "
+                f"operator mark {bool(i.get('operator_success', False))}"
+                + (", diverged" if i.get("sim_diverged") else ""))
 
     def _apply(self, effect: Effect) -> None:
         c = self.control
@@ -276,7 +303,14 @@ class CollectionSession:
             self._say(f"operator success mark: {'ON' if c.success_mark else 'off'}")
         elif effect is Effect.START:
             self.device.reset()
-            self._say(f"recording episode {c.kept + 1}/{c.num_episodes}")
+            self._waiting = self.config.wait_for_devices
+            self._say(f"recording episode {c.kept + 1}/{c.num_episodes}"
+                      + (": waiting for device data (enter/space starts now)" if self._waiting else ""))
+            self._publish(force=True, capture=True)
+        elif effect is Effect.GO:
+            if self._waiting:
+                self._waiting = False
+                self._say("starting the episode now (start key)")
         elif effect is Effect.SAVE_AND_STOP:
             self._keep_current = True
         elif effect is Effect.STOP_INTERRUPTED:
@@ -287,6 +321,7 @@ class CollectionSession:
     def _step(self) -> bool:
         t0 = self._clock()
         action = self.device.act(self._obs)
+        self._track_device_state()
         self._obs, _, terminated, truncated, info = self.env.step(action)
         self._info = info
         self.device.send_feedback(info)
@@ -297,31 +332,68 @@ class CollectionSession:
         self._publish()
         return bool(terminated or truncated)
 
+    def _track_device_state(self) -> None:
+        """Announce a loss of device data (the agent holds the gripper) and its return."""
+        state, before = getattr(self.device, "status", "-"), self._device_state
+        self._device_state = state
+        if state == "hold" and before != "hold":
+            self.report.data_losses += 1
+            self._say(f"DEVICE DATA LOST at step {self._steps}: holding the gripper until data returns")
+            self._publish(force=True)
+        elif state != "hold" and before == "hold":
+            self._say(f"device data back at step {self._steps}: continuing from the held pose")
+            self._publish(force=True)
+
+    def _headline(self) -> str:
+        c = self.control
+        if c.phase is Phase.REVIEW:
+            return f"REVIEW - last episode {self._last_result or ''}"
+        if c.phase is Phase.DONE:
+            return "DONE"
+        if self._waiting:
+            return f"WAITING for device data (enter/space starts now) - episode {c.kept + 1}/{c.num_episodes}"
+        if self._device_state == "hold":
+            return "DEVICE DATA LOST - holding the gripper"
+        return f"RECORDING episode {c.kept + 1}/{c.num_episodes}"
+
     def _readouts(self) -> dict:
         i, c = self._info, self.control
         lat = self.device.latency_stats() if self.controller.live_latency and hasattr(self.device, "latency_stats") else {}
-        recent = self._step_times[-50:]
+        recent = np.diff(self._tick_times[-51:])
+        recent = recent[recent < 10 * self.dt + 1.0]  # a wait or a review between two steps is no period
+        hz = 1.0 / float(np.mean(recent)) if len(recent) else None
         return {
-            "phase": c.phase.value, "episode": min(c.kept + 1, c.num_episodes), "episodes_kept": c.kept,
+            "headline": self._headline(),
+            "phase": "waiting" if (self._waiting and c.phase is Phase.RECORDING) else c.phase.value, "episode": min(c.kept + 1, c.num_episodes), "episodes_kept": c.kept,
             "episodes_wanted": c.num_episodes, "step": self._steps, "sim_time_s": round(self.sim_clock(), 3),
             "teleop_status": getattr(self.device, "status", "-"),
+            "device_data": "-" if c.phase is not Phase.RECORDING else (
+                "waiting" if self._waiting else "LOST" if self._device_state == "hold" else "ok"),
             "left_tip_force_N": i.get("left_tip_normal_force", 0.0), "right_tip_force_N": i.get("right_tip_normal_force", 0.0),
             "jaw_gap_mm": 1e3 * float(i.get("jaw_gap", np.nan)) if "jaw_gap" in i else None,
             "mean_von_mises_Pa": i.get("mean_von_mises"), "goal_distance_m": i.get("goal_distance"),
             "is_success": bool(i.get("is_success", False)), "operator_success": self.control.success_mark,
-            "loop_hz": 1.0 / float(np.mean(recent)) if recent else None,
+            "loop_hz": hz,
+            "behind": bool(hz is not None and self.config.realtime and hz < 0.95 / self.dt
+                           and c.phase is Phase.RECORDING and not self._waiting and self._steps > 1),
+            "last_episode": self._last_result,
             "latency_p50_ms": 1e3 * lat["p50_s"] if lat.get("count") else None,
             "recording": str(self.recorder.directory) if self.recorder is not None else "off",
             "controller": self.controller.description,
         }
 
-    def _publish(self, force: bool = False) -> None:
+    def _publish(self, force: bool = False, capture: bool | None = None) -> None:
+        """Views and status line (throttled unless ``force``); ``capture`` (default: not in review)
+        draws the env's current state, else the views keep their frame and get new readouts."""
         now = self._clock()
         c = self.config
-        if self.view is not None and (force or (c.view_hz > 0 and now - self._last_view >= 1.0 / c.view_hz)):
+        capture = self.control.phase is not Phase.REVIEW if capture is None else capture
+        if self.views and (force or (c.view_hz > 0 and now - self._last_view >= 1.0 / c.view_hz)):
             self._last_view = now
-            self.view.update(self.env.render() if self.env.render_mode == "rgb_array" else None, self._readouts())
-        if c.status_hz > 0 and now - self._last_status >= 1.0 / c.status_hz:
+            readouts = self._readouts()
+            for view in self.views:
+                view.update(view.capture(self.env) if capture else None, readouts)
+        if c.status_hz > 0 and (force or now - self._last_status >= 1.0 / c.status_hz):
             self._last_status = now
             r = self._readouts()
             lat = f"{r['latency_p50_ms']:.0f} ms" if r["latency_p50_ms"] is not None else "n/a"
@@ -329,10 +401,13 @@ class CollectionSession:
             gap = f"{r['jaw_gap_mm']:.1f} mm" if r["jaw_gap_mm"] is not None else "-"
             stress = r["mean_von_mises_Pa"]
             self._status(f"[{r['phase']}] ep {r['episode']}/{r['episodes_wanted']} step {r['step']} | "
+                         + ("DEVICE DATA LOST | " if r["device_data"] == "LOST" else "")
+                         + ("BEHIND real time | " if r["behind"] else "") +
                          f"F L {r['left_tip_force_N']:.1f} N R {r['right_tip_force_N']:.1f} N | gap {gap} | "
                          f"stress {stress / 1e3 if stress is not None else float('nan'):.1f} kPa | "
                          f"{r['teleop_status']} | {hz} | latency {lat}"
-                         + (" | SUCCESS" if r["is_success"] else "") + (" | marked" if r["operator_success"] else ""))
+                         + (" | SUCCESS" if r["is_success"] else "") + (" | marked" if r["operator_success"] else "")
+                         + (f" | last episode {r['last_episode']}" if r["phase"] == "review" else ""))
 
     def run(self) -> SessionReport:
         """Run until enough episodes are kept, Esc, Ctrl-C or an error; returns the report."""
@@ -346,7 +421,9 @@ class CollectionSession:
                 self._say("WARNING: not recording (no output folder or no recorder)")
             self._reset_env(keep_pending=False)
             self._say(f"recording episode 1/{c.num_episodes} with {self.controller.description}; "
-                      "keys: right arrow = end episode, left arrow = re-record, s = mark success, Esc = stop")
+                      "keys: right arrow = end episode, left arrow = re-record, s = mark success, Esc = stop, "
+                      "enter/space = start now"
+                      + ("; waiting for device data" if self._waiting else ""))
             next_tick = self._clock()
             last = self._clock()
             while not c.done:
@@ -364,7 +441,16 @@ class CollectionSession:
                 if c.done:
                     break
                 now = self._clock()
-                if c.phase is Phase.RECORDING:
+                if c.phase is Phase.RECORDING and self._waiting:
+                    if self.controller.has_data():
+                        self._waiting = False
+                        self._say("device data arrived: episode started")
+                    else:
+                        self._publish()
+                        if not self.config.realtime:
+                            self._sleep(0.005)
+                if c.phase is Phase.RECORDING and not self._waiting:
+                    self._tick_times.append(now)
                     if self._step():
                         for e in c.episode_ended(self._steps):
                             self._apply(e)
@@ -380,6 +466,7 @@ class CollectionSession:
                         self._sleep(wait)
                     elif wait < -self.dt:  # behind: do not try to catch up with a burst
                         next_tick = self._clock()
+                        self._fell_behind()
         except BaseException as exc:
             self.report.stopped_by = "interrupt" if isinstance(exc, KeyboardInterrupt) else "error"
             self._keep_current = False
@@ -388,10 +475,20 @@ class CollectionSession:
             self._finish(previous, install)
         return self.report
 
+    def _fell_behind(self) -> None:
+        """A step ended more than one period late: count it; say it once per episode."""
+        self.report.late_steps += 1
+        if not self._behind_said and self.control.phase is Phase.RECORDING and not self._waiting:
+            self._behind_said = True
+            recent = np.diff(self._tick_times[-21:])
+            hz = f"{1.0 / float(np.mean(recent)):.1f} Hz" if len(recent) else "?"
+            self._say(f"BEHIND real time: the loop runs at {hz}, below the {1.0 / self.dt:.0f} Hz control rate "
+                      "(the simulation runs slower than the clock)")
+
     def _finish(self, previous_handler, installed: bool) -> None:
         steps = self._steps
         for what, fn in (("keys", self.keys.stop), ("haptics", self._release_haptics), ("env", lambda: self._close_env(steps)),
-                         ("device", self.device.disconnect), ("view", self.view.close if self.view else lambda: None)):
+                         ("device", self.device.disconnect), *(("view", v.close) for v in self.views)):
             try:
                 fn()
             except Exception:  # keep cleaning up; the failure is reported, not swallowed
@@ -403,6 +500,12 @@ class CollectionSession:
             a = np.array(st)
             self.report.loop_hz = float(1.0 / a.mean())
             self.report.step_time_s = {"p50": float(np.median(a)), "p95": float(np.percentile(a, 95))}
+        periods = np.diff(self._tick_times)
+        periods = periods[periods < 10 * self.dt + 1.0]  # a review or a wait between episodes is no period
+        if len(periods) > 3:
+            rates = 1.0 / periods[3:] if len(periods) > 6 else 1.0 / periods
+            # p95: the rate that 95 % of the loop periods reach (1 / the 95th percentile of the period)
+            self.report.loop_rate_hz = {"p50": float(np.median(rates)), "p95": float(np.percentile(rates, 5))}
         if self.controller.live_latency and hasattr(self.device, "latency_stats"):
             self.report.latency = self.device.latency_stats()
         self._say(f"stopped ({self.report.stopped_by}): {len(self.report.saved)} episode(s) kept"

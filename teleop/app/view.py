@@ -1,4 +1,14 @@
-"""Live view of a collection session: the scene image and readouts, without new dependencies.
+"""Live views of a collection session.
+
+``SceneView3D`` (the default, ``--view 3d``): the 3D browser viewer of ``defgrasp_env.viewer``
+(viser; the ``[viewer]`` extra): the deforming object coloured by stress, pads, wrist frame, goal,
+tip-force arrows, and a status panel with the readouts (episode status, forces, gap, stress, success,
+device state, and during review the result of the episode just finished, whose last frame stays on
+screen). ``LiveView`` (``--view 2d`` and ``--view-png``) is the camera image and a readout table, with
+no extra dependency (below).
+
+Both have ``capture(env)`` (what to show of the env now), ``update(frame, readouts)``,
+``new_episode()`` and ``close()``; the session calls only these.
 
 ``LiveView.update(frame, readouts)`` keeps the newest camera frame (``env.render()``, uint8
 [H, W, 3]) and a dict of readouts (tip forces, jaw gap, mean stress, ...). Two optional sinks:
@@ -75,9 +85,11 @@ class LiveView:
 
     png_path: file to keep replaced with the newest frame (None: no file).
     http_address: (host, port) to serve on (port 0 picks a free one; None: no server).
+    port_flag: the option named when the port is taken.
     """
 
-    def __init__(self, png_path=None, http_address: tuple[str, int] | None = None):
+    def __init__(self, png_path=None, http_address: tuple[str, int] | None = None, port_flag: str = "--view-port"):
+        self.port_flag = port_flag
         self.png_path = pathlib.Path(png_path) if png_path is not None else None
         self._lock = threading.Lock()
         self._frame: np.ndarray | None = None
@@ -90,6 +102,14 @@ class LiveView:
             self._start_server(http_address)
 
     # publishing --------------------------------------------------------------------------------------
+    @staticmethod
+    def capture(env) -> np.ndarray | None:
+        """The env's camera image (``render_mode="rgb_array"``), else None."""
+        return env.render() if env.render_mode == "rgb_array" else None
+
+    def new_episode(self) -> None:
+        """Nothing to restart (the image has no colour scale)."""
+
     def update(self, frame: np.ndarray | None, readouts: dict) -> None:
         """Publish a new frame (None keeps the previous one) and the readouts."""
         if not isinstance(readouts, dict):
@@ -166,7 +186,11 @@ class LiveView:
                 pass
 
         host, port = address
-        self._server = http.server.ThreadingHTTPServer((host, int(port)), Handler)
+        try:
+            self._server = http.server.ThreadingHTTPServer((host, int(port)), Handler)
+        except OSError as exc:
+            raise OSError(exc.errno, f"live view port {port} on {host} cannot be used ({exc.strerror}); "
+                                     f"choose another with {self.port_flag} (0 picks a free one)") from None
         self._server.daemon_threads = True
         self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.2},
                                         name="teleop-view", daemon=True)
@@ -180,6 +204,50 @@ class LiveView:
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class SceneView3D:
+    """The 3D browser view of the session's env (module doc): ``defgrasp_env.viewer.LiveSceneViewer``
+    on ``(host, port)``; the port is checked at construction (``OSError`` naming it and ``port_flag``)."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, port_flag: str = "--view-port"):
+        from defgrasp_env.viewer import LiveSceneViewer
+
+        self._viewer = LiveSceneViewer(host=host, port=port, port_flag=port_flag, say=None, title="defgrasp teleop")
+        self._viewer.open()
+
+    @property
+    def url(self) -> str | None:
+        return self._viewer.url
+
+    def capture(self, env):
+        """(frame, surface) of world 0 of the env's scene now, or None before the first reset."""
+        inner = env.unwrapped
+        if inner.scene is None:
+            return None
+        return self._viewer.capture(inner.scene, 0, inner.config.goal,
+                                    time_s=float(inner.task.elapsed[0]) * inner.config.dt)
+
+    def new_episode(self) -> None:
+        self._viewer.new_episode()
+
+    def update(self, frame, readouts: dict) -> None:
+        """Draw a captured frame (None keeps the one on screen) and show the readouts."""
+        if not isinstance(readouts, dict):
+            raise TypeError(f"readouts must be a dict, got {type(readouts).__name__}")
+        if frame is None:
+            self._viewer.set_status(readouts)
+        else:
+            self._viewer.show_frame(*frame, readouts)
+
+    def close(self) -> None:
+        self._viewer.close()
 
     def __enter__(self):
         return self
