@@ -34,9 +34,9 @@ def test_pad_boxes_from_a_recorded_pose_match_the_scene():
     for _ in range(6):
         env.step(rng.uniform(-1, 1, 7))
     scene = env.unwrapped.scene
-    pos, quat = scene.flange_pose()
-    centers, quats, half = pad_boxes_world(pos[0], quat[0], scene.gap[0])
-    ref_c, ref_q = scene.pad_poses()
+    pos, quat = scene.gripper.flange_pose()
+    centers, quats, half = pad_boxes_world(pos[0], quat[0], scene.gripper.gap[0])
+    ref_c, ref_q = scene.gripper.pad_poses()
     np.testing.assert_allclose(centers, ref_c[0], atol=1e-12)
     np.testing.assert_allclose(quats, ref_q[0], atol=1e-12)
     assert np.all(half > 0)
@@ -101,7 +101,7 @@ def test_vector_env_human_mode_draws_the_chosen_world():
         viewer = venv.unwrapped._viewer.viewer
         scene = venv.unwrapped.scene
         assert scene.object_names == ["cylinder", "torus"]  # object="random" with seed 5: two different objects
-        np.testing.assert_array_equal(viewer.drawing.triangles, scene.meshes[1].surface)  # world 1's torus
+        np.testing.assert_array_equal(viewer.drawing.triangles, scene.mesh(1).surface)  # world 1's torus
         assert viewer.url.startswith("http://127.0.0.1:")
     finally:
         venv.close()

@@ -27,7 +27,7 @@ from ..wrist import clamp_joints, fk_analytic, ik_analytic
 from .driver import GripperConfig, GripperDriver, update_grip_stiffness
 from .linkage import GAP_MAX, GAP_MIN, pad_boxes
 
-__all__ = ["GROUND_CLEARANCE", "Gripper", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
+__all__ = ["GROUND_CLEARANCE", "Gripper", "pad_box_poses", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
 
 #: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
 #: can never push a node through itself; the inner face stays where the linkage puts it.
@@ -38,6 +38,17 @@ GROUND_CLEARANCE = 0.001
 #: Half extents (m) of each pad's collision box (the pad plus its backing), in frame G.
 PAD_BOX_HALF_EXTENTS = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2, 0.0, 0.0])
 _CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+
+
+def pad_box_poses(flange_pos: np.ndarray, flange_quat: np.ndarray, gap: np.ndarray):
+    """Collision-box centres [W, 2, 3] (m) and orientations [W, 2, 4] (xyzw) of the pads (pad plus
+    backing, half extents ``PAD_BOX_HALF_EXTENTS``) for flange poses [W, 3] m, [W, 4] xyzw (world)
+    and jaw gaps [W] (m, clipped to the stroke)."""
+    centers = pad_boxes(gap=np.clip(gap, GAP_MIN, GAP_MAX))[0].copy()      # [W,2,3] in G
+    centers[:, 0, 0] += PAD_BACKING / 2
+    centers[:, 1, 0] -= PAD_BACKING / 2
+    world = flange_pos[:, None, :] + quat_rotate(flange_quat[:, None, :], centers)
+    return world, np.repeat(flange_quat[:, None, :], 2, axis=1)
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:
@@ -117,12 +128,7 @@ class Gripper:
         joints ``q`` [W, 6] and gap [W] (m; default: the current ones)."""
         q = self._q if q is None else q
         gap = self._gap if gap is None else gap
-        pos, quat = fk_analytic(q)
-        centers = pad_boxes(gap=np.clip(gap, GAP_MIN, GAP_MAX))[0].copy()      # [W,2,3] in G
-        centers[:, 0, 0] += PAD_BACKING / 2
-        centers[:, 1, 0] -= PAD_BACKING / 2
-        world = pos[:, None, :] + quat_rotate(quat[:, None, :], centers)
-        return world, np.repeat(quat[:, None, :], 2, axis=1)
+        return pad_box_poses(*fk_analytic(q), gap)
 
     def tcp_positions(self) -> np.ndarray:
         """Tool centre point (midpoint between the pad inner faces) [W, 3], m."""

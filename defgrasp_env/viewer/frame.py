@@ -10,9 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..envs.scene import PAD_BACKING, PAD_BOX_HALF_EXTENTS
-from ..gripper import GAP_MAX, GAP_MIN, pad_boxes
-from ..transforms import quat_rotate
+from ..gripper import PAD_BOX_HALF_EXTENTS, pad_box_poses
 
 
 @dataclass(frozen=True)
@@ -60,12 +58,10 @@ def node_stress(tets: np.ndarray, tet_stress: np.ndarray, num_nodes: int) -> np.
 def pad_boxes_world(flange_position, flange_quat, gap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The pads' collision boxes (as the simulation uses them: pad + backing) for a flange pose and a
     jaw gap: centres [2, 3] (m), orientations [2, 4] (xyzw), half extents [2, 3] (m)."""
-    centers = pad_boxes(gap=float(np.clip(gap, GAP_MIN, GAP_MAX)))[0].copy()   # [2, 3] in the gripper frame
-    centers[0, 0] += PAD_BACKING / 2
-    centers[1, 0] -= PAD_BACKING / 2
-    quat = np.asarray(flange_quat, dtype=np.float64)
-    world = np.asarray(flange_position, dtype=np.float64) + quat_rotate(np.repeat(quat[None], 2, axis=0), centers)
-    return world, np.repeat(quat[None], 2, axis=0), np.repeat(PAD_BOX_HALF_EXTENTS[None], 2, axis=0)
+    pos = np.asarray(flange_position, dtype=np.float64)[None]
+    quat = np.asarray(flange_quat, dtype=np.float64)[None]
+    centers, quats = pad_box_poses(pos, quat, np.array([float(gap)]))
+    return centers[0], quats[0], np.repeat(PAD_BOX_HALF_EXTENTS[None], 2, axis=0)
 
 
 def frame_from_scene(scene, world: int = 0, goal=(0.0, 0.6, 0.0), time_s: float = 0.0) -> ViewerFrame:
@@ -73,15 +69,15 @@ def frame_from_scene(scene, world: int = 0, goal=(0.0, 0.6, 0.0), time_s: float 
     nodes = scene.node_positions(world).astype(np.float64)
     tet_slice = scene.model.world_tets(world)
     tet_stress = scene.state.von_mises.numpy()[tet_slice]
-    centers, quats = scene.pad_poses()
-    pos, quat = scene.flange_pose()
+    centers, quats = scene.gripper.pad_poses()
+    pos, quat = scene.gripper.flange_pose()
     return ViewerFrame(
         vertices=nodes,
-        node_stress=node_stress(scene.meshes[world].tets, tet_stress, len(nodes)),
+        node_stress=node_stress(scene.mesh(world).tets, tet_stress, len(nodes)),
         pad_centers=centers[world], pad_quats=quats[world],
         pad_half_extents=np.repeat(PAD_BOX_HALF_EXTENTS[None], 2, axis=0),
         flange_position=pos[world], flange_quat=quat[world],
-        tip_forces=np.asarray(scene.tip_force[world], dtype=np.float64),
+        tip_forces=np.asarray(scene.gripper.tip_force[world], dtype=np.float64),
         feature_point=nodes.mean(axis=0),
         goal=np.asarray(goal, dtype=np.float64),
         time_s=float(time_s),

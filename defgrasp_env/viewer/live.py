@@ -45,7 +45,7 @@ class LiveSceneViewer:
 
     def capture(self, scene, world: int = 0, goal=(0.0, 0.6, 0.0), time_s: float = 0.0) -> tuple[ViewerFrame, np.ndarray]:
         """(frame, surface triangles) of a scene's world, to ``show_frame`` now or later."""
-        return frame_from_scene(scene, world, goal, time_s), scene.meshes[world].surface
+        return frame_from_scene(scene, world, goal, time_s), scene.mesh(world).surface
 
     def show_frame(self, frame: ViewerFrame, triangles: np.ndarray, readouts: dict | None = None) -> None:
         viewer = self.open()
