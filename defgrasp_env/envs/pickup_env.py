@@ -13,6 +13,10 @@ from .config import PickupConfig
 from .scene import PickupScene
 from .task import PickupTask, action_space, observation_spaces
 
+#: Reset-option prefixes of frameworks that drive the env (LeRobot's rollout passes
+#: ``{"lerobot_new_rollout": True}``): such keys are ignored; any other unknown key is an error.
+FOREIGN_OPTION_PREFIXES = ("lerobot_",)
+
 
 def make_config(config: PickupConfig | None, kwargs: dict[str, Any]) -> PickupConfig:
     """A ``PickupConfig`` from keyword options (``object=``, ``youngs_modulus=``, ...)."""
@@ -72,6 +76,9 @@ class DeformablePickupEnv(gym.Env):
 
     **Reset options**: ``{"object": name}`` picks the episode's object among the configured ones
     (for ``object="random"``; the random draw is still made, so the other draws stay the same).
+    Keys starting with a framework prefix in ``FOREIGN_OPTION_PREFIXES`` (``"lerobot_"``) are
+    ignored, so LeRobot's rollout markers pass; any other key is rejected with a ``ValueError``, so a
+    typo such as ``{"objet": ...}`` never silently does nothing.
 
     **Full state** beyond observations: ``env.unwrapped.scene`` (node positions, forces, stresses).
 
@@ -95,9 +102,10 @@ class DeformablePickupEnv(gym.Env):
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        unknown = sorted(set(options or {}) - {"object"})
+        unknown = sorted(k for k in options or {} if k != "object" and not k.startswith(FOREIGN_OPTION_PREFIXES))
         if unknown:
-            raise ValueError(f"reset options must be a subset of ['object'], got {unknown}")
+            raise ValueError(f"reset options must be a subset of ['object'] (plus keys starting with "
+                             f"{list(FOREIGN_OPTION_PREFIXES)}), got {unknown}")
         name = (options or {}).get("object")
         if name is not None and name not in self.config.object_names:
             raise ValueError(f"reset option object must be one of {list(self.config.object_names)}, got {name!r}")
