@@ -92,7 +92,9 @@ class DeformablePickupEnv(gym.Env):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
-        self.metadata = {**self.metadata, "render_fps": self.config.control_hz}
+        # an int where the rate is one (video writers such as PyAV's need a rational frame rate)
+        hz = self.config.control_hz
+        self.metadata = {**self.metadata, "render_fps": int(hz) if float(hz).is_integer() else hz}
         self.observation_space = observation_spaces(self.config)
         self.action_space = action_space(self.config)
         self.scene: PickupScene | None = None
