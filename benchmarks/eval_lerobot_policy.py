@@ -40,12 +40,16 @@ from success_table import HUMAN, MODULI, OBJECTS, _human, _label  # noqa: E402
 EXPERT_RATE = 1.0
 
 
+def cell_name(obj: str, e: float) -> str:
+    return f"{obj}_E{e:.0e}"
+
+
 def eval_cell(ckpt: str, obj: str, e: float, episodes: int, batch: int, seed: int, out: pathlib.Path,
               extra: list[str]) -> dict:
     """Run ``lerobot-eval`` for one cell; returns its ``eval_info.json`` overall block."""
     from lerobot.scripts.lerobot_eval import eval_main
 
-    cell_dir = out / f"{obj}_E{e:.0e}"
+    cell_dir = out / cell_name(obj, e)
     argv = ["lerobot-eval", "--env.type=defgrasp", f"--env.object={obj}", f"--env.youngs_modulus={e}",
             f"--policy.path={ckpt}", "--policy.device=cpu", f"--eval.n_episodes={episodes}",
             f"--eval.batch_size={batch}", "--eval.use_async_envs=false", f"--seed={seed}",
@@ -75,8 +79,8 @@ def format_report(cells: dict, episodes: int, wall: float, ckpt: str, train_note
                                          for c, o in zip(cols, OBJECTS))
                  + f" | **{net:.2f}** ({EXPERT_RATE:.2f} / {_human('net', 'net')}) |")
     n = sum(c["n_episodes"] for c in cells.values())
-    lines += ["", f"{n} episodes, net success {net:.3f}; evaluation wall time {wall / 60:.1f} min "
-              f"(mean {wall / max(n, 1):.1f} s per episode, video rendering included)."]
+    lines += ["", f"{n} episodes, net success {net:.3f}; evaluation time {wall / 60:.1f} min "
+              f"(sum over cells; mean {wall / max(n, 1):.1f} s per episode, video rendering included)."]
     return "\n".join(lines)
 
 
@@ -103,7 +107,7 @@ def main(argv=None) -> int:
     objects = args.objects.split(",")
     moduli = [float(x) for x in args.moduli.split(",")]
     out = pathlib.Path(args.out)
-    cells, t0 = {}, time.perf_counter()
+    cells = {}
     for obj in objects:
         for e in moduli:
             t = time.perf_counter()
@@ -111,10 +115,16 @@ def main(argv=None) -> int:
                                         out, extra)
             print(f"{obj:9s} E={e:.0e}: success {cells[(obj, e)]['pc_success']:.0f} % "
                   f"({time.perf_counter() - t:.0f} s)", flush=True)
-    wall = time.perf_counter() - t0
-    (out / "cells.json").write_text(json.dumps({f"{o}|{e}": c for (o, e), c in cells.items()}, indent=1))
-    if set(objects) != set(OBJECTS) or set(moduli) != set(MODULI):
+    # cells evaluated earlier into the same --out (e.g. by a parallel run over other objects) complete the table
+    for obj in OBJECTS:
+        for e in MODULI:
+            info = out / cell_name(obj, e) / "eval_info.json"
+            if (obj, e) not in cells and info.is_file():
+                cells[(obj, e)] = json.loads(info.read_text())["overall"]
+    if len(cells) < len(OBJECTS) * len(MODULI):
+        print(f"{len(cells)} of {len(OBJECTS) * len(MODULI)} cells in {out}: no table yet")
         return 0
+    wall = sum(c["eval_s"] for c in cells.values())
     report = format_report(cells, args.episodes, wall, args.checkpoint, args.train_note)
     print(report)
     (out / "report.md").write_text(report + "\n")

@@ -4,7 +4,8 @@ Importing this module registers the config with LeRobot's env registry (``EnvCon
 ``ChoiceRegistry``). LeRobot's scripts find it without flags once the tiny plugin distribution
 ``plugins/lerobot_env_defgrasp`` is installed (``register_third_party_plugins()`` imports every
 installed distribution named ``lerobot_env_*``), or with
-``--env.discover_packages_path=defgrasp_env.lerobot_env`` without it::
+``--env.discover_packages_path=defgrasp_env`` without it (LeRobot then imports
+``defgrasp_env`` and its direct submodules, this one among them)::
 
     lerobot-eval --env.type=defgrasp --env.object=torus --env.youngs_modulus=1e4 \\
         --policy.path=outputs/train/act_defgrasp/checkpoints/last/pretrained_model \\
@@ -19,6 +20,7 @@ to-lerobot`` writes, so a policy trained on an exported dataset runs here unchan
 
 from __future__ import annotations
 
+import pathlib
 from dataclasses import dataclass, field
 
 from lerobot.configs import FeatureType, PolicyFeature
@@ -27,7 +29,8 @@ from lerobot.processor import PolicyProcessorPipeline, RenameObservationsProcess
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
 
 from . import ENV_ID
-from .envs.config import OBS_TYPES, PickupConfig
+from .envs.config import OBS_TYPES, RANDOM_OBJECT, PickupConfig
+from .sim.meshing import OBJECT_SHAPES
 from .envs.task import AGENT_POS_NAMES, ENV_STATE_NAMES
 from .recording.lerobot_export import CAMERA_KEY
 
@@ -62,6 +65,9 @@ class DefgraspEnvConfig(EnvConfig):
         if self.obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type must be one of {list(OBS_TYPES)}, got {self.obs_type!r}")
         # validate every env option now (clear errors at parse time, not inside the vector env)
+        if self.object not in (*OBJECT_SHAPES, RANDOM_OBJECT) and not pathlib.Path(self.object).is_file():
+            raise ValueError(f"object must be one of {sorted(OBJECT_SHAPES)}, {RANDOM_OBJECT!r} or a mesh file, "
+                             f"got {self.object!r}")
         env_config = PickupConfig(**self._pickup_kwargs())
         camera = env_config.camera
         self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(7,))}
