@@ -1,5 +1,7 @@
 """``SB3VectorEnv``: the native vector env under Stable-Baselines3's VecEnv protocol, and a PPO smoke run."""
 
+import pathlib
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -51,7 +53,7 @@ def test_ppo_trains_on_the_vector_env(tmp_path):
     curve records both rollouts, and the script's PNG/CSV are written."""
     import sys
 
-    sys.path.insert(0, "benchmarks")
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
     from train_ppo import save_curve, train
 
     model, curve = train(num_envs=2, timesteps=32, n_steps=8, batch_size=16, episode_seconds=0.3)
