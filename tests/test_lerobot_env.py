@@ -109,7 +109,7 @@ def test_lerobot_eval_one_episode_matches_a_direct_rollout(tmp_path):
     """`lerobot-eval` (LeRobot's CLI, in a subprocess, plugin found by --env.discover_packages_path) runs a
     tiny random-init ACT for one short episode; its reward sum equals the same policy driving
     gym.make through LeRobotPolicy on the same seed (ACT is deterministic at inference)."""
-    from defgrasp_env.policies.lerobot_policy import LeRobotPolicy, save_untrained_act
+    from defgrasp_env.lerobot_policy import LeRobotPolicy, save_untrained_act
 
     ckpt = save_untrained_act(tmp_path / "act", seed=3)
     out = tmp_path / "eval"

@@ -8,7 +8,7 @@ import defgrasp_env  # noqa: F401
 
 pytest.importorskip("lerobot")
 
-from defgrasp_env.policies.lerobot_policy import LeRobotPolicy, save_untrained_act  # noqa: E402
+from defgrasp_env.lerobot_policy import LeRobotPolicy, save_untrained_act  # noqa: E402
 
 
 @pytest.fixture(scope="module")

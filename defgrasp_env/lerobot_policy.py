@@ -45,7 +45,7 @@ class LeRobotPolicy:
         from lerobot.configs.policies import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
-        from ..lerobot_env import DefgraspEnvConfig
+        from .lerobot_env import DefgraspEnvConfig
 
         path = pathlib.Path(path)
         if not (path / "config.json").is_file():
@@ -114,7 +114,7 @@ def save_untrained_act(path: str | pathlib.Path, *, seed: int = 0, dim_model: in
     from lerobot.policies.act.modeling_act import ACTPolicy
     from lerobot.policies.factory import make_pre_post_processors
 
-    from ..lerobot_env import DefgraspEnvConfig
+    from .lerobot_env import DefgraspEnvConfig
 
     features = env_to_policy_features(DefgraspEnvConfig())
     config = ACTConfig(
