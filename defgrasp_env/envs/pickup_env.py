@@ -104,10 +104,11 @@ class DeformablePickupEnv(gym.Env):
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        unknown = sorted(k for k in options or {} if k != "object" and not k.startswith(FOREIGN_OPTION_PREFIXES))
+        unknown = sorted((k for k in options or {} if k != "object"
+                          and not (isinstance(k, str) and k.startswith(FOREIGN_OPTION_PREFIXES))), key=repr)
         if unknown:
-            raise ValueError(f"reset options must be a subset of ['object'] (plus keys starting with "
-                             f"{list(FOREIGN_OPTION_PREFIXES)}), got {unknown}")
+            raise ValueError(f"reset options must be a subset of ['object'], got {unknown} (keys starting "
+                             f"with {list(FOREIGN_OPTION_PREFIXES)} are ignored)")
         name = (options or {}).get("object")
         if name is not None and name not in self.config.object_names:
             raise ValueError(f"reset option object must be one of {list(self.config.object_names)}, got {name!r}")
