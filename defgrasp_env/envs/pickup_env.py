@@ -15,6 +15,10 @@ from .replay_spec import ReplaySpec
 from .scene import PickupScene
 from .task import PickupTask, action_space, observation_spaces
 
+#: Reset-option prefixes of frameworks that drive the env (LeRobot's rollout passes
+#: ``{"lerobot_new_rollout": True}``): such keys are ignored; any other unknown key is an error.
+FOREIGN_OPTION_PREFIXES = ("lerobot_",)
+
 
 def make_config(config: PickupConfig | None, kwargs: dict[str, Any]) -> PickupConfig:
     """A ``PickupConfig`` from keyword options (``object=``, ``youngs_modulus=``, ...)."""
@@ -29,10 +33,14 @@ def make_config(config: PickupConfig | None, kwargs: dict[str, Any]) -> PickupCo
 
 
 def parse_reset_options(config: PickupConfig, options: dict | None) -> str | None:
-    """The episode's object from the reset ``options`` (None: drawn), after checking them."""
-    unknown = sorted(set(options or {}) - {"object"})
+    """The episode's object from the reset ``options`` (None: drawn), after checking them: keys
+    other than ``object`` are refused (typos caught), except those of other frameworks, which start
+    with one of ``FOREIGN_OPTION_PREFIXES`` and are ignored."""
+    unknown = sorted((k for k in options or {} if k != "object"
+                      and not (isinstance(k, str) and k.startswith(FOREIGN_OPTION_PREFIXES))), key=repr)
     if unknown:
-        raise ValueError(f"reset options must be a subset of ['object'], got {unknown}")
+        raise ValueError(f"reset options must be a subset of ['object'], got {unknown} (keys starting "
+                         f"with {list(FOREIGN_OPTION_PREFIXES)} are ignored)")
     name = (options or {}).get("object")
     if name is not None and name not in config.object_names:
         raise ValueError(f"reset option object must be one of {list(config.object_names)}, got {name!r}")
@@ -103,6 +111,9 @@ class DeformablePickupEnv(gym.Env):
 
     **Reset options**: ``{"object": name}`` picks the episode's object among the configured ones
     (for ``object="random"``; the random draw is still made, so the other draws stay the same).
+    Keys starting with a framework prefix in ``FOREIGN_OPTION_PREFIXES`` (``"lerobot_"``) are
+    ignored, so LeRobot's rollout markers pass; any other key is rejected with a ``ValueError``, so a
+    typo such as ``{"objet": ...}`` never silently does nothing.
 
     **Full state** beyond observations: ``env.unwrapped.scene`` (node positions, forces, stresses).
 
@@ -123,7 +134,9 @@ class DeformablePickupEnv(gym.Env):
 
             check_port_free(viewer_host, viewer_port, "viewer_port")
             self._viewer = LiveSceneViewer(host=viewer_host, port=viewer_port)
-        self.metadata = {**self.metadata, "render_fps": self.config.control_hz}
+        # an int where the rate is one (video writers such as PyAV's need a rational frame rate)
+        hz = self.config.control_hz
+        self.metadata = {**self.metadata, "render_fps": int(hz) if float(hz).is_integer() else hz}
         self.observation_space = observation_spaces(self.config)
         self.action_space = action_space(self.config)
         self.scene: PickupScene | None = None

@@ -1,0 +1,153 @@
+"""Success table of a trained LeRobot policy, by ``lerobot-eval``, in the layout of the paper's Table 2.
+
+Each (object, E) cell is one run of LeRobot's own ``lerobot-eval`` entry point (``eval_main``, called
+in this process with the cell's command line so that Warp's kernels load once):
+
+    lerobot-eval --env.type=defgrasp --env.object=OBJ --env.youngs_modulus=E \\
+        --policy.path=CKPT --policy.device=cpu --eval.n_episodes=N --eval.batch_size=B \\
+        --seed=SEED --output_dir=OUT/OBJ_E
+
+Success is LeRobot's ``pc_success`` (``info["is_success"]`` at the episode's end) from each cell's
+``eval_info.json``. Printed: the table with the scripted expert's rate (``success_table.py``, the
+same env defaults) and the paper's human rate beside each cell, plus timing. ``--append`` adds the
+report to ``benchmarks/RESULTS.md`` with the machine.
+
+    python benchmarks/eval_lerobot_policy.py CKPT --episodes 5 --out datasets/output/eval_act
+    python benchmarks/eval_lerobot_policy.py CKPT --objects torus --moduli 1e4 --policy.n_action_steps=1
+
+Arguments this script does not know (``--env.*``, ``--policy.*``, ``--eval.*``) go to ``lerobot-eval``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import pathlib
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from machine import append_results, git_state, host  # noqa: E402
+from success_table import HUMAN, MODULI, OBJECTS, _human, _label  # noqa: E402
+
+#: The scripted expert's rate in every cell (benchmarks/RESULTS.md, success_table.py: 400/400).
+EXPERT_RATE = 1.0
+
+
+def cell_name(obj: str, e: float) -> str:
+    return f"{obj}_E{e:.0e}"
+
+
+def eval_cell(ckpt: str, obj: str, e: float, episodes: int, batch: int, seed: int, out: pathlib.Path,
+              extra: list[str]) -> dict:
+    """Run ``lerobot-eval`` for one cell; returns its ``eval_info.json`` overall block."""
+    from lerobot.scripts.lerobot_eval import eval_main
+
+    cell_dir = out / cell_name(obj, e)
+    argv = ["lerobot-eval", "--env.type=defgrasp", f"--env.object={obj}", f"--env.youngs_modulus={e}",
+            f"--policy.path={ckpt}", "--policy.device=cpu", f"--eval.n_episodes={episodes}",
+            f"--eval.batch_size={batch}", "--eval.use_async_envs=false", f"--seed={seed}",
+            f"--output_dir={cell_dir}", *extra]
+    print(" ".join(argv), flush=True)
+    saved, sys.argv = sys.argv, argv
+    try:
+        eval_main()
+    finally:
+        sys.argv = saved
+    return json.loads((cell_dir / "eval_info.json").read_text())["overall"]
+
+
+def pool_cell(dirs: list[pathlib.Path]) -> dict | None:
+    """Success rate, episode count and time of one cell over the ``eval_info.json`` files in ``dirs``."""
+    infos = [json.loads((d / "eval_info.json").read_text()) for d in dirs if (d / "eval_info.json").is_file()]
+    if not infos:
+        return None
+    successes = [s for i in infos for task in i["per_task"] for s in task["metrics"]["successes"]]
+    return {"pc_success": 100.0 * sum(successes) / len(successes), "n_episodes": len(successes),
+            "successes": sum(successes), "eval_s": sum(i["overall"]["eval_s"] for i in infos)}
+
+
+def format_report(cells: dict, wall: float, ckpt: str, train_note: str) -> str:
+    counts = sorted({c["n_episodes"] for c in cells.values()})
+    per_cell = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+    lines = [f"Policy `{ckpt}` ({train_note}); {per_cell} episodes per cell through `lerobot-eval`; "
+             f"cell = learned (scripted expert / paper's human; n/a = not legible).", "",
+             "| Young's modulus | " + " | ".join(o.capitalize() for o in OBJECTS) + " | Net |",
+             "|---" * (len(OBJECTS) + 2) + "|"]
+    for e in MODULI:
+        rates = [cells[(o, e)]["pc_success"] / 100 for o in OBJECTS]
+        row = [f"{r:.2f} [{cells[(o, e)]['successes']}/{cells[(o, e)]['n_episodes']}] "
+               f"({EXPERT_RATE:.2f} / {_human(e, o)})" for r, o in zip(rates, OBJECTS)]
+        lines.append(f"| {_label(e)} | " + " | ".join(row)
+                     + f" | **{sum(rates) / len(rates):.2f}** ({EXPERT_RATE:.2f} / {_human(e, 'net')}) |")
+    cols = [sum(cells[(o, e)]["pc_success"] for e in MODULI) / 100 / len(MODULI) for o in OBJECTS]
+    net = sum(cols) / len(cols)
+    lines.append("| Net | " + " | ".join(f"{c:.2f} ({EXPERT_RATE:.2f} / {_human('net', o)})"
+                                         for c, o in zip(cols, OBJECTS))
+                 + f" | **{net:.2f}** ({EXPERT_RATE:.2f} / {_human('net', 'net')}) |")
+    n = sum(c["n_episodes"] for c in cells.values())
+    k = sum(c["successes"] for c in cells.values())
+    lines += ["", f"{n} episodes, {k} successes; net success (mean of the cells) {net:.3f}; evaluation time {wall / 60:.1f} min "
+              f"(sum over cells; mean {wall / max(n, 1):.1f} s per episode, video rendering included)."]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("checkpoint", help="pretrained_model folder written by lerobot-train")
+    ap.add_argument("--episodes", type=int, default=5, help="episodes per (object, E) cell (0: table only)")
+    ap.add_argument("--batch-size", type=int, default=1, help="lerobot-eval --eval.batch_size")
+    ap.add_argument("--seed", type=int, default=100_000, help="lerobot-eval --seed of every cell")
+    ap.add_argument("--objects", default=",".join(OBJECTS))
+    ap.add_argument("--moduli", default=",".join(f"{e:g}" for e in MODULI))
+    ap.add_argument("--out", default=str(ROOT / "datasets" / "output" / "eval_lerobot"))
+    ap.add_argument("--train-note", default="", help="training summary for the report (steps, time, machine)")
+    ap.add_argument("--pool", nargs="*", default=[], help="further --out folders whose episodes join the table")
+    ap.add_argument("--append", action="store_true", help="append the report to benchmarks/RESULTS.md")
+    args, extra = ap.parse_known_args(argv)  # the rest goes to lerobot-eval (e.g. --env.episode_seconds=5)
+    if any(not a.startswith("--") for a in extra):
+        ap.error(f"unrecognized arguments: {extra}")
+    from lerobot.utils.import_utils import register_third_party_plugins
+
+    logging.basicConfig(level=logging.WARNING)
+    import defgrasp_env.lerobot_env  # noqa: F401  (registers --env.type=defgrasp without the plugin install)
+
+    register_third_party_plugins()
+    objects = args.objects.split(",")
+    moduli = [float(x) for x in args.moduli.split(",")]
+    out = pathlib.Path(args.out)
+    cells = {}
+    for obj in objects if args.episodes > 0 else []:
+        for e in moduli:
+            t = time.perf_counter()
+            cells[(obj, e)] = eval_cell(args.checkpoint, obj, e, args.episodes, args.batch_size, args.seed,
+                                        out, extra)
+            print(f"{obj:9s} E={e:.0e}: success {cells[(obj, e)]['pc_success']:.0f} % "
+                  f"({time.perf_counter() - t:.0f} s)", flush=True)
+    # the table pools every cell's episodes found in --out and the --pool folders (parallel runs over
+    # other objects, or earlier passes with other seeds)
+    pooled = {cell: pool_cell([d / cell_name(*cell) for d in [out, *map(pathlib.Path, args.pool)]])
+              for cell in ((o, e) for o in OBJECTS for e in MODULI)}
+    cells = {cell: c for cell, c in pooled.items() if c is not None}
+    if len(cells) < len(OBJECTS) * len(MODULI):
+        print(f"{len(cells)} of {len(OBJECTS) * len(MODULI)} cells found: no table yet")
+        return 0
+    wall = sum(c["eval_s"] for c in cells.values())
+    report = format_report(cells, wall, args.checkpoint, args.train_note)
+    print(report)
+    (out / "report.md").write_text(report + "\n")
+    if args.append:
+        stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
+        append_results(f"## Learned policy (eval_lerobot_policy.py), {stamp}\n\nMachine: {host()}; "
+                       f"{git_state()}.\n{report}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""LeRobot ``EnvConfig`` for ``DeformablePickup-v0``, registered as ``--env.type=defgrasp``.
+
+Importing this module registers the config with LeRobot's env registry (``EnvConfig`` is a draccus
+``ChoiceRegistry``). LeRobot's scripts find it without flags once the tiny plugin distribution
+``plugins/lerobot_env_defgrasp`` is installed (``register_third_party_plugins()`` imports every
+installed distribution named ``lerobot_env_*``), or with
+``--env.discover_packages_path=defgrasp_env`` without it (LeRobot then imports
+``defgrasp_env`` and its direct submodules, this one among them)::
+
+    lerobot-eval --env.type=defgrasp --env.object=torus --env.youngs_modulus=1e4 \\
+        --policy.path=outputs/train/act_defgrasp/checkpoints/last/pretrained_model \\
+        --eval.n_episodes=5 --eval.batch_size=1
+
+LeRobot builds ``gym.make(cfg.gym_id, **cfg.gym_kwargs)`` inside a ``SyncVectorEnv`` and reads
+success from ``info["is_success"]``; observations reach the policy as
+``agent_pos`` -> ``observation.state`` [10], ``environment_state`` -> ``observation.environment_state``
+[33] and ``pixels`` -> ``observation.images.camera`` [3, H, W] (the names ``defgrasp-dataset
+to-lerobot`` writes, so a policy trained on an exported dataset runs here unchanged).
+"""
+
+from __future__ import annotations
+
+import pathlib
+from dataclasses import dataclass, field
+
+from lerobot.configs import FeatureType, PolicyFeature
+from lerobot.envs.configs import EnvConfig
+from lerobot.processor import PolicyProcessorPipeline, RenameObservationsProcessorStep
+from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
+
+from . import ENV_ID
+from .envs.config import OBS_TYPES, RANDOM_OBJECT, PickupConfig
+from .sim.meshing import OBJECT_SHAPES
+from .envs.task import AGENT_POS_NAMES, ENV_STATE_NAMES
+from .recording.lerobot_export import CAMERA_KEY
+
+__all__ = ["DefgraspEnvConfig"]
+
+
+@EnvConfig.register_subclass("defgrasp")
+@dataclass
+class DefgraspEnvConfig(EnvConfig):
+    """``DeformablePickup-v0`` for ``lerobot-eval`` / ``lerobot-train --env.type=defgrasp``.
+
+    ``fps`` is the env's control rate (Hz; actions are held for 1/fps s). ``object``: one of the
+    five shapes, ``"random"`` or a mesh path; ``youngs_modulus`` (Pa); ``obs_type``: ``"state"``
+    (``agent_pos`` + ``environment_state``), ``"pixels_agent_pos"`` or ``"pixels"``;
+    ``episode_seconds`` sets LeRobot's rollout length (``max_episode_steps``); ``render_mode``
+    "rgb_array" gives the evaluation videos. Actions are the env's delta actions [7] in [-1, 1].
+    """
+
+    task: str | None = ENV_ID
+    fps: int = int(PickupConfig.control_hz)
+    object: str = PickupConfig.object
+    youngs_modulus: float = 1e5
+    obs_type: str = "state"
+    episode_seconds: float = PickupConfig.episode_seconds
+    render_mode: str = "rgb_array"
+    device: str = "cpu"
+    features: dict[str, PolicyFeature] = field(default_factory=dict)
+    features_map: dict[str, str] = field(default_factory=lambda: {
+        ACTION: ACTION, "agent_pos": OBS_STATE, "environment_state": OBS_ENV_STATE, "pixels": CAMERA_KEY})
+
+    def __post_init__(self):
+        if self.obs_type not in OBS_TYPES:
+            raise ValueError(f"obs_type must be one of {list(OBS_TYPES)}, got {self.obs_type!r}")
+        # validate every env option now (clear errors at parse time, not inside the vector env)
+        if self.object not in (*OBJECT_SHAPES, RANDOM_OBJECT) and not pathlib.Path(self.object).is_file():
+            raise ValueError(f"object must be one of {sorted(OBJECT_SHAPES)}, {RANDOM_OBJECT!r} or a mesh file, "
+                             f"got {self.object!r}")
+        env_config = PickupConfig(**self._pickup_kwargs())
+        camera = env_config.camera
+        self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(7,))}
+        if self.obs_type in ("state", "pixels_agent_pos"):
+            self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(len(AGENT_POS_NAMES),))
+        if self.obs_type == "state":
+            self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV,
+                                                               shape=(len(ENV_STATE_NAMES),))
+        if self.obs_type in ("pixels", "pixels_agent_pos"):
+            self.features["pixels"] = PolicyFeature(type=FeatureType.VISUAL,
+                                                    shape=(camera.height, camera.width, 3))
+
+    def _pickup_kwargs(self) -> dict:
+        return dict(object=self.object, youngs_modulus=float(self.youngs_modulus), obs_type=self.obs_type,
+                    control_hz=float(self.fps), episode_seconds=float(self.episode_seconds),
+                    device=self.device)
+
+    @property
+    def package_name(self) -> str:
+        """Module whose import registers ``gym_id`` (LeRobot imports it if the id is missing)."""
+        return "defgrasp_env"
+
+    @property
+    def gym_id(self) -> str:
+        return self.task
+
+    @property
+    def gym_kwargs(self) -> dict:
+        return {**self._pickup_kwargs(), "render_mode": self.render_mode,
+                "max_episode_steps": round(self.episode_seconds * self.fps)}
+
+    def get_env_processors(self):
+        """LeRobot turns a single ``pixels`` array into ``observation.image``; rename it to the
+        dataset's camera key. State observations pass through unchanged."""
+        rename = RenameObservationsProcessorStep(rename_map={OBS_IMAGE: CAMERA_KEY})
+        return PolicyProcessorPipeline(steps=[rename]), PolicyProcessorPipeline(steps=[])

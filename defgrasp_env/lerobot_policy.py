@@ -1,0 +1,134 @@
+"""``LeRobotPolicy``: a trained LeRobot policy (ACT, diffusion, ...) with the scripted expert's interface.
+
+    policy = LeRobotPolicy.from_pretrained("outputs/train/act/checkpoints/last/pretrained_model")
+    obs, _ = env.reset(seed=0); policy.reset()
+    action = policy(obs)            # float32 [7] (or [N, 7] for a batch of observations)
+
+Observations go through the same path as in ``lerobot-eval``: LeRobot's ``preprocess_observation``
+(``agent_pos`` -> ``observation.state``, ``environment_state`` -> ``observation.environment_state``,
+``pixels`` -> ``observation.image``), the ``defgrasp`` env config's processor (camera key), then the
+policy's own saved pre-processor (normalisation, device) and post-processor (un-normalisation).
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+import torch
+
+__all__ = ["LeRobotPolicy"]
+
+
+class LeRobotPolicy:
+    """A pretrained LeRobot policy as ``policy(obs) -> action`` for ``DeformablePickup-v0``.
+
+    ``obs``: the env's observation dict, one observation (``agent_pos`` [10], ...) or a batch ([N, 10],
+    ... as from ``gym.make_vec``). Returns float32 delta actions [7] or [N, 7] in [-1, 1] (clipped).
+    ``reset()`` clears the policy's action queue at every episode start; ``reset(mask)`` for a vector
+    env is accepted when the policy keeps no state between steps (``n_action_steps == 1`` without
+    temporal ensembling) or all worlds restart together, otherwise it raises ``ValueError`` (LeRobot
+    policies keep one action queue for the whole batch).
+    """
+
+    def __init__(self, policy, preprocessor, postprocessor, env_preprocessor=None):
+        self.policy = policy.eval()
+        self.preprocessor = preprocessor
+        self.postprocessor = postprocessor
+        self.env_preprocessor = env_preprocessor
+        self.num_worlds = 0
+
+    @classmethod
+    def from_pretrained(cls, path: str | pathlib.Path, device: str = "cpu") -> LeRobotPolicy:
+        """Load a ``pretrained_model`` folder written by ``lerobot-train`` (config, weights and the
+        saved pre/post-processors) onto ``device``."""
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        from .lerobot_env import DefgraspEnvConfig
+
+        path = pathlib.Path(path)
+        if not (path / "config.json").is_file():
+            raise FileNotFoundError(f"{path} is not a LeRobot pretrained_model folder (no config.json)")
+        config = PreTrainedConfig.from_pretrained(path)
+        config.device = device
+        policy = get_policy_class(config.type).from_pretrained(path, config=config)
+        pre, post = make_pre_post_processors(config, pretrained_path=str(path),
+                                             preprocessor_overrides={"device_processor": {"device": device}})
+        env_pre, _ = DefgraspEnvConfig().get_env_processors()
+        return cls(policy, pre, post, env_pre)
+
+    def reset(self, mask=None) -> None:
+        """Start new episodes: all worlds, or the worlds where ``mask`` [N] is True."""
+        if mask is not None:
+            m = np.asarray(mask, bool).reshape(-1)
+            if self.num_worlds and m.shape != (self.num_worlds,):
+                raise ValueError(f"mask must have shape ({self.num_worlds},), got {m.shape}")
+            cfg = self.policy.config
+            stateless = getattr(cfg, "n_action_steps", 1) == 1 and getattr(cfg, "temporal_ensemble_coeff", None) is None
+            if not m.any() or (not m.all() and stateless):
+                return
+            if not m.all():
+                raise ValueError("this policy queues actions for the whole batch: reset all worlds together "
+                                 "or use n_action_steps=1 without temporal ensembling")
+        self.policy.reset()
+
+    def __call__(self, obs) -> np.ndarray:
+        from lerobot.envs.utils import preprocess_observation
+
+        if not isinstance(obs, dict) or not obs:
+            raise TypeError(f"obs must be the env's observation dict, got {type(obs).__name__}")
+        arrays = {k: np.asarray(v) for k, v in obs.items()}
+        ref, batch_ndim = next(((arrays[k], n) for k, n in (("agent_pos", 2), ("environment_state", 2), ("pixels", 4))
+                                if k in arrays), (None, 0))
+        if ref is None:
+            raise ValueError(f"obs has none of agent_pos, environment_state, pixels: {sorted(arrays)}")
+        single = ref.ndim == batch_ndim - 1
+        batch = {k: (v[None] if single else v) for k, v in arrays.items()}
+        for k, v in batch.items():
+            if v.dtype != np.uint8 and not np.all(np.isfinite(v)):
+                raise ValueError(f"observation {k!r} must be finite")
+        self.num_worlds = len(next(iter(batch.values())))
+        x = preprocess_observation(batch)
+        x["task"] = [""] * self.num_worlds
+        if self.env_preprocessor is not None:
+            x = self.env_preprocessor(x)
+        x = self.preprocessor(x)
+        with torch.inference_mode():
+            action = self.policy.select_action(x)
+        action = self.postprocessor(action).to("cpu").numpy()
+        action = np.clip(action, -1.0, 1.0).astype(np.float32)
+        return action[0] if single else action
+
+
+def save_untrained_act(path: str | pathlib.Path, *, seed: int = 0, dim_model: int = 32, chunk_size: int = 4,
+                       stats: dict | None = None) -> pathlib.Path:
+    """Write a randomly initialised, tiny ACT ``pretrained_model`` folder for the ``defgrasp`` env's
+    state features (``observation.state`` [10], ``observation.environment_state`` [33], ``action``
+    [7]), loadable by ``lerobot-eval --policy.path`` and ``LeRobotPolicy.from_pretrained``: for tests
+    and smoke runs of the evaluation plumbing (it does not solve the task). ``stats``: per-feature
+    ``{"mean": [...], "std": [...]}`` for the normaliser (default: mean 0, std 1)."""
+    from lerobot.envs.utils import env_to_policy_features
+    from lerobot.configs import FeatureType
+    from lerobot.policies.act.configuration_act import ACTConfig
+    from lerobot.policies.act.modeling_act import ACTPolicy
+    from lerobot.policies.factory import make_pre_post_processors
+
+    from .lerobot_env import DefgraspEnvConfig
+
+    features = env_to_policy_features(DefgraspEnvConfig())
+    config = ACTConfig(
+        device="cpu", dim_model=dim_model, n_heads=2, dim_feedforward=2 * dim_model, n_encoder_layers=1,
+        n_decoder_layers=1, n_vae_encoder_layers=1, chunk_size=chunk_size, n_action_steps=1,
+        input_features={k: f for k, f in features.items() if f.type is not FeatureType.ACTION},
+        output_features={k: f for k, f in features.items() if f.type is FeatureType.ACTION})
+    torch.manual_seed(seed)
+    policy = ACTPolicy(config)
+    stats = stats or {k: {"mean": [0.0] * f.shape[0], "std": [1.0] * f.shape[0]} for k, f in features.items()}
+    tensors = {k: {m: torch.as_tensor(v, dtype=torch.float32) for m, v in s.items()} for k, s in stats.items()}
+    pre, post = make_pre_post_processors(config, dataset_stats=tensors)
+    path = pathlib.Path(path)
+    policy.save_pretrained(path)
+    pre.save_pretrained(path)
+    post.save_pretrained(path)
+    return path

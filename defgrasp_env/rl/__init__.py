@@ -1,0 +1,1 @@
+"""Reinforcement-learning integrations of the native vector env (optional extra ``defgrasp[rl]``)."""

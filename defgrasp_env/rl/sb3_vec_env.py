@@ -1,0 +1,107 @@
+"""``SB3VectorEnv``: the native vector env of ``DeformablePickup-v0`` as a Stable-Baselines3 ``VecEnv``.
+
+    from stable_baselines3 import PPO
+    venv = SB3VectorEnv(gym.make_vec("DeformablePickup-v0", num_envs=16, autoreset_mode="SameStep"))
+    PPO("MultiInputPolicy", VecNormalize(venv)).learn(100_000)
+
+Stable-Baselines3 steps a ``VecEnv`` (N worlds, auto-reset inside ``step``, one info dict per world),
+not a Gymnasium ``VectorEnv``. This adapter keeps the N worlds in ONE batched FEM simulation (no
+per-world processes) and translates the protocol:
+
+* observations: the env's Dict of numpy arrays [N, ...] (``MultiInputPolicy``), float32;
+* ``step_wait`` returns rewards [N] float32, dones [N] (terminated or truncated) and a list of N
+  info dicts with the env's per-world scalars (``is_success``, reward terms, ...), plus, for worlds
+  whose episode ended, ``terminal_observation`` (their last observation; the returned observation is
+  already the next episode's first) and ``TimeLimit.truncated`` (truncated and not terminated), as
+  SB3 expects for bootstrapping;
+* ``seed(s)`` seeds world i with ``s + i`` at the next ``reset()``.
+
+The wrapped env must use ``autoreset_mode="SameStep"`` (SB3's convention) and numpy outputs.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+
+__all__ = ["SB3VectorEnv"]
+
+
+class SB3VectorEnv(VecEnv):
+    """Stable-Baselines3 view of a ``DeformablePickupVectorEnv`` (see the module docstring)."""
+
+    def __init__(self, env):
+        venv = getattr(env, "unwrapped", env)
+        if getattr(venv, "autoreset_mode", None) != AutoresetMode.SAME_STEP:
+            raise ValueError(f"the vector env must use autoreset_mode='SameStep', got "
+                             f"{getattr(venv, 'autoreset_mode', None)!r}")
+        if getattr(venv, "torch_outputs", False):
+            raise ValueError("the vector env must return numpy observations (torch_outputs=False)")
+        self.env = env
+        self._actions: np.ndarray | None = None
+        super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
+
+    # -- VecEnv API --------------------------------------------------------------------------
+    def reset(self):
+        seeds = self._seeds if any(s is not None for s in self._seeds) else None
+        obs, info = self.env.reset(seed=seeds)
+        self._reset_seeds()
+        self.reset_infos = self._split_info(info)
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions, np.float32)
+
+    def step_wait(self):
+        if self._actions is None:
+            raise RuntimeError("step_async() must come before step_wait()")
+        obs, reward, terminated, truncated, info = self.env.step(self._actions)
+        self._actions = None
+        done = np.asarray(terminated, bool) | np.asarray(truncated, bool)
+        infos = self._split_info(info)
+        if done.any():
+            final_obs = info["final_obs"]
+            final_info = self._split_info(info["final_info"])
+            for i in np.flatnonzero(done):
+                infos[i] = {**final_info[i], "terminal_observation": {k: v[i] for k, v in final_obs.items()},
+                            "TimeLimit.truncated": bool(truncated[i] and not terminated[i])}
+        return obs, np.asarray(reward, np.float32), done, infos
+
+    def seed(self, seed: int | None = None):
+        self._seeds = [None if seed is None else seed + i for i in range(self.num_envs)]
+        return self._seeds
+
+    def close(self) -> None:
+        self.env.close()
+
+    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
+        value = getattr(self.env.unwrapped, attr_name) if attr_name != "render_mode" else self.env.render_mode
+        return [value for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        raise AttributeError(f"{type(self).__name__} does not set attributes of the worlds ({attr_name!r})")
+
+    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
+        raise AttributeError(f"{type(self).__name__}: the worlds share one simulation; no per-world "
+                             f"{method_name!r}")
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+    def get_images(self):
+        return list(self.env.render())
+
+    # -- internals -------------------------------------------------------------------------
+    def _split_info(self, info: dict) -> list[dict]:
+        """Gymnasium's batched info (arrays [N] with ``_key`` masks) -> N per-world dicts of scalars."""
+        out: list[dict] = [{} for _ in range(self.num_envs)]
+        for key, value in info.items():
+            if key.startswith("_") or key in ("final_obs", "final_info") or not isinstance(value, np.ndarray):
+                continue
+            mask = info.get(f"_{key}", np.ones(self.num_envs, bool))
+            for i in np.flatnonzero(mask):
+                out[i][key] = value[i].item() if value[i].ndim == 0 else value[i]
+        return out

@@ -1,0 +1,57 @@
+"""``LeRobotPolicy``: a saved LeRobot policy as a plain-Python policy object (the expert's interface)."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import defgrasp_env  # noqa: F401
+
+pytest.importorskip("lerobot")
+
+from defgrasp_env.lerobot_policy import LeRobotPolicy, save_untrained_act  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def policy(tmp_path_factory):
+    return LeRobotPolicy.from_pretrained(save_untrained_act(tmp_path_factory.mktemp("act") / "m", seed=1))
+
+
+def test_policy_drives_gym_make_to_the_end_of_an_episode(policy):
+    env = gym.make("DeformablePickup-v0", object="cylinder", youngs_modulus=1e6, max_episode_steps=6)
+    obs, _ = env.reset(seed=4)
+    policy.reset()
+    steps, done = 0, False
+    while not done:
+        action = policy(obs)
+        assert action.shape == (7,) and action.dtype == np.float32 and np.all(np.abs(action) <= 1.0)
+        obs, _, term, trunc, info = env.step(action)
+        steps, done = steps + 1, term or trunc
+    assert steps == 6 and trunc and not info["is_success"]
+
+
+def test_batch_equals_single_observations(policy):
+    env = gym.make("DeformablePickup-v0")
+    obs = [env.reset(seed=s)[0] for s in (0, 1, 2)]
+    batch = {k: np.stack([o[k] for o in obs]) for k in obs[0]}
+    policy.reset()
+    out = policy(batch)
+    assert out.shape == (3, 7)
+    for i, o in enumerate(obs):
+        policy.reset()
+        np.testing.assert_allclose(policy(o), out[i], atol=1e-6)
+
+
+def test_reset_mask_and_bad_input(policy, tmp_path):
+    env = gym.make("DeformablePickup-v0")
+    obs, _ = env.reset(seed=0)
+    batch = {k: np.stack([v, v]) for k, v in obs.items()}
+    policy(batch)
+    policy.reset(np.array([True, False]))  # n_action_steps == 1: no state kept, partial reset is fine
+    with pytest.raises(ValueError, match="shape"):
+        policy.reset(np.array([True, False, True]))
+    with pytest.raises(ValueError, match="finite"):
+        policy({**obs, "agent_pos": np.full(10, np.nan, np.float32)})
+    with pytest.raises(TypeError):
+        policy(np.zeros(43))
+    with pytest.raises(FileNotFoundError):
+        LeRobotPolicy.from_pretrained(tmp_path)

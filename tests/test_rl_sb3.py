@@ -1,0 +1,66 @@
+"""``SB3VectorEnv``: the native vector env under Stable-Baselines3's VecEnv protocol, and a PPO smoke run."""
+
+import pathlib
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import defgrasp_env  # noqa: F401
+
+pytest.importorskip("stable_baselines3")
+
+from defgrasp_env.rl.sb3_vec_env import SB3VectorEnv  # noqa: E402
+
+
+def _vec(n=2, steps=3, **kw):
+    return gym.make_vec("DeformablePickup-v0", num_envs=n, autoreset_mode="SameStep", max_episode_steps=steps, **kw)
+
+
+def test_protocol_matches_the_native_env_and_auto_resets():
+    venv = SB3VectorEnv(_vec())
+    ref = _vec()
+    venv.seed(5)
+    obs = venv.reset()
+    ref_obs, _ = ref.reset(seed=5)
+    for k in ref_obs:
+        np.testing.assert_array_equal(obs[k], ref_obs[k])
+    first = obs["environment_state"].copy()
+    actions = np.tile(np.array([0.1, -0.3, 0.0, 0.0, 0.2, 0.0, 0.4], np.float32), (2, 1))
+    for t in range(3):
+        venv.step_async(actions)
+        obs, reward, done, infos = venv.step_wait()
+        ref_obs, ref_r, _, ref_trunc, ref_info = ref.step(actions)
+        assert reward.dtype == np.float32 and reward.shape == (2,)
+        np.testing.assert_allclose(reward, ref_r, rtol=1e-6)
+        assert len(infos) == 2 and all("is_success" in i for i in infos)
+    # the time limit ended both episodes: terminal obs = the native env's last obs, new episode started
+    assert done.all() and all(i["TimeLimit.truncated"] for i in infos)
+    for w in range(2):
+        np.testing.assert_array_equal(infos[w]["terminal_observation"]["agent_pos"], ref_info["final_obs"]["agent_pos"][w])
+    assert not np.allclose(obs["environment_state"], first)  # fresh noise draw for the new episodes
+    np.testing.assert_array_equal(obs["agent_pos"], ref_obs["agent_pos"])
+
+
+def test_rejects_other_autoreset_modes():
+    with pytest.raises(ValueError, match="SameStep"):
+        SB3VectorEnv(gym.make_vec("DeformablePickup-v0", num_envs=1))
+
+
+@pytest.mark.slow
+def test_ppo_trains_on_the_vector_env(tmp_path):
+    """Two PPO iterations through VecMonitor + VecNormalize: the policy's parameters change, the
+    curve records both rollouts, and the script's PNG/CSV are written."""
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import save_curve, train
+
+    model, curve = train(num_envs=2, timesteps=32, n_steps=8, batch_size=16, episode_seconds=0.3)
+    assert model.num_timesteps == 32 and len(curve.rows) == 2
+    assert sum(r["episodes"] for r in curve.rows) == 2 * (16 // 6)  # 6-step episodes, 2 worlds x 16 steps
+    params = [p.detach().clone() for p in model.policy.parameters()]
+    model.learn(16, reset_num_timesteps=False)
+    assert any(not np.allclose(a.numpy(), b.detach().numpy()) for a, b in zip(params, model.policy.parameters()))
+    save_curve(curve.rows, tmp_path, "smoke")
+    assert (tmp_path / "curve.png").stat().st_size > 1000 and (tmp_path / "curve.csv").is_file()
