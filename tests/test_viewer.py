@@ -100,7 +100,7 @@ def test_vector_env_human_mode_draws_the_chosen_world():
         venv.step(np.zeros((2, 7)))
         viewer = venv.unwrapped._viewer.viewer
         scene = venv.unwrapped.scene
-        assert scene.object_names == ["cylinder", "torus"]  # object="random" with seed 5: two different objects
+        assert scene.object_names == ("cylinder", "torus")  # object="random" with seed 5: two different objects
         np.testing.assert_array_equal(viewer.drawing.triangles, scene.mesh(1).surface)  # world 1's torus
         assert viewer.url.startswith("http://127.0.0.1:")
     finally:
