@@ -31,7 +31,7 @@ from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
 from . import ENV_ID
 from .envs.config import OBS_TYPES, RANDOM_OBJECT, PickupConfig
 from .sim.meshing import OBJECT_SHAPES
-from .envs.task import AGENT_POS_NAMES, ENV_STATE_NAMES
+from .layout import AGENT_POS, ENV_STATE
 from .recording.lerobot_export import CAMERA_KEY
 
 __all__ = ["DefgraspEnvConfig"]
@@ -72,10 +72,10 @@ class DefgraspEnvConfig(EnvConfig):
         camera = env_config.camera
         self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(7,))}
         if self.obs_type in ("state", "pixels_agent_pos"):
-            self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(len(AGENT_POS_NAMES),))
+            self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(AGENT_POS.size,))
         if self.obs_type == "state":
             self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV,
-                                                               shape=(len(ENV_STATE_NAMES),))
+                                                               shape=(ENV_STATE.size,))
         if self.obs_type in ("pixels", "pixels_agent_pos"):
             self.features["pixels"] = PolicyFeature(type=FeatureType.VISUAL,
                                                     shape=(camera.height, camera.width, 3))
