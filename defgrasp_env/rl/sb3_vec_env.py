@@ -103,5 +103,6 @@ class SB3VectorEnv(VecEnv):
                 continue
             mask = info.get(f"_{key}", np.ones(self.num_envs, bool))
             for i in np.flatnonzero(mask):
-                out[i][key] = value[i].item() if value[i].ndim == 0 else value[i]
+                item = value[i]  # a number, an array, or an object (e.g. a ReplaySpec) of an object array
+                out[i][key] = item.item() if isinstance(item, np.generic) else item
         return out
