@@ -62,13 +62,14 @@ def check_object(name: str) -> str:
 class PickupConfig:
     """Everything that defines a DeformablePickup task; see ``DeformablePickupEnv`` for the meaning.
 
-    ``object`` is a name of ``OBJECT_SHAPES``, ``"random"`` (sampled per episode among the five), or
-    a path to a watertight surface mesh (checked here: it must exist and load as a watertight
+    ``object`` is a name of ``OBJECT_SHAPES``, ``"random"`` (sampled per episode among the five), a
+    path to a watertight surface mesh, or a tuple (a list is accepted) of names and mesh paths to
+    sample from per episode, uniformly (each entry checked here: it must exist and load as a watertight
     surface, so a bad name or file fails at ``gym.make``, not at ``reset``). ``youngs_modulus`` is a value in Pa or a tuple of values
     to sample from per episode (e.g. the paper's (1e4, 1e5, 1e6, 1e7)).
     """
 
-    object: str = "cuboid"
+    object: str | tuple[str, ...] = "cuboid"
     object_resolution: float | None = None
     youngs_modulus: float | tuple[float, ...] = 1e5
     poisson_ratio: float = 0.3
@@ -118,7 +119,16 @@ class PickupConfig:
         for name, cls in (("gripper", GripperConfig), ("solver", SolverConfig), ("camera", Camera)):
             if not isinstance(getattr(self, name), cls):
                 raise TypeError(f"{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
-        check_object(self.object)  # last: loads a mesh file, after the cheap checks
+        if isinstance(self.object, list):
+            object.__setattr__(self, "object", tuple(self.object))  # frozen: normalised once, here
+        if isinstance(self.object, tuple):
+            if len(self.object) == 0 or RANDOM_OBJECT in self.object:
+                raise ValueError(f"an object tuple must hold >= 1 names of {sorted(OBJECT_SHAPES)} or mesh paths "
+                                 f"(not {RANDOM_OBJECT!r}), got {self.object!r}")
+            for name in self.object:
+                check_object(name)  # last: loads mesh files, after the cheap checks
+        else:
+            check_object(self.object)
 
     @property
     def dt(self) -> float:
@@ -135,5 +145,8 @@ class PickupConfig:
 
     @property
     def object_names(self) -> tuple[str, ...]:
+        """The objects an episode's object is drawn from (uniformly)."""
+        if isinstance(self.object, tuple):
+            return self.object
         return tuple(OBJECT_SHAPES) if self.object == RANDOM_OBJECT else (self.object,)
 

@@ -18,6 +18,7 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
 from ..gripper import Gripper
 from ..layout import NUM_KEYPOINTS
@@ -30,6 +31,8 @@ from ..sim.state import Control, State
 from ..transforms import quat_to_matrix
 from ..wrist.force_limit import limited_substep, wrist_force
 from .config import PickupConfig
+from .readouts import SceneReadouts, StepReadout
+from .scene_kernels import gather_rows
 
 
 @functools.lru_cache(maxsize=16)
@@ -53,6 +56,13 @@ def keypoint_indices(nodes: np.ndarray, surface: np.ndarray, count: int = NUM_KE
     return candidates[np.array(chosen)]
 
 
+@functools.lru_cache(maxsize=16)
+def object_keypoints(name: str, resolution: float | None) -> np.ndarray:
+    """Cached ``keypoint_indices`` of ``object_mesh(name, resolution)`` (object-local node ids)."""
+    mesh = object_mesh(name, resolution)
+    return keypoint_indices(mesh.nodes, mesh.surface)
+
+
 @dataclass(frozen=True)
 class WorldSetup:
     """What a reset draws for one world: the object (a name of ``OBJECT_SHAPES`` or a mesh path),
@@ -62,6 +72,16 @@ class WorldSetup:
     material: Material
     position: np.ndarray   # [3] m, object frame origin in the world
     quat: np.ndarray       # [4] xyzw
+
+
+def _remap_index(old_start: np.ndarray, new_start: np.ndarray, keep: np.ndarray, device: str) -> wp.array:
+    """int32 [rows of new layout]: the old row of each new row of a kept world, -1 elsewhere
+    (``old_start`` / ``new_start`` [W+1]: first row of each world)."""
+    counts = np.diff(new_start)
+    world = np.repeat(np.arange(len(counts)), counts)
+    local = np.arange(new_start[-1]) - new_start[world]
+    index = np.where(keep[world], old_start[world] + local, -1)
+    return wp.array(index.astype(np.int32), dtype=wp.int32, device=device)
 
 
 class PickupScene:
@@ -77,6 +97,16 @@ class PickupScene:
     def __init__(self, config: PickupConfig, setups: list[WorldSetup]):
         self.config = config
         self.num_worlds = len(setups)
+        #: physics substeps per control period, looped by ``step`` (the solver takes one per call)
+        self.substeps = config.solver.substeps
+        self.gripper = Gripper(config.gripper, self.num_worlds)
+        self._build(setups)
+        self._setups = list(setups)  # the setup each world was last reset to (initial pose, material)
+        self.reset_worlds(np.ones(self.num_worlds, bool), setups)
+
+    def _build(self, setups: list[WorldSetup]) -> None:
+        """Model, solver, state and control of worlds holding ``setups``' objects and materials."""
+        config = self.config
         self._object_names = tuple(s.object_name for s in setups)
         self._meshes = [object_mesh(s.object_name, config.object_resolution) for s in setups]
         contact = ContactParams(config.contact_stiffness, config.ground_friction, config.pad_friction)
@@ -84,21 +114,18 @@ class PickupScene:
         self.model = build_model(self._meshes, [s.material for s in setups],
                                  [(s.position, s.quat) for s in setups], pad_half_extents=[half, half],
                                  contact=contact, device=config.device)
-        #: physics substeps per control period, looped by ``step`` (the solver takes one per call)
-        self.substeps = config.solver.substeps
         self.solver = ImplicitSolver(self.model, dataclasses.replace(config.solver, substeps=1))
         self.state = State.from_model(self.model)
         self._substep_start = State.from_model(self.model)  # a substep's start, for wrist-limit retries
         self._control = Control.from_model(self.model)
-        self._keypoints = [keypoint_indices(m.nodes, m.surface) for m in self._meshes]
-        self.gripper = Gripper(config.gripper, self.num_worlds)
-        self._setups = list(setups)  # the setup each world was last reset to (initial pose, material)
-        self.reset_worlds(np.ones(self.num_worlds, bool), setups)
+        self._readouts = SceneReadouts(self.model, [object_keypoints(s.object_name, config.object_resolution)
+                                                    for s in setups])
+        self._readout: StepReadout | None = None
 
     # -- accessors ---------------------------------------------------------------------------
     @property
     def object_names(self) -> tuple[str, ...]:
-        """The object each world was built with (a name of ``OBJECT_SHAPES`` or a mesh path)."""
+        """The object each world holds now (a name of ``OBJECT_SHAPES`` or a mesh path)."""
         return self._object_names
 
     @property
@@ -117,16 +144,17 @@ class PickupScene:
 
     # -- resets ----------------------------------------------------------------------------
     def reset_worlds(self, mask: np.ndarray, setups: list[WorldSetup]) -> None:
-        """Put the worlds in ``mask`` back to their initial state with the given setups (objects must
-        match the built ones); other worlds are left untouched, bit for bit."""
+        """Put the worlds in ``mask`` back to their initial state with the given setups; other
+        worlds are left untouched, bit for bit (their full state and their gripper). A world whose
+        object changes makes the scene rebuild its flat arrays (``_rebuild``)."""
+        if any(setups[w].object_name != self._object_names[w] for w in np.flatnonzero(mask)):
+            self._rebuild(mask, setups)
         m = self.model
         x = self.state.positions.numpy()
         v = self.state.velocities.numpy()
         flange_xz = np.zeros((self.num_worlds, 2))
         for w in np.flatnonzero(mask):
             s = setups[w]
-            if s.object_name != self._object_names[w]:
-                raise ValueError(f"world {w} holds {self._object_names[w]!r}; cannot reset it to {s.object_name!r}")
             sl = m.world_nodes(w)
             local = self._meshes[w].nodes
             x[sl] = (local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32)
@@ -136,12 +164,33 @@ class PickupScene:
             self._setups[w] = s
             flange_xz[w] = s.position[0], s.position[2]
         self.gripper.reset(mask, flange_xz)
+        self._readout = None
         self.state.positions.assign(x)
         self.state.velocities.assign(v)
         self._zero_outputs(mask)
         pos, quat = self.gripper.pad_poses()
         self.state.pad_positions.assign(pos.reshape(-1, 3).astype(np.float32))
         self.state.pad_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
+
+    def _rebuild(self, mask: np.ndarray, setups: list[WorldSetup]) -> None:
+        """New flat arrays for the objects after the reset of ``mask`` (node and tet offsets change
+        with the objects), with the full state of every world outside ``mask`` copied to its new
+        offsets by a gather kernel on the device (the gripper's per-world state has no offsets and
+        stays). The worlds in ``mask`` are then set by ``reset_worlds``."""
+        old_model, old_state = self.model, self.state
+        kept = [self._setups[w] if not mask[w] else setups[w] for w in range(self.num_worlds)]
+        self._build(kept)
+        for w in np.flatnonzero(mask):
+            self._setups[w] = setups[w]  # built with its new material: no material update needed
+        new = self.model
+        node_index = _remap_index(old_model.node_start, new.node_start, ~mask, new.device)
+        tet_index = _remap_index(old_model.tet_start, new.tet_start, ~mask, new.device)
+        for name in ("positions", "velocities", "elastic_force", "contact_force", "von_mises"):
+            index = tet_index if name == "von_mises" else node_index
+            dst = getattr(self.state, name)
+            wp.launch(gather_rows, dim=len(dst), inputs=[getattr(old_state, name), index, dst], device=new.device)
+        for name in ("pad_positions", "pad_orientations", "mean_von_mises", "pad_normal_force", "pad_force"):
+            wp.copy(getattr(self.state, name), getattr(old_state, name))  # [W] / [W*P]: same layout
 
     def _zero_outputs(self, mask: np.ndarray) -> None:
         """Forces and stresses of freshly reset worlds: the object is at rest shape, untouched."""
@@ -168,6 +217,7 @@ class PickupScene:
         pad forces (``Gripper.sense``). Worlds with ``active == False`` keep their wrist and jaw
         still."""
         active = np.ones(self.num_worlds, bool) if active is None else active
+        self._readout = None
         self.gripper.begin_step(target_pos, target_quat)
         # substeps adapted to the pad travel (sim.pad_motion; the jaw's half-period travel included)
         travel = self.gripper.planned_pad_travel() + self.config.gripper.closing_speed * self.config.dt / 2
@@ -198,26 +248,23 @@ class PickupScene:
         """Node positions [N_w, 3] (m, world) of world ``w``'s object (a copy)."""
         return self.state.positions.numpy()[self.model.world_nodes(w)].copy()
 
+    def readout(self) -> StepReadout:
+        """Feature point and velocity, keypoints and finiteness of every world at the current state
+        (``readouts.StepReadout``): reduced on the simulation's device, once per state (cached until
+        the next ``step`` or reset), so observations, reward and the divergence check share it."""
+        if self._readout is None:
+            self._readout = self._readouts.compute(self.state)
+        return self._readout
+
     def feature_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Object feature point (mean node position, paper eq. 5) [W,3] m and its velocity [W,3] m/s."""
-        x, v = self.state.positions.numpy(), self.state.velocities.numpy()
-        starts = self.model.node_start
-        counts = np.diff(starts)
-        pos = np.add.reduceat(x.astype(np.float64), starts[:-1], axis=0) / counts[:, None]
-        vel = np.add.reduceat(v.astype(np.float64), starts[:-1], axis=0) / counts[:, None]
-        return pos, vel
+        r = self.readout()
+        return r.feature_position, r.feature_velocity
 
     def keypoint_positions(self) -> np.ndarray:
         """[W, NUM_KEYPOINTS, 3] positions (m) of fixed surface nodes of each object."""
-        x = self.state.positions.numpy()
-        out = np.zeros((self.num_worlds, NUM_KEYPOINTS, 3))
-        for w in range(self.num_worlds):
-            idx = self._keypoints[w] + self.model.node_start[w]
-            out[w, : len(idx)] = x[idx]
-        return out
+        return self.readout().keypoints
 
     def finite(self) -> np.ndarray:
         """[W] bool: the world's node positions and velocities are all finite."""
-        x, v = self.state.positions.numpy(), self.state.velocities.numpy()
-        bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
-        return np.add.reduceat(bad.astype(int), self.model.node_start[:-1]) == 0
+        return self.readout().finite
