@@ -32,7 +32,7 @@ from ..transforms import quat_to_matrix
 from ..wrist.force_limit import limited_substep, wrist_force
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
-from .scene_kernels import gather_rows
+from .scene_kernels import gather_rows, scatter_rows, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds
 
 
 @functools.lru_cache(maxsize=16)
@@ -121,6 +121,10 @@ class PickupScene:
         self._readouts = SceneReadouts(self.model, [object_keypoints(s.object_name, config.object_resolution)
                                                     for s in setups])
         self._readout: StepReadout | None = None
+        world = np.arange(self.num_worlds, dtype=np.int32)
+        self._world_ids = wp.array(world, dtype=wp.int32, device=self.model.device)  # [W]: row w is world w
+        self._pad_world = wp.array(np.repeat(world, self.model.pads_per_world), dtype=wp.int32,
+                                   device=self.model.device)  # [W*P]: the world of each pad row
 
     # -- accessors ---------------------------------------------------------------------------
     @property
@@ -150,23 +154,24 @@ class PickupScene:
         if any(setups[w].object_name != self._object_names[w] for w in np.flatnonzero(mask)):
             self._rebuild(mask, setups)
         m = self.model
-        x = self.state.positions.numpy()
-        v = self.state.velocities.numpy()
+        rows, values = [], []
         flange_xz = np.zeros((self.num_worlds, 2))
         for w in np.flatnonzero(mask):
             s = setups[w]
             sl = m.world_nodes(w)
             local = self._meshes[w].nodes
-            x[sl] = (local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32)
-            v[sl] = 0.0
+            rows.append(np.arange(sl.start, sl.stop, dtype=np.int32))
+            values.append((local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32))
             if s.material != self._setups[w].material:
                 set_world_material(m, w, s.material)
             self._setups[w] = s
             flange_xz[w] = s.position[0], s.position[2]
         self.gripper.reset(mask, flange_xz)
         self._readout = None
-        self.state.positions.assign(x)
-        self.state.velocities.assign(v)
+        if rows:  # only the reset worlds' rows travel (no full-state download)
+            index = wp.array(np.concatenate(rows), dtype=wp.int32, device=m.device)
+            x = wp.array(np.concatenate(values), dtype=wp.vec3, device=m.device)
+            wp.launch(scatter_rows, dim=len(index), inputs=[x, index, self.state.positions], device=m.device)
         self._zero_outputs(mask)
         pos, quat = self.gripper.pad_poses()
         self.state.pad_positions.assign(pos.reshape(-1, 3).astype(np.float32))
@@ -193,16 +198,16 @@ class PickupScene:
             wp.copy(getattr(self.state, name), getattr(old_state, name))  # [W] / [W*P]: same layout
 
     def _zero_outputs(self, mask: np.ndarray) -> None:
-        """Forces and stresses of freshly reset worlds: the object is at rest shape, untouched."""
-        m, st = self.model, self.state
-        node_mask = np.repeat(mask, np.diff(m.node_start))
-        tet_mask = np.repeat(mask, np.diff(m.tet_start))
-        pad_mask = np.repeat(mask, m.pads_per_world)
-        for array, rows in ((st.elastic_force, node_mask), (st.contact_force, node_mask), (st.von_mises, tet_mask),
-                            (st.mean_von_mises, mask), (st.pad_normal_force, pad_mask), (st.pad_force, pad_mask)):
-            host = array.numpy()
-            host[rows] = 0.0
-            array.assign(host)
+        """Velocities, forces and stresses of freshly reset worlds (at rest shape, untouched): zeroed
+        by kernels on the device, row by row of the worlds in ``mask``."""
+        m, st, d = self.model, self.state, self.model.device
+        world_mask = wp.array(mask.astype(np.int32), dtype=wp.int32, device=d)
+        for array, row_world in ((st.velocities, m.node_world), (st.elastic_force, m.node_world),
+                                 (st.contact_force, m.node_world), (st.pad_force, self._pad_world)):
+            wp.launch(zero_vec3_rows_of_worlds, dim=len(array), inputs=[array, row_world, world_mask], device=d)
+        for array, row_world in ((st.von_mises, m.tet_world), (st.mean_von_mises, self._world_ids),
+                                 (st.pad_normal_force, self._pad_world)):
+            wp.launch(zero_float_rows_of_worlds, dim=len(array), inputs=[array, row_world, world_mask], device=d)
 
     # -- stepping --------------------------------------------------------------------------
     def step(self, target_pos: np.ndarray, target_quat: np.ndarray, target_gap: np.ndarray,

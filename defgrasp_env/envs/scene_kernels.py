@@ -55,3 +55,28 @@ def gather_keypoints(x: wp.array(dtype=wp.vec3), index: wp.array(dtype=wp.int32)
         out[k] = x[j]
     else:
         out[k] = wp.vec3()
+
+
+@wp.kernel
+def scatter_rows(values: wp.array(dtype=Any), index: wp.array(dtype=wp.int32), dst: wp.array(dtype=Any)):
+    """``dst[index[k]] = values[k]``."""
+    k = wp.tid()
+    dst[index[k]] = values[k]
+
+
+@wp.kernel
+def zero_vec3_rows_of_worlds(a: wp.array(dtype=wp.vec3), row_world: wp.array(dtype=wp.int32),
+                             mask: wp.array(dtype=wp.int32)):
+    """``a[i] = 0`` where the world of row i (``row_world[i]``) has ``mask != 0``."""
+    i = wp.tid()
+    if mask[row_world[i]] != 0:
+        a[i] = wp.vec3()
+
+
+@wp.kernel
+def zero_float_rows_of_worlds(a: wp.array(dtype=wp.float32), row_world: wp.array(dtype=wp.int32),
+                              mask: wp.array(dtype=wp.int32)):
+    """``a[i] = 0`` where the world of row i (``row_world[i]``) has ``mask != 0``."""
+    i = wp.tid()
+    if mask[row_world[i]] != 0:
+        a[i] = 0.0
