@@ -91,7 +91,9 @@ class PickupScene:
     ``model`` / ``state`` (the FEM's static data and full state, Newton style: read, do not write),
     ``solver`` (built with ``substeps=1``),
     ``substeps``, and the read-only accessors ``object_names``, ``setups``, ``materials``,
-    ``mesh(w)`` and the readouts below.
+    ``mesh(w)`` and the readouts below (``readout()``: reduced on the device once per state).
+    ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object: read
+    them from the scene after each reset rather than holding on to them.
     """
 
     def __init__(self, config: PickupConfig, setups: list[WorldSetup]):
@@ -118,7 +120,7 @@ class PickupScene:
         self.state = State.from_model(self.model)
         self._substep_start = State.from_model(self.model)  # a substep's start, for wrist-limit retries
         self._control = Control.from_model(self.model)
-        self._readouts = SceneReadouts(self.model, [object_keypoints(s.object_name, config.object_resolution)
+        self._readouts = SceneReadouts(self.model, self.state, [object_keypoints(s.object_name, config.object_resolution)
                                                     for s in setups])
         self._readout: StepReadout | None = None
         world = np.arange(self.num_worlds, dtype=np.int32)
@@ -258,7 +260,7 @@ class PickupScene:
         (``readouts.StepReadout``): reduced on the simulation's device, once per state (cached until
         the next ``step`` or reset), so observations, reward and the divergence check share it."""
         if self._readout is None:
-            self._readout = self._readouts.compute(self.state)
+            self._readout = self._readouts.compute()
         return self._readout
 
     def feature_points(self) -> tuple[np.ndarray, np.ndarray]:
