@@ -39,7 +39,7 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import defgrasp_env  # noqa: E402,F401
-from defgrasp_env.envs.scene import PAD_BOX_HALF_EXTENTS  # noqa: E402
+from defgrasp_env.gripper import PAD_BOX_HALF_EXTENTS  # noqa: E402
 from defgrasp_env.sim.meshing import OBJECT_SHAPES  # noqa: E402
 from defgrasp_env.transforms import quat_rotate  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402

@@ -147,3 +147,28 @@ def test_object_tuple_with_a_user_mesh(tmp_path):
 def test_bad_object_tuple_rejected(obj):
     with pytest.raises(ValueError, match="object"):
         gym.make(ENV_ID, object=obj)
+
+
+def test_material_tuples_are_drawn_per_world_as_a_single_env_draws_them():
+    kwargs = dict(object="random", youngs_modulus=(1e4, 1e6), poisson_ratio=(0.2, 0.45), density=(300.0, 900.0))
+    venv = gym.make_vec(ENV_ID, num_envs=4, vectorization_mode="vector_entry_point", **kwargs)
+    _, info = venv.reset(seed=5)
+    a = _actions(4, 1, seed=3)[0]
+    obs, *_ = venv.step(a)
+    materials = set()
+    for w in range(4):
+        single = gym.make(ENV_ID, **kwargs)
+        _, sinfo = single.reset(seed=5 + w)
+        assert sinfo["replay_spec"].material == info["replay_spec"][w].material
+        materials.add(sinfo["replay_spec"].material)
+        sobs, *_ = single.step(a[w])
+        for key in sobs:  # the model uses the drawn material: the step is the single env's, bit for bit
+            assert np.array_equal(sobs[key], obs[key][w]), (w, key)
+    assert len(materials) >= 2
+    assert {m.poisson_ratio for m in materials} <= {0.2, 0.45} and {m.density for m in materials} <= {300.0, 900.0}
+
+
+@pytest.mark.parametrize("kwargs", [dict(density=()), dict(poisson_ratio=(0.3, 0.5)), dict(density=(500.0, -1.0))])
+def test_bad_material_tuples_rejected(kwargs):
+    with pytest.raises(ValueError):
+        gym.make(ENV_ID, **kwargs)
