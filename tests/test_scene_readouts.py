@@ -68,3 +68,33 @@ def test_finite_flags_only_the_world_with_a_nan():
         getattr(state, field).assign(host)
         r = readouts.compute()
         assert r.finite.tolist() == [True, False, True], field
+
+
+def test_assembled_model_equals_build_model_bit_for_bit():
+    """The scene's model from cached one-world models equals ``build_model`` of the same worlds."""
+    from defgrasp_env.envs.common import draw_setup
+    from defgrasp_env.envs.config import PickupConfig
+    from defgrasp_env.envs.scene import object_mesh
+    from defgrasp_env.envs.world_models import assemble_model
+    from defgrasp_env.gripper import Gripper
+    from defgrasp_env.sim.model import ContactParams, build_model
+
+    config = PickupConfig(object="random", youngs_modulus=(1e4, 1e6), density=(300.0, 800.0))
+    rng = np.random.default_rng(1)
+    setups = [draw_setup(config, rng) for _ in range(7)]
+    args = ([object_mesh(s.object_name, None) for s in setups], [s.material for s in setups],
+            [(s.position, s.quat) for s in setups])
+    half = [Gripper.pad_half_extents] * 2
+    contact = ContactParams(2e6, 0.4, 0.9)
+    a = assemble_model(*args, half, contact, "cpu")
+    b = build_model(*args, pad_half_extents=half, contact=contact, device="cpu")
+    for name in b.__dataclass_fields__:
+        x, y = getattr(a, name), getattr(b, name)
+        if isinstance(y, wp.array):
+            assert x.dtype == y.dtype and x.numpy().tobytes() == y.numpy().tobytes(), name
+        elif name == "surfaces":
+            assert all(np.array_equal(s, t) for s, t in zip(x, y))
+        elif isinstance(y, np.ndarray):
+            assert x.dtype == y.dtype and np.array_equal(x, y), name
+        else:
+            assert x == y, name

@@ -24,7 +24,7 @@ from ..gripper import Gripper
 from ..layout import NUM_KEYPOINTS
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
-from ..sim.model import ContactParams, build_model, set_world_material
+from ..sim.model import ContactParams, set_world_material
 from ..sim.pad_motion import corner_travel, substeps_for_travel
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
@@ -32,6 +32,7 @@ from ..transforms import quat_to_matrix
 from ..wrist.force_limit import limited_substep, wrist_force
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
+from .world_models import assemble_model
 from .scene_kernels import gather_rows, scatter_rows, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds
 
 
@@ -113,9 +114,8 @@ class PickupScene:
         self._meshes = [object_mesh(s.object_name, config.object_resolution) for s in setups]
         contact = ContactParams(config.contact_stiffness, config.ground_friction, config.pad_friction)
         half = Gripper.pad_half_extents
-        self.model = build_model(self._meshes, [s.material for s in setups],
-                                 [(s.position, s.quat) for s in setups], pad_half_extents=[half, half],
-                                 contact=contact, device=config.device)
+        self.model = assemble_model(self._meshes, [s.material for s in setups],
+                                    [(s.position, s.quat) for s in setups], [half, half], contact, config.device)
         self.solver = ImplicitSolver(self.model, dataclasses.replace(config.solver, substeps=1))
         self.state = State.from_model(self.model)
         self._substep_start = State.from_model(self.model)  # a substep's start, for wrist-limit retries

@@ -40,7 +40,9 @@ class DeformablePickupVectorEnv(VectorEnv):
     offsets with one gather kernel per state array on the simulation's device; the grippers'
     per-world state has no offsets and is kept. Untouched worlds stay bit-identical, and step on
     bit for bit as before (the solver keeps no state across steps). Cost: a reset that changes an
-    object pays the host build of the model of all worlds and the solver's launch recording
+    object pays the assembly of all worlds' model from cached one-world models
+    (``world_models.assemble_model``: concatenation, equal to ``build_model`` bit for bit), new
+    solver scratch and state arrays, and the solver's launch recording at the next step
     (benchmarks/bench_vector_env.py: W = 16/64 on the CPU); a reset that keeps every object (a
     single object, or the same draw) costs what it did. A pool of prebuilt worlds per object
     would make such resets cheaper but multiply memory and the solver's work by the pool size;
