@@ -14,14 +14,19 @@ from .task import REWARD_TERMS, PickupTask
 
 
 def draw_setup(config: PickupConfig, rng: np.random.Generator, object_name: str | None = None) -> WorldSetup:
-    """Random episode start of one world: object (if not given), E, position and yaw noise."""
+    """Random episode start of one world: object (if not given), E, position and yaw noise, then
+    Poisson ratio and density where the config gives tuples of them."""
     drawn = config.object_names[rng.integers(len(config.object_names))]  # always drawn: same stream either way
     name = object_name if object_name is not None else drawn
     e = config.moduli[rng.integers(len(config.moduli))]
     xz = rng.uniform(-config.init_position_noise, config.init_position_noise, size=2)
     yaw = rng.uniform(-config.init_yaw_noise, config.init_yaw_noise)
     quat = np.array([0.0, np.sin(yaw / 2), 0.0, np.cos(yaw / 2)])
-    return WorldSetup(name, Material(config.density, float(e), config.poisson_ratio),
+    # drawn after the pose and only for a tuple, so that the draws of single values stay as they were
+    nu = config.poisson_ratio[rng.integers(len(config.poisson_ratio))] \
+        if isinstance(config.poisson_ratio, tuple) else config.poisson_ratio
+    rho = config.density[rng.integers(len(config.density))] if isinstance(config.density, tuple) else config.density
+    return WorldSetup(name, Material(float(rho), float(e), float(nu)),
                       np.array([xz[0], 0.0, xz[1]]), quat)
 
 

@@ -62,17 +62,20 @@ def check_object(name: str) -> str:
 class PickupConfig:
     """Everything that defines a DeformablePickup task; see ``DeformablePickupEnv`` for the meaning.
 
-    ``object`` is a name of ``OBJECT_SHAPES``, ``"random"`` (sampled per episode among the five), or
-    a path to a watertight surface mesh (checked here: it must exist and load as a watertight
+    ``object`` is a name of ``OBJECT_SHAPES``, ``"random"`` (sampled per episode among the five), a
+    path to a watertight surface mesh, or a tuple (a list is accepted) of names and mesh paths to
+    sample from per episode, uniformly (each entry checked here: it must exist and load as a watertight
     surface, so a bad name or file fails at ``gym.make``, not at ``reset``). ``youngs_modulus`` is a value in Pa or a tuple of values
-    to sample from per episode (e.g. the paper's (1e4, 1e5, 1e6, 1e7)).
+    to sample from per episode (e.g. the paper's (1e4, 1e5, 1e6, 1e7)); ``poisson_ratio`` and
+    ``density`` (kg/m^3) likewise (a tuple is sampled per episode, after the pose; a single value
+    draws nothing, so the draws of existing configurations are unchanged).
     """
 
-    object: str = "cuboid"
+    object: str | tuple[str, ...] = "cuboid"
     object_resolution: float | None = None
     youngs_modulus: float | tuple[float, ...] = 1e5
-    poisson_ratio: float = 0.3
-    density: float = 500.0
+    poisson_ratio: float | tuple[float, ...] = 0.3
+    density: float | tuple[float, ...] = 500.0
     ground_friction: float = 0.5
     pad_friction: float = 1.0
     contact_stiffness: float = 1e6
@@ -96,11 +99,16 @@ class PickupConfig:
     def __post_init__(self) -> None:
         if self.object_resolution is not None:
             check_range("object_resolution", self.object_resolution, 0.0, 0.1, "m", high_open=False)
-        moduli = self.youngs_modulus if isinstance(self.youngs_modulus, tuple) else (self.youngs_modulus,)
-        if len(moduli) == 0:
-            raise ValueError("youngs_modulus must be a value or a non-empty tuple of values in Pa, got ()")
-        for e in moduli:
-            Material(self.density, e, self.poisson_ratio)  # validates all three
+        for name, unit in (("youngs_modulus", "Pa"), ("poisson_ratio", ""), ("density", "kg/m^3")):
+            value = getattr(self, name)
+            if isinstance(value, list):
+                object.__setattr__(self, name, tuple(value))  # frozen: normalised once, here
+            if getattr(self, name) == ():
+                raise ValueError(f"{name} must be a value or a non-empty tuple of values {unit}, got ()")
+        for e in self.moduli:
+            for nu in self.poisson_ratios:
+                for rho in self.densities:
+                    Material(rho, e, nu)  # validates all three
         ContactParams(self.contact_stiffness, self.ground_friction, self.pad_friction)
         check_range("init_position_noise", self.init_position_noise, 0.0, 0.1, "m", low_open=False, high_open=False)
         check_range("init_yaw_noise", self.init_yaw_noise, 0.0, math.pi, "rad", low_open=False, high_open=False)
@@ -118,7 +126,16 @@ class PickupConfig:
         for name, cls in (("gripper", GripperConfig), ("solver", SolverConfig), ("camera", Camera)):
             if not isinstance(getattr(self, name), cls):
                 raise TypeError(f"{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
-        check_object(self.object)  # last: loads a mesh file, after the cheap checks
+        if isinstance(self.object, list):
+            object.__setattr__(self, "object", tuple(self.object))  # frozen: normalised once, here
+        if isinstance(self.object, tuple):
+            if len(self.object) == 0 or RANDOM_OBJECT in self.object:
+                raise ValueError(f"an object tuple must hold >= 1 names of {sorted(OBJECT_SHAPES)} or mesh paths "
+                                 f"(not {RANDOM_OBJECT!r}), got {self.object!r}")
+            for name in self.object:
+                check_object(name)  # last: loads mesh files, after the cheap checks
+        else:
+            check_object(self.object)
 
     @property
     def dt(self) -> float:
@@ -134,6 +151,17 @@ class PickupConfig:
         return self.youngs_modulus if isinstance(self.youngs_modulus, tuple) else (float(self.youngs_modulus),)
 
     @property
+    def poisson_ratios(self) -> tuple[float, ...]:
+        return self.poisson_ratio if isinstance(self.poisson_ratio, tuple) else (float(self.poisson_ratio),)
+
+    @property
+    def densities(self) -> tuple[float, ...]:
+        return self.density if isinstance(self.density, tuple) else (float(self.density),)
+
+    @property
     def object_names(self) -> tuple[str, ...]:
+        """The objects an episode's object is drawn from (uniformly)."""
+        if isinstance(self.object, tuple):
+            return self.object
         return tuple(OBJECT_SHAPES) if self.object == RANDOM_OBJECT else (self.object,)
 

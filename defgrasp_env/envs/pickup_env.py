@@ -98,7 +98,8 @@ class DeformablePickupEnv(gym.Env):
     or RNG state, options, object, material, initial pose and the reset that built the simulation;
     ``spec.reset(env)`` repeats the reset bit for bit).
 
-    **Arguments**: every field of ``PickupConfig`` as a keyword (``object``, ``youngs_modulus``
+    **Arguments**: every field of ``PickupConfig`` as a keyword (``object``: a name, ``"random"``,
+    a mesh path, or a tuple of names and paths drawn from per episode; ``youngs_modulus``
     (value or tuple to sample), ``poisson_ratio``, ``density``, ``ground_friction``,
     ``pad_friction``, ``init_position_noise``, ``init_yaw_noise``, ``control_hz``,
     ``max_linear_speed`` (m/s, <= 2), ``max_angular_speed`` (rad/s), ``wrist_force_limit`` (N),

@@ -18,18 +18,22 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
 from ..gripper import Gripper
 from ..layout import NUM_KEYPOINTS
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
-from ..sim.model import ContactParams, build_model, set_world_material
+from ..sim.model import ContactParams, set_world_material
 from ..sim.pad_motion import corner_travel, substeps_for_travel
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
 from ..transforms import quat_to_matrix
 from ..wrist.force_limit import limited_substep, wrist_force
 from .config import PickupConfig
+from .readouts import SceneReadouts, StepReadout
+from .world_models import assemble_model
+from .scene_kernels import gather_rows, scatter_rows, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds
 
 
 @functools.lru_cache(maxsize=16)
@@ -53,6 +57,13 @@ def keypoint_indices(nodes: np.ndarray, surface: np.ndarray, count: int = NUM_KE
     return candidates[np.array(chosen)]
 
 
+@functools.lru_cache(maxsize=16)
+def object_keypoints(name: str, resolution: float | None) -> np.ndarray:
+    """Cached ``keypoint_indices`` of ``object_mesh(name, resolution)`` (object-local node ids)."""
+    mesh = object_mesh(name, resolution)
+    return keypoint_indices(mesh.nodes, mesh.surface)
+
+
 @dataclass(frozen=True)
 class WorldSetup:
     """What a reset draws for one world: the object (a name of ``OBJECT_SHAPES`` or a mesh path),
@@ -64,6 +75,16 @@ class WorldSetup:
     quat: np.ndarray       # [4] xyzw
 
 
+def _remap_index(old_start: np.ndarray, new_start: np.ndarray, keep: np.ndarray, device: str) -> wp.array:
+    """int32 [rows of new layout]: the old row of each new row of a kept world, -1 elsewhere
+    (``old_start`` / ``new_start`` [W+1]: first row of each world)."""
+    counts = np.diff(new_start)
+    world = np.repeat(np.arange(len(counts)), counts)
+    local = np.arange(new_start[-1]) - new_start[world]
+    index = np.where(keep[world], old_start[world] + local, -1)
+    return wp.array(index.astype(np.int32), dtype=wp.int32, device=device)
+
+
 class PickupScene:
     """W worlds of the pickup task in one simulation (flat arrays, per-world offsets).
 
@@ -71,34 +92,46 @@ class PickupScene:
     ``model`` / ``state`` (the FEM's static data and full state, Newton style: read, do not write),
     ``solver`` (built with ``substeps=1``),
     ``substeps``, and the read-only accessors ``object_names``, ``setups``, ``materials``,
-    ``mesh(w)`` and the readouts below.
+    ``mesh(w)`` and the readouts below (``readout()``: reduced on the device once per state).
+    ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object: read
+    them from the scene after each reset rather than holding on to them.
     """
 
     def __init__(self, config: PickupConfig, setups: list[WorldSetup]):
         self.config = config
         self.num_worlds = len(setups)
+        #: physics substeps per control period, looped by ``step`` (the solver takes one per call)
+        self.substeps = config.solver.substeps
+        self.gripper = Gripper(config.gripper, self.num_worlds)
+        self._build(setups)
+        self._setups = list(setups)  # the setup each world was last reset to (initial pose, material)
+        self.reset_worlds(np.ones(self.num_worlds, bool), setups)
+
+    def _build(self, setups: list[WorldSetup]) -> None:
+        """Model, solver, state and control of worlds holding ``setups``' objects and materials."""
+        config = self.config
         self._object_names = tuple(s.object_name for s in setups)
         self._meshes = [object_mesh(s.object_name, config.object_resolution) for s in setups]
         contact = ContactParams(config.contact_stiffness, config.ground_friction, config.pad_friction)
         half = Gripper.pad_half_extents
-        self.model = build_model(self._meshes, [s.material for s in setups],
-                                 [(s.position, s.quat) for s in setups], pad_half_extents=[half, half],
-                                 contact=contact, device=config.device)
-        #: physics substeps per control period, looped by ``step`` (the solver takes one per call)
-        self.substeps = config.solver.substeps
+        self.model = assemble_model(self._meshes, [s.material for s in setups],
+                                    [(s.position, s.quat) for s in setups], [half, half], contact, config.device)
         self.solver = ImplicitSolver(self.model, dataclasses.replace(config.solver, substeps=1))
         self.state = State.from_model(self.model)
         self._substep_start = State.from_model(self.model)  # a substep's start, for wrist-limit retries
         self._control = Control.from_model(self.model)
-        self._keypoints = [keypoint_indices(m.nodes, m.surface) for m in self._meshes]
-        self.gripper = Gripper(config.gripper, self.num_worlds)
-        self._setups = list(setups)  # the setup each world was last reset to (initial pose, material)
-        self.reset_worlds(np.ones(self.num_worlds, bool), setups)
+        self._readouts = SceneReadouts(self.model, self.state, [object_keypoints(s.object_name, config.object_resolution)
+                                                    for s in setups])
+        self._readout: StepReadout | None = None
+        world = np.arange(self.num_worlds, dtype=np.int32)
+        self._world_ids = wp.array(world, dtype=wp.int32, device=self.model.device)  # [W]: row w is world w
+        self._pad_world = wp.array(np.repeat(world, self.model.pads_per_world), dtype=wp.int32,
+                                   device=self.model.device)  # [W*P]: the world of each pad row
 
     # -- accessors ---------------------------------------------------------------------------
     @property
     def object_names(self) -> tuple[str, ...]:
-        """The object each world was built with (a name of ``OBJECT_SHAPES`` or a mesh path)."""
+        """The object each world holds now (a name of ``OBJECT_SHAPES`` or a mesh path)."""
         return self._object_names
 
     @property
@@ -117,43 +150,66 @@ class PickupScene:
 
     # -- resets ----------------------------------------------------------------------------
     def reset_worlds(self, mask: np.ndarray, setups: list[WorldSetup]) -> None:
-        """Put the worlds in ``mask`` back to their initial state with the given setups (objects must
-        match the built ones); other worlds are left untouched, bit for bit."""
+        """Put the worlds in ``mask`` back to their initial state with the given setups; other
+        worlds are left untouched, bit for bit (their full state and their gripper). A world whose
+        object changes makes the scene rebuild its flat arrays (``_rebuild``)."""
+        if any(setups[w].object_name != self._object_names[w] for w in np.flatnonzero(mask)):
+            self._rebuild(mask, setups)
         m = self.model
-        x = self.state.positions.numpy()
-        v = self.state.velocities.numpy()
+        rows, values = [], []
         flange_xz = np.zeros((self.num_worlds, 2))
         for w in np.flatnonzero(mask):
             s = setups[w]
-            if s.object_name != self._object_names[w]:
-                raise ValueError(f"world {w} holds {self._object_names[w]!r}; cannot reset it to {s.object_name!r}")
             sl = m.world_nodes(w)
             local = self._meshes[w].nodes
-            x[sl] = (local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32)
-            v[sl] = 0.0
+            rows.append(np.arange(sl.start, sl.stop, dtype=np.int32))
+            values.append((local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32))
             if s.material != self._setups[w].material:
                 set_world_material(m, w, s.material)
             self._setups[w] = s
             flange_xz[w] = s.position[0], s.position[2]
         self.gripper.reset(mask, flange_xz)
-        self.state.positions.assign(x)
-        self.state.velocities.assign(v)
+        self._readout = None
+        if rows:  # only the reset worlds' rows travel (no full-state download)
+            index = wp.array(np.concatenate(rows), dtype=wp.int32, device=m.device)
+            x = wp.array(np.concatenate(values), dtype=wp.vec3, device=m.device)
+            wp.launch(scatter_rows, dim=len(index), inputs=[x, index, self.state.positions], device=m.device)
         self._zero_outputs(mask)
         pos, quat = self.gripper.pad_poses()
         self.state.pad_positions.assign(pos.reshape(-1, 3).astype(np.float32))
         self.state.pad_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
 
+    def _rebuild(self, mask: np.ndarray, setups: list[WorldSetup]) -> None:
+        """New flat arrays for the objects after the reset of ``mask`` (node and tet offsets change
+        with the objects), with the full state of every world outside ``mask`` copied to its new
+        offsets by a gather kernel on the device (the gripper's per-world state has no offsets and
+        stays). The worlds in ``mask`` are then set by ``reset_worlds``."""
+        old_model, old_state = self.model, self.state
+        kept = [self._setups[w] if not mask[w] else setups[w] for w in range(self.num_worlds)]
+        self._build(kept)
+        for w in np.flatnonzero(mask):
+            self._setups[w] = setups[w]  # built with its new material: no material update needed
+        new = self.model
+        node_index = _remap_index(old_model.node_start, new.node_start, ~mask, new.device)
+        tet_index = _remap_index(old_model.tet_start, new.tet_start, ~mask, new.device)
+        for name in ("positions", "velocities", "elastic_force", "contact_force", "von_mises"):
+            index = tet_index if name == "von_mises" else node_index
+            dst = getattr(self.state, name)
+            wp.launch(gather_rows, dim=len(dst), inputs=[getattr(old_state, name), index, dst], device=new.device)
+        for name in ("pad_positions", "pad_orientations", "mean_von_mises", "pad_normal_force", "pad_force"):
+            wp.copy(getattr(self.state, name), getattr(old_state, name))  # [W] / [W*P]: same layout
+
     def _zero_outputs(self, mask: np.ndarray) -> None:
-        """Forces and stresses of freshly reset worlds: the object is at rest shape, untouched."""
-        m, st = self.model, self.state
-        node_mask = np.repeat(mask, np.diff(m.node_start))
-        tet_mask = np.repeat(mask, np.diff(m.tet_start))
-        pad_mask = np.repeat(mask, m.pads_per_world)
-        for array, rows in ((st.elastic_force, node_mask), (st.contact_force, node_mask), (st.von_mises, tet_mask),
-                            (st.mean_von_mises, mask), (st.pad_normal_force, pad_mask), (st.pad_force, pad_mask)):
-            host = array.numpy()
-            host[rows] = 0.0
-            array.assign(host)
+        """Velocities, forces and stresses of freshly reset worlds (at rest shape, untouched): zeroed
+        by kernels on the device, row by row of the worlds in ``mask``."""
+        m, st, d = self.model, self.state, self.model.device
+        world_mask = wp.array(mask.astype(np.int32), dtype=wp.int32, device=d)
+        for array, row_world in ((st.velocities, m.node_world), (st.elastic_force, m.node_world),
+                                 (st.contact_force, m.node_world), (st.pad_force, self._pad_world)):
+            wp.launch(zero_vec3_rows_of_worlds, dim=len(array), inputs=[array, row_world, world_mask], device=d)
+        for array, row_world in ((st.von_mises, m.tet_world), (st.mean_von_mises, self._world_ids),
+                                 (st.pad_normal_force, self._pad_world)):
+            wp.launch(zero_float_rows_of_worlds, dim=len(array), inputs=[array, row_world, world_mask], device=d)
 
     # -- stepping --------------------------------------------------------------------------
     def step(self, target_pos: np.ndarray, target_quat: np.ndarray, target_gap: np.ndarray,
@@ -168,6 +224,7 @@ class PickupScene:
         pad forces (``Gripper.sense``). Worlds with ``active == False`` keep their wrist and jaw
         still."""
         active = np.ones(self.num_worlds, bool) if active is None else active
+        self._readout = None
         self.gripper.begin_step(target_pos, target_quat)
         # substeps adapted to the pad travel (sim.pad_motion; the jaw's half-period travel included)
         travel = self.gripper.planned_pad_travel() + self.config.gripper.closing_speed * self.config.dt / 2
@@ -198,26 +255,23 @@ class PickupScene:
         """Node positions [N_w, 3] (m, world) of world ``w``'s object (a copy)."""
         return self.state.positions.numpy()[self.model.world_nodes(w)].copy()
 
+    def readout(self) -> StepReadout:
+        """Feature point and velocity, keypoints and finiteness of every world at the current state
+        (``readouts.StepReadout``): reduced on the simulation's device, once per state (cached until
+        the next ``step`` or reset), so observations, reward and the divergence check share it."""
+        if self._readout is None:
+            self._readout = self._readouts.compute()
+        return self._readout
+
     def feature_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Object feature point (mean node position, paper eq. 5) [W,3] m and its velocity [W,3] m/s."""
-        x, v = self.state.positions.numpy(), self.state.velocities.numpy()
-        starts = self.model.node_start
-        counts = np.diff(starts)
-        pos = np.add.reduceat(x.astype(np.float64), starts[:-1], axis=0) / counts[:, None]
-        vel = np.add.reduceat(v.astype(np.float64), starts[:-1], axis=0) / counts[:, None]
-        return pos, vel
+        r = self.readout()
+        return r.feature_position, r.feature_velocity
 
     def keypoint_positions(self) -> np.ndarray:
         """[W, NUM_KEYPOINTS, 3] positions (m) of fixed surface nodes of each object."""
-        x = self.state.positions.numpy()
-        out = np.zeros((self.num_worlds, NUM_KEYPOINTS, 3))
-        for w in range(self.num_worlds):
-            idx = self._keypoints[w] + self.model.node_start[w]
-            out[w, : len(idx)] = x[idx]
-        return out
+        return self.readout().keypoints
 
     def finite(self) -> np.ndarray:
         """[W] bool: the world's node positions and velocities are all finite."""
-        x, v = self.state.positions.numpy(), self.state.velocities.numpy()
-        bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
-        return np.add.reduceat(bad.astype(int), self.model.node_start[:-1]) == 0
+        return self.readout().finite

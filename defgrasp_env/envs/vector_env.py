@@ -13,7 +13,7 @@ from gymnasium.vector.utils import batch_space
 
 from .actions import check_actions, targets
 from .common import SceneCamera, draw_world, observations, step_infos
-from .config import RANDOM_OBJECT, PickupConfig
+from .config import PickupConfig
 from .pickup_env import make_config
 from .scene import PickupScene
 from .seeds import world_seeds
@@ -26,8 +26,27 @@ class DeformablePickupVectorEnv(VectorEnv):
     Spaces, reward and observations are those of ``DeformablePickupEnv`` (batched on a leading axis
     of N); the reset option is ``reset_mask`` (below). World ``i`` reset with seed ``s + i`` draws exactly what a single env reset
     with seed ``s + i`` draws, so the vector env equals N single envs on those seeds.
-    Each world keeps the object it was built with (``object="random"`` draws it per world once, at
-    construction); Young's modulus, pose noise and the rest are drawn per episode.
+    Every episode of every world draws its object (``object="random"``: one of the five shapes; a
+    tuple of names and mesh paths: one of those), Young's modulus, pose noise and the rest, from
+    that world's RNG, as a single env reset on the same seed or RNG state draws them; ``reset`` and
+    every autoresetting ``step`` report them per reset world in ``info["object"]`` (object array
+    [N] of str), ``info["youngs_modulus"]`` ([N] Pa), with masks ``_object`` / ``_youngs_modulus``.
+
+    Storage of worlds with different objects (node and tet counts differ by world): the worlds'
+    nodes and tets stay packed in flat arrays with per-world offsets (``model.node_start``,
+    ``model.tet_start``; no padding, so the solver's work is exactly the sum of the objects). A
+    reset that changes the object of any world rebuilds the model, solver and state for the new
+    objects (``PickupScene.reset_worlds``) and copies every other world's full state to its new
+    offsets with one gather kernel per state array on the simulation's device; the grippers'
+    per-world state has no offsets and is kept. Untouched worlds stay bit-identical, and step on
+    bit for bit as before (the solver keeps no state across steps). Cost: a reset that changes an
+    object pays the assembly of all worlds' model from cached one-world models
+    (``world_models.assemble_model``: concatenation, equal to ``build_model`` bit for bit), new
+    solver scratch and state arrays, and the solver's launch recording at the next step
+    (benchmarks/bench_vector_env.py: W = 16/64 on the CPU); a reset that keeps every object (a
+    single object, or the same draw) costs what it did. A pool of prebuilt worlds per object
+    would make such resets cheaper but multiply memory and the solver's work by the pool size;
+    per-world padding to the largest object would waste up to ~3x the work of the smallest.
 
     Autoreset (``autoreset_mode``): ``NEXT_STEP`` (default: a world that ended is reset by the
     following ``step``, which returns its first observation with zero reward), ``SAME_STEP`` (reset
@@ -82,7 +101,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         self.scene: PickupScene | None = None
         self.task = PickupTask(self.config, num_envs)
         self._needs_reset = np.zeros(num_envs, bool)
-        self._origins = [None] * num_envs  # each world's ReplaySpec of the reset that built the scene
+        self._origins = [None] * num_envs  # each world's ReplaySpec of the reset that built its object
         self._camera = SceneCamera(self.config)
 
     # -- gym API ---------------------------------------------------------------------------
@@ -100,9 +119,8 @@ class DeformablePickupVectorEnv(VectorEnv):
         for i in np.flatnonzero(mask):
             if seeds[i] is not None or self.scene is None:
                 self._rngs[i] = seeding.np_random(seeds[i])[0]
-        specs = self._reset_worlds(mask, seeds)
         info = {"is_success": np.zeros(self.num_envs, bool), "_is_success": mask.copy(),
-                "replay_spec": specs, "_replay_spec": np.array([spec is not None for spec in specs])}
+                **self._reset_worlds(mask, seeds)}
         if self._viewer is not None:
             if mask[self._viewer_world]:
                 self._viewer.new_episode()
@@ -129,8 +147,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         if resetting.any():
             # after the step: the worlds' frozen-gripper step is discarded, and their first
             # observation is the state the reset sets, as a single env's reset returns it
-            specs = self._reset_worlds(resetting)
-            info.update(replay_spec=specs, _replay_spec=resetting.copy())
+            info.update(self._reset_worlds(resetting))
         obs = self._obs()
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self._needs_reset = done
@@ -139,8 +156,7 @@ class DeformablePickupVectorEnv(VectorEnv):
             info["final_info"] = {k: v.copy() for k, v in info.items() if k not in ("final_obs",)}
             info["_final_obs"] = done.copy()
             info["_final_info"] = done.copy()
-            specs = self._reset_worlds(done)
-            info.update(replay_spec=specs, _replay_spec=done.copy())
+            info.update(self._reset_worlds(done))
             obs = self._obs()
         if self._viewer is not None:
             self.render()
@@ -173,31 +189,36 @@ class DeformablePickupVectorEnv(VectorEnv):
         self._camera = SceneCamera(self.config)
 
     # -- internals -------------------------------------------------------------------------
-    def _reset_worlds(self, mask: np.ndarray, seeds: list | None = None) -> np.ndarray:
+    def _reset_worlds(self, mask: np.ndarray, seeds: list | None = None) -> dict[str, np.ndarray]:
         """Reset the worlds in ``mask`` (all of them when the scene is built) from their RNGs, just
-        seeded with ``seeds[w]`` where that is not None. Returns the ReplaySpec of each reset world
-        (object array [N], None elsewhere)."""
+        seeded with ``seeds[w]`` where that is not None. Returns the reset info entries of the reset
+        worlds: ``replay_spec`` (object array [N]), ``object`` (object array [N]),
+        ``youngs_modulus`` [N] Pa, each with its ``_key`` mask."""
         seeds = seeds if seeds is not None else [None] * self.num_envs
         built = self.scene is None
         reset = np.ones(self.num_envs, bool) if built else mask
         specs = np.full(self.num_envs, None, dtype=object)
         setups = [None] * self.num_envs
         for w in np.flatnonzero(reset):
-            name = None if built else self.scene.object_names[w]
             # a world outside the mask is drawn (at the build) from an RNG that was not reseeded
-            setups[w], spec = draw_world(self.config, self._rngs[w], seeds[w] if mask[w] else None, name)
-            if self.config.object == RANDOM_OBJECT:  # the world keeps its object: a single env must pick it
-                spec = dataclasses.replace(spec, options={"object": setups[w].object_name})
-            if built:
-                self._origins[w] = spec
-            specs[w] = dataclasses.replace(spec, scene_origin=None if built else self._origins[w])
+            setups[w], spec = draw_world(self.config, self._rngs[w], seeds[w] if mask[w] else None)
+            if built or setups[w].object_name != self.scene.object_names[w]:
+                self._origins[w] = spec  # this reset builds the world's object
+                specs[w] = spec
+            else:
+                specs[w] = dataclasses.replace(spec, scene_origin=self._origins[w])
         if built:
             self.scene = PickupScene(self.config, setups)
         else:
             self.scene.reset_worlds(mask, setups)
         self.task.reset(mask)
         self._needs_reset[mask] = False
-        return specs
+        objects = np.full(self.num_envs, None, dtype=object)
+        moduli = np.zeros(self.num_envs)
+        for w in np.flatnonzero(reset):
+            objects[w], moduli[w] = setups[w].object_name, setups[w].material.youngs_modulus
+        return {"replay_spec": specs, "_replay_spec": reset.copy(), "object": objects, "_object": reset.copy(),
+                "youngs_modulus": moduli, "_youngs_modulus": reset.copy()}
 
     def _obs(self):
         pixels = None

@@ -47,8 +47,8 @@ class VectorHDF5Recorder(VectorWrapper):
     ``scene_origin``); the recorder stores it and reads nothing private of the env. On CUDA the
     float atomics sum in a varying order, so a replay differs in the last bits and, through contact
     and friction, by up to millimetres over an episode (measured on an H100: 2.8 mm after 45 steps
-    of grasp and lift); the data stays valid. With ``object="random"`` a world keeps the object it
-    was built with; its files name it in the reset options (``{"object": name}``) of the replay data.
+    of grasp and lift); the data stays valid. With ``object="random"`` (or a tuple) a world draws a
+    fresh object per episode, as a single env on the same seed or RNG state draws it.
 
     Autoreset modes: ``NEXT_STEP`` (an ended world's next step starts its next episode) and
     ``DISABLED`` (steps of an ended world are not recorded until ``reset(options={"reset_mask"})``

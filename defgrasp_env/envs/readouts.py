@@ -1,0 +1,76 @@
+"""Per-step readouts of the pickup scene, reduced on the simulation's device: the full FEM state
+(all nodes of all worlds) is read by Warp kernels (``scene_kernels``) into small per-world arrays,
+and only those [W, ...] arrays reach the host, once per step, shared by observations, reward,
+success and the divergence check."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from ..layout import NUM_KEYPOINTS
+from ..sim.model import Model
+from ..sim.state import State
+from .scene_kernels import gather_keypoints, world_readouts
+
+
+@dataclass(frozen=True)
+class StepReadout:
+    """What the env reads of a state, per world (host numpy; world frame, SI units).
+
+    Attributes:
+        feature_position: [W, 3] float64 m, the object's feature point (mean node position, eq. 5).
+        feature_velocity: [W, 3] float64 m/s, its velocity (mean node velocity).
+        keypoints: [W, NUM_KEYPOINTS, 3] float64 m, fixed surface nodes (zeros past an object's count).
+        finite: [W] bool, every node position and velocity of the world is finite.
+    """
+
+    feature_position: np.ndarray
+    feature_velocity: np.ndarray
+    keypoints: np.ndarray
+    finite: np.ndarray
+
+
+class SceneReadouts:
+    """Device buffers and recorded launches of the readouts of one model's ``state``.
+
+    Public device arrays (valid after ``compute``, overwritten by the next): ``feature_position``,
+    ``feature_velocity`` ([W] vec3d), ``keypoints`` ([W*NUM_KEYPOINTS] vec3), ``finite`` ([W] int32).
+
+    Args:
+        model: the simulation's model (its ``node_start`` offsets and device).
+        state: the state the readouts read (its arrays are bound to the recorded launches).
+        keypoints: per world, the object-local node ids of its keypoints (<= NUM_KEYPOINTS each).
+    """
+
+    def __init__(self, model: Model, state: State, keypoints: list[np.ndarray]):
+        d, w = model.device, model.num_worlds
+        self.num_worlds = w
+        self._device = d
+        self._node_start = wp.array(model.node_start.astype(np.int32), dtype=wp.int32, device=d)
+        index = np.full((w, NUM_KEYPOINTS), -1, np.int32)
+        for i, local in enumerate(keypoints):  # once per build, not per step
+            index[i, : len(local)] = np.asarray(local) + model.node_start[i]
+        self._keypoint_index = wp.array(index.ravel(), dtype=wp.int32, device=d)
+        self.feature_position = wp.zeros(w, dtype=wp.vec3d, device=d)
+        self.feature_velocity = wp.zeros(w, dtype=wp.vec3d, device=d)
+        self.keypoints = wp.zeros(w * NUM_KEYPOINTS, dtype=wp.vec3, device=d)
+        self.finite = wp.zeros(w, dtype=wp.int32, device=d)
+        # recorded once (a couple of microseconds of Python per launch, as the solver's launches)
+        self._launches = (
+            wp.launch(world_readouts, dim=w, inputs=[state.positions, state.velocities, self._node_start],
+                      outputs=[self.feature_position, self.feature_velocity, self.finite], device=d,
+                      record_cmd=True),
+            wp.launch(gather_keypoints, dim=w * NUM_KEYPOINTS, inputs=[state.positions, self._keypoint_index],
+                      outputs=[self.keypoints], device=d, record_cmd=True))
+
+    def compute(self) -> StepReadout:
+        """Launch the readout kernels on the state and bring the [W, ...] results to the host."""
+        w = self.num_worlds
+        for cmd in self._launches:
+            cmd.launch()
+        return StepReadout(self.feature_position.numpy().copy(), self.feature_velocity.numpy().copy(),
+                           self.keypoints.numpy().reshape(w, NUM_KEYPOINTS, 3).astype(np.float64),
+                           self.finite.numpy() != 0)
