@@ -31,7 +31,7 @@ from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
 from . import ENV_ID
 from .envs.config import OBS_TYPES, RANDOM_OBJECT, PickupConfig
 from .sim.meshing import OBJECT_SHAPES
-from .layout import AGENT_POS, ENV_STATE
+from .layout import AGENT_POS, DELTA_ACTION, ENV_STATE
 from .recording.lerobot_export import CAMERA_KEY
 
 __all__ = ["DefgraspEnvConfig"]
@@ -70,7 +70,7 @@ class DefgraspEnvConfig(EnvConfig):
                              f"got {self.object!r}")
         env_config = PickupConfig(**self._pickup_kwargs())
         camera = env_config.camera
-        self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(7,))}
+        self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(DELTA_ACTION.size,))}
         if self.obs_type in ("state", "pixels_agent_pos"):
             self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(AGENT_POS.size,))
         if self.obs_type == "state":

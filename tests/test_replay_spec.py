@@ -106,6 +106,28 @@ def test_vector_world_replays_bit_exactly_in_a_single_env(obj):
     venv.close()
 
 
+def test_a_world_replays_bit_exactly_whatever_the_other_worlds_do():
+    """The substep count depends on the config only: world 0 takes the largest legal move (every
+    delta axis saturated), world 1 a gentle one; world 1 replayed alone in a single env gives the
+    same node positions bit for bit (with a batch-wide count adapted to the actions, world 0's
+    move gave world 1 more substeps than its replay: 1.4e-7 m apart at the first step)."""
+    venv = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point")
+    _, info = venv.reset(seed=11)
+    spec = info["replay_spec"][1]
+    actions = np.zeros((4, 2, 7), np.float32)
+    actions[:, 0] = [-1.0, 1.0, -1.0, 1.0, -1.0, -1.0, 1.0]
+    actions[:, 1, 1] = -0.5
+    scene = venv.unwrapped.scene
+    x = []
+    for a in actions:
+        venv.step(a)
+        x.append(scene.state.positions.numpy()[scene.model.world_nodes(1)].copy())
+    _, x_single = _single_positions(spec, actions[:, 1])
+    for k, (a, b) in enumerate(zip(x, x_single)):
+        assert np.array_equal(a, b), f"step {k}: max |dx| = {np.abs(a - b).max():.3e} m"
+    venv.close()
+
+
 def test_partial_reset_emits_specs_only_for_the_reset_worlds():
     venv = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point",
                         autoreset_mode=AutoresetMode.DISABLED)

@@ -3,6 +3,8 @@ position [W, 3] m, orientation [W, 4] xyzw and jaw-gap [W] m targets of one cont
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..gripper import Gripper
@@ -51,6 +53,18 @@ def absolute_targets(gripper: Gripper, config: PickupConfig, action: np.ndarray)
     axis = rel[:, :3] / np.maximum(np.linalg.norm(rel[:, :3], axis=1, keepdims=True), 1e-12)
     new_quat = quat_multiply(axis_angle_to_quat(axis * (angle * frac)[:, None]), quat)
     return pos + d * step, quat_normalize(new_quat), ABSOLUTE_ACTION.get(action, "gap")[:, 0]
+
+
+#: Largest flange move of one control period, in units of (``max_linear_speed`` dt,
+#: ``max_angular_speed`` dt), per ``action_mode``: a delta action moves each axis by up to the speed
+#: limit (a norm of up to sqrt 3 of it); an absolute action's move is rate-limited in norm.
+STEP_NORM_FACTOR = {"delta": math.sqrt(3.0), "absolute": 1.0}
+
+
+def max_flange_step(config: PickupConfig) -> tuple[float, float]:
+    """Largest flange translation (m) and rotation (rad) one control period of ``config`` can make."""
+    factor = STEP_NORM_FACTOR[config.action_mode]
+    return factor * config.max_linear_speed * config.dt, factor * config.max_angular_speed * config.dt
 
 
 #: The decoder of each ``action_mode``.

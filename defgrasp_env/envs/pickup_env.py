@@ -20,6 +20,12 @@ from .task import PickupTask, action_space, observation_spaces
 FOREIGN_OPTION_PREFIXES = ("lerobot_",)
 
 
+def render_fps(control_hz: float) -> int | float:
+    """``metadata["render_fps"]``: the control rate, an int where it is one (video writers such as
+    PyAV's, used by lerobot-eval, need a rational frame rate)."""
+    return int(control_hz) if float(control_hz).is_integer() else control_hz
+
+
 def make_config(config: PickupConfig | None, kwargs: dict[str, Any]) -> PickupConfig:
     """A ``PickupConfig`` from keyword options (``object=``, ``youngs_modulus=``, ...)."""
     base = config if config is not None else PickupConfig()
@@ -58,7 +64,8 @@ class DeformablePickupEnv(gym.Env):
     collaborative arm: it stops moving while the net force its pads exert on the object would
     exceed ``wrist_force_limit`` (default 150 N, a UR e-Series default safety limit), as the jaw
     stops at ``gripper.grip_force_limit``; so a tip force stays within about grip limit + wrist
-    limit. No node goes through a pad at any legal speed; a state with a node deeper than 1 mm
+    limit, except where the object is pinched between a pad and the ground or wrapped round a pad
+    edge (see the README's known gaps). No node goes through a pad at any legal speed; a state with a node deeper than 1 mm
     in a pad or the ground is flagged (``sim_penetrated``).
 
     **Action space** (``action_mode``; names, slices, units and bounds in ``defgrasp_env.layout``):
@@ -91,7 +98,8 @@ class DeformablePickupEnv(gym.Env):
 
     **Info**: ``is_success``, ``grasped``, ``pierced``, ``goal_distance`` (m), reward terms, tip
     forces (N), ``wrist_force`` (N, net force of the pads on the object), jaw gap (m), mean von
-    Mises stress (Pa), solver iterations/residual/penetration (m), ``sim_diverged``,
+    Mises stress (Pa), solver iterations (of the accepted solves, summed over substeps; a wrist
+    force-limit retry is not counted)/residual/penetration (m), ``sim_diverged``,
     ``sim_converged`` (Newton met its tolerance in every substep), ``sim_penetrated`` (a node ended
     deeper than ``solver.penetration_bound``, 1 mm, in a pad or the ground); ``reset`` returns
     ``is_success``, ``object``, ``youngs_modulus`` (Pa) and ``replay_spec`` (a ``ReplaySpec``: seed
@@ -135,9 +143,7 @@ class DeformablePickupEnv(gym.Env):
 
             check_port_free(viewer_host, viewer_port, "viewer_port")
             self._viewer = LiveSceneViewer(host=viewer_host, port=viewer_port)
-        # an int where the rate is one (video writers such as PyAV's need a rational frame rate)
-        hz = self.config.control_hz
-        self.metadata = {**self.metadata, "render_fps": int(hz) if float(hz).is_integer() else hz}
+        self.metadata = {**self.metadata, "render_fps": render_fps(self.config.control_hz)}
         self.observation_space = observation_spaces(self.config)
         self.action_space = action_space(self.config)
         self.scene: PickupScene | None = None

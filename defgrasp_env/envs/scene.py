@@ -4,7 +4,8 @@ the gripper and the FEM together and reads back what the env observes. Shared by
 (W = 1) and the native vector env.
 
 Physics substeps have one owner, :meth:`PickupScene.step`: a control period is
-``config.solver.substeps`` equal substeps (more when the pads travel far, ``sim.pad_motion``), and
+``substeps`` equal substeps (``config.solver.substeps``, more when the configured speeds let the
+pads travel far in a period, ``sim.pad_motion``; never dependent on the actions), and
 in each the gripper's jaw driver and wrist move on the pad forces of the one before, then the
 solver takes ONE backward-Euler step (the solver is built with ``substeps=1``; its own substep loop
 is not used, because the jaw driver and the wrist force limit must see the forces of every
@@ -20,16 +21,17 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from ..gripper import Gripper
+from ..gripper import Gripper, pad_reach
 from ..layout import NUM_KEYPOINTS
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.model import ContactParams, set_world_material
-from ..sim.pad_motion import corner_travel, substeps_for_travel
+from ..sim.pad_motion import max_pad_travel, substeps_for_travel
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
 from ..transforms import quat_to_matrix
 from ..wrist.force_limit import limited_substep, wrist_force
+from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model
@@ -100,8 +102,12 @@ class PickupScene:
     def __init__(self, config: PickupConfig, setups: list[WorldSetup]):
         self.config = config
         self.num_worlds = len(setups)
-        #: physics substeps per control period, looped by ``step`` (the solver takes one per call)
-        self.substeps = config.solver.substeps
+        #: physics substeps per control period, looped by ``step`` (the solver takes one per call):
+        #: ``config.solver.substeps``, or more where the largest legal move of the pads in a period
+        #: would exceed ``sim.pad_motion.MAX_PAD_TRAVEL`` per substep (a function of the config only)
+        linear, angle = max_flange_step(config)
+        travel = max_pad_travel(linear, angle, pad_reach(), config.gripper.closing_speed * config.dt)
+        self.substeps = substeps_for_travel(travel, config.solver.substeps)
         self.gripper = Gripper(config.gripper, self.num_worlds)
         self._build(setups)
         self._setups = list(setups)  # the setup each world was last reset to (initial pose, material)
@@ -215,9 +221,8 @@ class PickupScene:
     def step(self, target_pos: np.ndarray, target_quat: np.ndarray, target_gap: np.ndarray,
              active: np.ndarray | None = None) -> SolveStats:
         """Move wrists and jaws toward the targets (flange pos [W, 3] m, quat [W, 4] xyzw, gap [W] m;
-        limits enforced) and advance the FEM by one control period in at least ``substeps`` physics
-        substeps (more when a pad point would travel more than ``sim.pad_motion.MAX_PAD_TRAVEL`` in
-        one): per substep the gripper plans jaw and wrist on the pad forces of the previous one
+        limits enforced) and advance the FEM by one control period in ``substeps`` physics
+        substeps: per substep the gripper plans jaw and wrist on the pad forces of the previous one
         (``Gripper.plan_substep``), the solver takes one step with the pads moved there
         (``Gripper.move``; retried with a fraction of the wrist motion while the pads' net force
         exceeds ``config.wrist_force_limit``, ``wrist.force_limit``), and the gripper reads the new
@@ -226,9 +231,7 @@ class PickupScene:
         active = np.ones(self.num_worlds, bool) if active is None else active
         self._readout = None
         self.gripper.begin_step(target_pos, target_quat)
-        # substeps adapted to the pad travel (sim.pad_motion; the jaw's half-period travel included)
-        travel = self.gripper.planned_pad_travel() + self.config.gripper.closing_speed * self.config.dt / 2
-        count = substeps_for_travel(travel, self.substeps)
+        count = self.substeps
         h = self.config.dt / count
         reports = []
         for k in range(count):

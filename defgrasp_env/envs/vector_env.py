@@ -14,7 +14,7 @@ from gymnasium.vector.utils import batch_space
 from .actions import check_actions, targets
 from .common import SceneCamera, draw_world, observations, step_infos
 from .config import PickupConfig
-from .pickup_env import make_config
+from .pickup_env import make_config, render_fps
 from .scene import PickupScene
 from .seeds import world_seeds
 from .task import PickupTask, action_space, observation_spaces
@@ -90,7 +90,7 @@ class DeformablePickupVectorEnv(VectorEnv):
             check_port_free(viewer_host, viewer_port, "viewer_port")
             self._viewer = LiveSceneViewer(host=viewer_host, port=viewer_port)
         self.max_episode_steps = max_episode_steps if max_episode_steps is not None else self.config.max_episode_steps
-        self.metadata = {"render_modes": ["rgb_array", "human"], "render_fps": self.config.control_hz,
+        self.metadata = {"render_modes": ["rgb_array", "human"], "render_fps": render_fps(self.config.control_hz),
                          "autoreset_mode": self.autoreset_mode}
         self.single_observation_space = observation_spaces(self.config)
         self.single_action_space = action_space(self.config)

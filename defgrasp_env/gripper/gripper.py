@@ -4,8 +4,8 @@ The gripper owns the robot side of the pickup scene: the wrist joints, the jaw g
 the grip-stiffness estimate, the pads' collision boxes and their poses, the lift that keeps the
 pads above the ground, and the tip-force readout. It knows nothing about the FEM solver: per
 physics substep the scene (which owns the substep loop) asks it for the pad box poses to move to
-(:meth:`Gripper.substep`) and hands it the pad normal forces the solver measured there
-(:meth:`Gripper.sense`).
+(:meth:`Gripper.plan_substep`, :meth:`Gripper.move`) and hands it the pad forces the solver measured
+there (:meth:`Gripper.sense`).
 
 Force limits: the jaw driver's grip-force limit runs in :meth:`Gripper.plan_substep` on the forces
 of the previous :meth:`Gripper.sense`. The wrist's force limit (``wrist.force_limit``) needs the
@@ -21,13 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..sim.pad_motion import corner_travel
 from ..transforms import quat_rotate
 from ..wrist import clamp_joints, fk_analytic, ik_analytic
 from .driver import GripperConfig, GripperDriver, update_grip_stiffness
 from .linkage import GAP_MAX, GAP_MIN, pad_boxes
 
-__all__ = ["GROUND_CLEARANCE", "Gripper", "pad_box_poses", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
+__all__ = ["GROUND_CLEARANCE", "Gripper", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
 
 #: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
 #: can never push a node through itself; the inner face stays where the linkage puts it.
@@ -49,6 +48,15 @@ def pad_box_poses(flange_pos: np.ndarray, flange_quat: np.ndarray, gap: np.ndarr
     centers[:, 1, 0] -= PAD_BACKING / 2
     world = flange_pos[:, None, :] + quat_rotate(flange_quat[:, None, :], centers)
     return world, np.repeat(flange_quat[:, None, :], 2, axis=1)
+
+
+def pad_reach() -> float:
+    """Largest distance (m) of a pad-box corner from the flange over the jaw's stroke."""
+    gaps = np.linspace(GAP_MIN, GAP_MAX, 9)
+    flange = np.zeros((len(gaps), 3))
+    centers, quats = pad_box_poses(flange, np.tile([0.0, 0.0, 0.0, 1.0], (len(gaps), 1)), gaps)
+    corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], _CORNER_SIGNS * PAD_BOX_HALF_EXTENTS)
+    return float(np.linalg.norm(corners, axis=-1).max())
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:
@@ -159,13 +167,6 @@ class Gripper:
     def _wrist_joints(self, fraction: float) -> np.ndarray:
         """Joints [W, 6] a ``fraction`` of the way through the control period's wrist motion."""
         return clamp_joints(self._q_start + self._q_move * fraction)
-
-    def planned_pad_travel(self) -> np.ndarray:
-        """Largest travel (m) [W] of a pad-box corner over the control period's wrist motion (jaw
-        excluded), from :meth:`begin_step`'s start to its target joints."""
-        start = self.pad_poses(self._q_start)
-        end = self.pad_poses(self._wrist_joints(1.0))
-        return corner_travel(*start, *end, PAD_BOX_HALF_EXTENTS)
 
     def plan_substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray) -> None:
         """Plan substep ``k`` of ``count`` (length ``h`` s): the jaw driver moves the gap toward

@@ -138,7 +138,7 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
                 raise (exc.cause if isinstance(exc.cause, Exception) else exc) from exc
             except ray.exceptions.RayError as exc:  # worker or node lost more than max_retries times
                 raise RuntimeError(f"a Ray task failed after {max_retries} retries: {exc}") from exc
-            if on_episode is not None:
+            if on_episode is not None and success is not None:  # None: the file was there already
                 on_episode(by_name[name], bool(success))
     except BaseException:
         for ref in pending:

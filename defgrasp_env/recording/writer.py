@@ -120,6 +120,7 @@ class EpisodeWriter:
         episode = self._open[w]
         path = self._next_path()
         write_episode(path, *self._contents(episode, w, reason), self.compression)
+        self._next_name = None  # used: a failed write keeps it for the next save
         del self._open[w]
         self.paths.append(path)
         self.episode_index += 1
@@ -134,8 +135,7 @@ class EpisodeWriter:
     # -- internals ---------------------------------------------------------------------------
     def _next_path(self) -> pathlib.Path:
         if self._next_name is not None:
-            name, self._next_name = self._next_name, None
-            return self.directory / name
+            return self.directory / self._next_name
         while (path := self.directory / self.name_template.format(index=self.episode_index)).exists():
             self.episode_index += 1
         return path

@@ -47,6 +47,8 @@ class SB3VectorEnv(VecEnv):
     # -- VecEnv API --------------------------------------------------------------------------
     def reset(self):
         seeds = self._seeds if any(s is not None for s in self._seeds) else None
+        if any(self._options):  # set by SB3's set_options: the native vector env takes one option dict
+            raise ValueError(f"{type(self).__name__} has no per-world reset options, got {self._options}")
         obs, info = self.env.reset(seed=seeds)
         self._reset_seeds()
         self.reset_infos = self._split_info(info)
@@ -66,6 +68,7 @@ class SB3VectorEnv(VecEnv):
             final_obs = info["final_obs"]
             final_info = self._split_info(info["final_info"])
             for i in np.flatnonzero(done):
+                self.reset_infos[i] = infos[i]  # the new episode's reset info (its ReplaySpec)
                 infos[i] = {**final_info[i], "terminal_observation": {k: v[i] for k, v in final_obs.items()},
                             "TimeLimit.truncated": bool(truncated[i] and not terminated[i])}
         return obs, np.asarray(reward, np.float32), done, infos
