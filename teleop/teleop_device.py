@@ -51,7 +51,7 @@ def make_action(position, quat_xyzw, gap_m: float) -> np.ndarray:
     p = check_array("position", position, (3,), lo=-MAX_POSITION_M, hi=MAX_POSITION_M, unit="m")
     q = quat_normalize(check_array("quat_xyzw", quat_xyzw, (4,)))
     g = check_number("gap_m", gap_m, 0.0, MAX_GAP_M, unit="m")
-    return np.concatenate([p, q, [g]]).astype(np.float32)
+    return ABSOLUTE_ACTION.pack(position=p, orientation=q, gap=[g]).astype(np.float32)
 
 
 def action_to_dict(action) -> dict[str, float]:

@@ -59,17 +59,18 @@ class ReplaySpec:
         """Repeat this reset (after its ``scene_origin``) in the single env ``env``; returns what
         the env's last ``reset`` returned."""
         if self.scene_origin is not None:
-            _reset(env, self.scene_origin.to_json_dict())
-        return _reset(env, self.to_json_dict())
+            reset_from_json(env, self.scene_origin.to_json_dict())
+        return reset_from_json(env, self.to_json_dict())
 
 
-def _reset(env: gym.Env, spec: dict):
-    """``env.reset`` with the seed of ``spec``, or from its RNG state."""
-    state = spec["rng_state"]
-    if spec["seed"] is None and state is not None:
+def reset_from_json(env: gym.Env, spec: dict):
+    """``env.reset`` as a recorded reset dict (``ReplaySpec.to_json_dict``, an episode file's
+    ``replay_json``) says: with its seed, or from its RNG state (keys missing: None)."""
+    state = spec.get("rng_state")
+    if spec.get("seed") is None and state is not None:
         bit_generator = getattr(np.random, state["bit_generator"])()
         bit_generator.state = state
         env.unwrapped.np_random = np.random.Generator(bit_generator)
-        return env.reset(options=spec["options"])
-    return env.reset(seed=spec["seed"], options=spec["options"])
+        return env.reset(options=spec.get("options"))
+    return env.reset(seed=spec.get("seed"), options=spec.get("options"))
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import gymnasium as gym
 import numpy as np
 
+from ..envs.replay_spec import reset_from_json
 from .reader import Episode, EpisodeFileError, load_episode
 
 
@@ -48,16 +49,6 @@ class ReplayResult:
         return "\n".join(lines + [f"  warning: {w}" for w in self.warnings])
 
 
-def _reset(env: gym.Env, spec: dict):
-    state = spec.get("rng_state")
-    if spec.get("seed") is None and state is not None:
-        bit_generator = getattr(np.random, state["bit_generator"])()
-        bit_generator.state = state
-        env.unwrapped.np_random = np.random.Generator(bit_generator)
-        return env.reset(options=spec.get("options"))
-    return env.reset(seed=spec.get("seed"), options=spec.get("options"))
-
-
 def make_replay_env(episode: Episode, device: str | None = None, **kwargs) -> gym.Env:
     """A fresh env with the episode's config (and time limit), reset exactly as when recorded."""
     cfg = episode.config
@@ -67,9 +58,9 @@ def make_replay_env(episode: Episode, device: str | None = None, **kwargs) -> gy
     limit = replay.get("max_episode_steps")
     env = gym.make(episode.attrs["env_id"], config=cfg, **({"max_episode_steps": limit} if limit else {}), **kwargs)
     origin = replay.get("scene_origin")
-    if origin is not None and not origin.get("unknown"):
-        _reset(env, origin)
-    _reset(env, replay)
+    if origin is not None and not origin.get("unknown"):  # "unknown": schema-1 files of older recorders
+        reset_from_json(env, origin)
+    reset_from_json(env, replay)
     return env
 
 
