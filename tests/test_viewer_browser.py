@@ -228,7 +228,11 @@ def test_teleop_app_3d_view_in_chromium(chromium, tmp_path):
         while session.control.phase.value != "review" and time.monotonic() - t0 < 600:
             time.sleep(0.2)
         assert session.control.phase.value == "review"
-        review = screenshot(view.url, ART / "teleop_review.png", ready=drawn)
+
+        def changed(img):  # the review frame is published just after the phase turns to review
+            return drawn(img) and (np.abs(working.astype(int) - img.astype(int)).max(axis=2) > 40).mean() > 0.005
+
+        review = screenshot(view.url, ART / "teleop_review.png", ready=changed)
     finally:
         session.request_stop()
         worker.join(timeout=60)
