@@ -145,6 +145,28 @@ def test_plan_cube_faces_and_torus_rim():
     assert plan.open_gap[0] < GAP_MAX
 
 
+@pytest.mark.parametrize("current_yaw", [0.0, 0.7, -2.0])
+def test_rim_grasp_is_continuous_in_the_object_yaw(current_yaw):
+    """A round rim (ring keypoints, 80 mm across) turned by any yaw, with the keypoints' radii
+    perturbed by +-0.5 mm (a deformed ring): the planned rim point moves by less than 2 mm and the
+    wrist yaw stays the current one. A plan that depends on which keypoint is farthest jumps by up
+    to the ring's diameter between nearly equal radii, and demonstrations made with it cannot be
+    learned (the learned policy grasped no torus)."""
+    rng = np.random.default_rng(3)
+    points = []
+    for object_yaw in np.linspace(-np.pi, np.pi, 37):
+        phi = object_yaw + np.linspace(0, 2 * np.pi, 8, endpoint=False)
+        r = 0.04 + rng.uniform(-5e-4, 5e-4, 8)
+        ring = np.stack([r * np.cos(phi), np.where(np.arange(8) % 2 == 0, 0.02, 0.0), r * np.sin(phi)], axis=1)
+        plan = plan_grasps(np.array([[0.0, 0.01, 0.0]]), ring[None], np.array([current_yaw]))
+        assert plan.rim[0]
+        assert plan.yaw[0] == pytest.approx(current_yaw, abs=1e-12)
+        points.append(plan.point[0])
+    points = np.array(points)
+    expected = 0.03 * np.array([np.cos(current_yaw), -np.sin(current_yaw)])   # on the +x_G axis
+    assert np.abs(points[:, [0, 2]] - expected).max() < 2e-3
+
+
 @pytest.mark.parametrize("name", ["cuboid", "sphere"])
 def test_stiff_object_is_held_at_the_grip_force_limit(name):
     """E = 1e7, picked up by the scripted expert whose jaw command is overridden to fully closed
