@@ -34,7 +34,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from machine import append_results, git_state, host  # noqa: E402
-from success_table import HUMAN, MODULI, OBJECTS, _human, _label  # noqa: E402
+from success_table import MODULI, OBJECTS, human_rate, modulus_label  # noqa: E402
 
 #: The scripted expert's rate in every cell (benchmarks/RESULTS.md, success_table.py: 400/400).
 EXPERT_RATE = 1.0
@@ -83,14 +83,14 @@ def format_report(cells: dict, wall: float, ckpt: str, train_note: str) -> str:
     for e in MODULI:
         rates = [cells[(o, e)]["pc_success"] / 100 for o in OBJECTS]
         row = [f"{r:.2f} [{cells[(o, e)]['successes']}/{cells[(o, e)]['n_episodes']}] "
-               f"({EXPERT_RATE:.2f} / {_human(e, o)})" for r, o in zip(rates, OBJECTS)]
-        lines.append(f"| {_label(e)} | " + " | ".join(row)
-                     + f" | **{sum(rates) / len(rates):.2f}** ({EXPERT_RATE:.2f} / {_human(e, 'net')}) |")
+               f"({EXPERT_RATE:.2f} / {human_rate(e, o)})" for r, o in zip(rates, OBJECTS)]
+        lines.append(f"| {modulus_label(e)} | " + " | ".join(row)
+                     + f" | **{sum(rates) / len(rates):.2f}** ({EXPERT_RATE:.2f} / {human_rate(e, 'net')}) |")
     cols = [sum(cells[(o, e)]["pc_success"] for e in MODULI) / 100 / len(MODULI) for o in OBJECTS]
     net = sum(cols) / len(cols)
-    lines.append("| Net | " + " | ".join(f"{c:.2f} ({EXPERT_RATE:.2f} / {_human('net', o)})"
+    lines.append("| Net | " + " | ".join(f"{c:.2f} ({EXPERT_RATE:.2f} / {human_rate('net', o)})"
                                          for c, o in zip(cols, OBJECTS))
-                 + f" | **{net:.2f}** ({EXPERT_RATE:.2f} / {_human('net', 'net')}) |")
+                 + f" | **{net:.2f}** ({EXPERT_RATE:.2f} / {human_rate('net', 'net')}) |")
     n = sum(c["n_episodes"] for c in cells.values())
     k = sum(c["successes"] for c in cells.values())
     lines += ["", f"{n} episodes, {k} successes; net success (mean of the cells) {net:.3f}; evaluation time {wall / 60:.1f} min "

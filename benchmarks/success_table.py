@@ -103,12 +103,14 @@ def _rate(results: list[dict]) -> float:
     return float(np.mean([r["success"] for r in results])) if results else float("nan")
 
 
-def _human(row, col) -> str:
+def human_rate(row, col) -> str:
+    """The paper's human success rate of a Table 2 cell (row: E or "net", col: object or "net"), or "n/a"."""
     v = HUMAN.get(row, {}).get(col)
     return "n/a" if v is None else f"{v:.2f}"
 
 
-def _label(e) -> str:
+def modulus_label(e) -> str:
+    """Row label of a Young's modulus (Pa) in the table: "1e4" .. "1e7", or "Net"."""
     return "Net" if e == "net" else f"1e{int(round(np.log10(e)))}"
 
 
@@ -121,10 +123,10 @@ def format_report(results: list[dict], objects, moduli) -> str:
         cells = []
         for o in objects:
             rs = by[(o, e)] if e != "net" else [r for m in moduli for r in by[(o, m)]]
-            cells.append(f"{_rate(rs):.2f} ({_human(e, o)})")
+            cells.append(f"{_rate(rs):.2f} ({human_rate(e, o)})")
         rs = [r for o in objects for r in (by[(o, e)] if e != "net" else [x for m in moduli for x in by[(o, m)]])]
-        cells.append(f"**{_rate(rs):.2f}** ({_human(e, 'net')})")
-        lines.append(f"| {_label(e)} | " + " | ".join(cells) + " |")
+        cells.append(f"**{_rate(rs):.2f}** ({human_rate(e, 'net')})")
+        lines.append(f"| {modulus_label(e)} | " + " | ".join(cells) + " |")
 
     lines += ["", "Mean episode length in steps of 50 ms (successful episodes only; all episodes in brackets):", ""]
     lines += [head, "|" + "---|" * (len(objects) + 2)]
@@ -136,7 +138,7 @@ def format_report(results: list[dict], objects, moduli) -> str:
             ok = [r["steps"] for r in rs if r["success"]]
             cells.append(f"{np.mean(ok):.0f} [{np.mean([r['steps'] for r in rs]):.0f}]" if ok
                          else f"- [{np.mean([r['steps'] for r in rs]):.0f}]")
-        lines.append(f"| {_label(e)} | " + " | ".join(cells) + " |")
+        lines.append(f"| {modulus_label(e)} | " + " | ".join(cells) + " |")
 
     lines += ["", "Failures by reason (count per cell; cells without failures omitted):", ""]
     lines += ["| Object | E | episodes | failures | " + " | ".join(REASONS) + " | regrasp attempts (all episodes) |",
@@ -148,7 +150,7 @@ def format_report(results: list[dict], objects, moduli) -> str:
             c = Counter(r["reason"] for r in rs if not r["success"])
             total.update(c)
             if sum(c.values()):
-                lines.append(f"| {o} | {_label(e)} | {len(rs)} | {sum(c.values())} | "
+                lines.append(f"| {o} | {modulus_label(e)} | {len(rs)} | {sum(c.values())} | "
                              + " | ".join(str(c[k]) for k in REASONS)
                              + f" | {sum(r['retries'] for r in rs)} |")
     lines.append(f"| **all** | | {len(results)} | {sum(total.values())} | "

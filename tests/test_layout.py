@@ -155,9 +155,7 @@ def test_teleop_uses_the_layout():
 
 def test_recorders_and_lerobot_name_columns_by_the_layout():
     from defgrasp_env.recording.lerobot_export import FrameShape, lerobot_features, lerobot_frame
-    from defgrasp_env.recording.recorder import ACTION_NAMES
 
-    assert ACTION_NAMES == {"delta": list(DELTA_ACTION.names), "absolute": list(ABSOLUTE_ACTION.names)}
     names = {"observations/agent_pos": list(AGENT_POS.names), "observations/environment_state": list(ENV_STATE.names)}
     features = lerobot_features(FrameShape(20, AGENT_POS.size, ENV_STATE.size, DELTA_ACTION.size, None), names, False)
     assert features["observation.state"]["names"] == list(AGENT_POS.names)

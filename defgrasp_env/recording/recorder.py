@@ -8,13 +8,9 @@ import pathlib
 import gymnasium as gym
 
 from ..envs.config import PickupConfig
-from ..layout import ACTION_LAYOUTS
 from .capture import object_record, step_record
 from .schema import SUFFIX
 from .writer import EpisodeWriter, to_json
-
-#: Column names of ``steps/action`` per action mode (``defgrasp_env.layout``).
-ACTION_NAMES = {mode: list(layout.names) for mode, layout in ACTION_LAYOUTS.items()}
 
 
 class HDF5Recorder(gym.Wrapper):
