@@ -34,8 +34,9 @@ from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 class LearningCurve(BaseCallback):
     """Success rate and mean return of the episodes that ended in each rollout, vs env steps and wall time."""
 
-    def __init__(self):
+    def __init__(self, max_seconds: float = float("inf")):
         super().__init__()
+        self.max_seconds = max_seconds  # training stops at the first step after this wall time
         self.rows: list[dict] = []
         self._success: list[bool] = []
         self._returns: list[float] = []
@@ -46,7 +47,7 @@ class LearningCurve(BaseCallback):
             if done:
                 self._success.append(bool(info.get("is_success", False)))
                 self._returns.append(float(info.get("episode", {}).get("r", np.nan)))
-        return True
+        return time.perf_counter() - self._t0 < self.max_seconds
 
     def _on_rollout_end(self) -> None:
         n = len(self._success)
@@ -77,8 +78,9 @@ def make_vec_env(num_envs: int, seed: int, **env_kwargs):
 
 
 def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 64, batch_size: int = 256,
-          torch_device: str = "cpu", verbose: int = 0, **env_kwargs):
-    """Train PPO; returns (model, LearningCurve)."""
+          torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), **env_kwargs):
+    """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
+    returns (model, LearningCurve)."""
     from stable_baselines3 import PPO
 
     venv = make_vec_env(num_envs, seed, **env_kwargs)
@@ -86,7 +88,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 64, batch
                 n_epochs=5, learning_rate=3e-4, gamma=0.99, gae_lambda=0.95, clip_range=0.2,
                 policy_kwargs=dict(net_arch=[256, 256], log_std_init=-0.5), seed=seed,
                 device=torch_device, verbose=verbose)
-    curve = LearningCurve()
+    curve = LearningCurve(max_seconds)
     model.learn(timesteps, callback=curve)
     return model, curve
 
@@ -126,10 +128,12 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cpu", help="simulation device (cpu, cuda:0)")
     ap.add_argument("--torch-device", default="cpu", help="PPO network device")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--minutes", type=float, default=float("inf"), help="stop after this wall time (min)")
     ap.add_argument("--out", default=str(ROOT / "datasets" / "output" / "ppo"))
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
+                         max_seconds=60.0 * args.minutes,
                          object=args.object, youngs_modulus=args.youngs_modulus,
                          episode_seconds=args.episode_seconds, device=args.device)
     wall = time.perf_counter() - t0
