@@ -92,8 +92,8 @@ def test_scene_owns_the_substeps():
     scene = PickupScene(cfg, [setup])
     assert scene.substeps == cfg.solver.substeps == 4 and scene.solver.config.substeps == 1
     calls = []
-    step = scene.solver.step
-    scene.solver.step = lambda *a: calls.append(a[-1]) or step(*a)
+    advance = scene.solver.advance
+    scene.solver.advance = lambda *a: calls.append(a[-1]) or advance(*a)
     pos, quat = scene.gripper.flange_pose()
     scene.step(pos, quat, scene.gripper.gap.copy())
     assert calls == [cfg.dt / 4] * 4

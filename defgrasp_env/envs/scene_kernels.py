@@ -1,6 +1,7 @@
 """Warp kernels of the pickup scene outside the FEM solver, on the simulation's device: the
-state remap of a rebuild (worlds whose object changed at a reset) and the per-world readouts of a
-step (feature point, keypoints, finiteness), which reduce the full state to small [W, ...] arrays.
+state remap of a rebuild (worlds whose object changed at a reset), the per-world readouts of a
+step (feature point, keypoints, finiteness), which reduce the full state to small [W, ...] arrays,
+and the pad loads of a solve packed for one download.
 Kernels take arrays and scalars only; the launchers are in ``scene.py`` / ``readouts.py``."""
 
 from __future__ import annotations
@@ -80,3 +81,13 @@ def zero_float_rows_of_worlds(a: wp.array(dtype=wp.float32), row_world: wp.array
     i = wp.tid()
     if mask[row_world[i]] != 0:
         a[i] = 0.0
+
+
+@wp.kernel
+def pack_pad_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.array(dtype=wp.vec3),
+                   loads: wp.array(dtype=wp.vec4)):
+    """``loads[p] = (pad_normal_force[p], pad_force[p])``: what the host needs of the pads after a
+    solve, packed for one download."""
+    p = wp.tid()
+    f = pad_force[p]
+    loads[p] = wp.vec4(pad_normal_force[p], f[0], f[1], f[2])
