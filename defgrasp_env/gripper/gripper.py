@@ -24,7 +24,7 @@ import numpy as np
 from ..transforms import quat_rotate, quat_to_matrix
 from ..wrist import clamp_joints, fk_analytic, ik_joints
 from .driver import GripperConfig, GripperDriver, update_grip_stiffness
-from .linkage import GAP_MAX, GAP_MIN, pad_boxes
+from .linkage import GAP_MAX, GAP_MIN, pad_boxes, pad_centers, theta_from_gap
 
 __all__ = ["GROUND_CLEARANCE", "Gripper", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
 
@@ -41,13 +41,16 @@ _CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for s
 
 def _pad_box_centers(flange_pos: np.ndarray, flange_quat: np.ndarray, gap: np.ndarray):
     """Collision-box centres [W, 2, 3] (m, world) of the pads and the flange rotations [W, 3, 3]
-    (the boxes' orientation) for flange poses [W, 3] m, [W, 4] xyzw and jaw gaps [W] m (clipped)."""
-    centers = pad_boxes(gap=np.clip(gap, GAP_MIN, GAP_MAX))[0]      # [W,2,3] in G (a new array)
-    centers[:, 0, 0] += PAD_BACKING / 2
-    centers[:, 1, 0] -= PAD_BACKING / 2
-    R = quat_to_matrix(flange_quat)[:, None]                         # [W,1,3,3]
-    rotated = (R[..., 0] * centers[..., None, 0] + R[..., 1] * centers[..., None, 1]) + R[..., 2] * centers[..., None, 2]
-    return flange_pos[:, None, :] + rotated, R[:, 0]
+    (the boxes' orientation) for flange poses [W, 3] m, [W, 4] xyzw and jaw gaps [W] m (clipped).
+    The boxes mirror each other across the flange's y-z plane, so the right pad's lateral term is
+    the left one's negated (exactly, as in the per-pad product)."""
+    left = pad_centers(theta_from_gap(np.clip(gap, GAP_MIN, GAP_MAX)))[:, 0]   # [W, 3] in G, z = 0
+    R = quat_to_matrix(flange_quat)                                            # [W, 3, 3]
+    lateral = R[:, :, 0] * (left[:, 0] + PAD_BACKING / 2)[:, None]
+    down = R[:, :, 1] * left[:, 1, None]
+    across = R[:, :, 2] * left[:, 2, None]
+    rotated = np.stack([(lateral + down) + across, (-lateral + down) + across], axis=1)
+    return flange_pos[:, None, :] + rotated, R
 
 
 def pad_box_poses(flange_pos: np.ndarray, flange_quat: np.ndarray, gap: np.ndarray):
