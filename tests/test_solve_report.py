@@ -77,8 +77,8 @@ def test_advance_into_another_state_equals_stepping_in_place():
 ])
 def test_folded_report_equals_combine_of_the_solves(config, force):
     """Over 4 solves, the report folded on the device equals ``SolveStats.combine`` of the reports
-    ``step`` returns, field by field and in dtype (cases: the default limits, world 1 converging; stopped at the Newton limit
-    and deeper than a tiny penetration bound; world 1 diverging)."""
+    ``step`` returns, field by field and in dtype (cases: the default limits, world 1 converging;
+    stopped at the Newton limit and deeper than a tiny penetration bound; world 1 diverging)."""
     model, state, control = build(force)
     solver = ImplicitSolver(model, config)
     reports = []

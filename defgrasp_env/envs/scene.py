@@ -36,8 +36,8 @@ from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model
-from .scene_kernels import (gather_rows, pack_pad_loads, scatter_rows, zero_float_rows_of_worlds,
-                            zero_vec3_rows_of_worlds)
+from .scene_kernels import (gather_rows, pack_pad_loads, scatter_rows, unpack_pad_targets,
+                            zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
 
 
 @functools.lru_cache(maxsize=16)
@@ -137,6 +137,7 @@ class PickupScene:
         self._report = SolveReport(self.num_worlds, self.model.device)  # the control step's solver report
         self._pad_loads = wp.zeros(self.num_worlds * self.model.pads_per_world, dtype=wp.vec4,
                                    device=self.model.device)  # a solve's pad forces, packed for one download
+        self._pad_targets = wp.zeros(len(self._pad_loads), dtype=wp.transform, device=self.model.device)
         self._solves = 0  # solves run by ``_solve_substep`` (the wrist limit's accepted solve is its last)
         self._last_pad_loads = np.zeros((self.num_worlds, self.model.pads_per_world, 4), np.float32)
         self._readout: StepReadout | None = None
@@ -263,8 +264,10 @@ class PickupScene:
         its pad loads [W, P, 4] (normal force N, net force xyz N) in ``_last_pad_loads``, from one
         download."""
         pos, quat = self.gripper.move(wrist_fraction)
-        self._control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
-        self._control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
+        self._pad_targets.assign(np.concatenate([pos, quat], axis=-1).reshape(-1, 7).astype(np.float32))
+        wp.launch(unpack_pad_targets, dim=len(self._pad_targets), inputs=[self._pad_targets],
+                  outputs=[self._control.pad_target_positions, self._control.pad_target_orientations],
+                  device=self.model.device)
         out = self._next_state
         self.solver.advance(self.state, out, self._control, h)
         wp.launch(pack_pad_loads, dim=len(self._pad_loads), inputs=[out.pad_normal_force, out.pad_force],

@@ -165,7 +165,8 @@ class Gripper:
         centers, R = _pad_box_centers(pos, quat, gap)
         quats = np.repeat(quat[:, None, :], 2, axis=1)
         r, h = np.abs(R[:, 1, :]), PAD_BOX_HALF_EXTENTS
-        lowest = np.minimum(centers[:, 0, 1], centers[:, 1, 1]) + ((-(r[:, 0] * h[0]) - r[:, 2] * h[2]) - r[:, 1] * h[1])
+        reach = (-(r[:, 0] * h[0]) - r[:, 2] * h[2]) - r[:, 1] * h[1]   # lowest corner below the centre
+        lowest = np.minimum(centers[:, 0, 1], centers[:, 1, 1]) + reach
         lifted = q.copy()
         lifted[:, 1] += np.maximum(GROUND_CLEARANCE - lowest, 0.0)
         lifted = clamp_joints(lifted)
