@@ -175,3 +175,23 @@ def test_wrist_limit_retries_solve_from_the_untouched_substep_start():
         assert scene.state is solves[-1] and len(solves) >= substeps_before + scene.substeps
     assert len(solves) > steps * scene.substeps  # the limit did retry
     assert scene.gripper.wrist_force[0] <= 1.0 * 1.1 + 5.0
+
+
+@pytest.mark.parametrize("substeps", [5, 4])
+def test_state_is_the_same_object_after_every_step(substeps):
+    """Zero-copy views of ``scene.state`` see every step: the two alternating states end a step of
+    an odd number of substeps with a copy back, so ``state`` is the same object after each step."""
+    from defgrasp_env.sim.solver import SolverConfig
+
+    cfg = PickupConfig(solver=SolverConfig(substeps=substeps))
+    setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.array([0.0, 0.01, 0.0]), np.array([0, 0, 0, 1.0]))
+    scene = PickupScene(cfg, [setup])
+    assert scene.substeps == substeps
+    state, view = scene.state, scene.state.positions.numpy()  # on the CPU: a view of the array
+    first = view.copy()
+    pos, quat = scene.gripper.flange_pose()
+    for _ in range(2):
+        scene.step(pos, quat, scene.gripper.gap.copy())
+        assert scene.state is state
+    assert not np.array_equal(view, first)  # the object fell 1 cm: the view saw it
+    np.testing.assert_array_equal(view, scene.state.positions.numpy())

@@ -97,10 +97,12 @@ class PickupScene:
     write), ``solver`` (built with ``substeps=1``),
     ``substeps``, and the read-only accessors ``object_names``, ``setups``, ``materials``,
     ``mesh(w)`` and the readouts below (``readout()``: reduced on the device once per state).
-    ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object, and
-    ``state`` by every physics substep (two states alternate: a substep's solves read the current
-    one and write the other, which becomes current when a solve is accepted): read them from the
-    scene after each reset and step rather than holding on to them.
+    ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object: read
+    them from the scene after each reset rather than holding on to them. Between resets ``state``
+    is the same object after every ``step`` (zero-copy views of its arrays see each step); within a
+    step two states alternate (a substep's solves read the current one, untouched, and write the
+    other, which becomes current when a solve is accepted), and a step of an odd number of
+    substeps ends with one copy back.
     """
 
     def __init__(self, config: PickupConfig, setups: list[WorldSetup]):
@@ -128,6 +130,7 @@ class PickupScene:
                                     [(s.position, s.quat) for s in setups], [half, half], contact, config.device)
         self.solver = ImplicitSolver(self.model, dataclasses.replace(config.solver, substeps=1))
         self.state = State.from_model(self.model)
+        self._home_state = self.state  # what ``state`` is between steps
         # the other state: a substep's solves (wrist-limit retries included) read ``state``, the
         # substep's untouched start, and write this one; the two swap when a solve is accepted
         self._next_state = State.from_model(self.model)
@@ -255,6 +258,9 @@ class PickupScene:
             self.state, self._next_state = self._next_state, self.state
             self._report.fold(self.solver.scratch, self.solver.config.penetration_bound, first=k == 0)
             self.gripper.sense(self._last_pad_loads[..., 0], force)
+        if self.state is not self._home_state:  # an odd number of substeps
+            self._home_state.copy_from(self.state)
+            self.state, self._next_state = self._home_state, self.state
         return self._report.download()
 
     def _solve_substep(self, wrist_fraction: np.ndarray, h: float):
