@@ -74,8 +74,8 @@ def main(argv=None) -> int:
         scene = PickupScene(config, [draw_setup(config, rng) for _ in range(w)])
         keys = [keypoint_indices(scene.mesh(i).nodes, scene.mesh(i).surface) for i in range(w)]
         host = _time(lambda: host_readouts(scene, keys), args.repeats)
-        readouts = SceneReadouts(scene.model, scene.state, keys)
-        dev = _time(readouts.compute, args.repeats)
+        readouts = SceneReadouts(scene.model, [scene.state], keys)
+        dev = _time(lambda: readouts.compute(scene.state), args.repeats)
         print(f"| {w} | {scene.model.num_nodes} | {host[0]:.2f} / {host[1]:.2f} | {dev[0]:.2f} / {dev[1]:.2f} "
               f"| {os.getloadavg()[0]:.1f} |")
     return 0

@@ -196,3 +196,29 @@ def test_stiff_object_is_held_at_the_grip_force_limit(name):
     assert len(gripped) >= 40
     np.testing.assert_allclose(gripped[-40:], limit, rtol=0.02)
     assert np.sum(gripped > 1.05 * limit) <= 1
+
+
+def test_blocked_planning_equals_one_pass(monkeypatch):
+    """``plan_grasps`` evaluates its candidates in blocks of worlds: any block size gives the bits of
+    one pass over all worlds (random objects, ties and rim grasps included), and planning a subset
+    of worlds gives those worlds' rows (the expert plans only the worlds that re-plan)."""
+    from defgrasp_env.policies import grasp_planning
+
+    rng = np.random.default_rng(3)
+    n = 300
+    feature = rng.uniform(-0.05, 0.05, (n, 3))
+    keypoints = feature[:, None, :] + rng.uniform(-1, 1, (n, 8, 3)) * rng.choice([0.01, 0.05, 0.08], (n, 1, 1))
+    keypoints[:50] = np.round(keypoints[:50], 3)
+    yaw = rng.uniform(-3, 3, n)
+    monkeypatch.setattr(grasp_planning, "_BLOCK", 10 ** 6)
+    one_pass = plan_grasps(feature, keypoints, yaw)
+    assert 10 < one_pass.rim.sum() < n - 10
+    for block in (1, 7, 64):
+        monkeypatch.setattr(grasp_planning, "_BLOCK", block)
+        plan = plan_grasps(feature, keypoints, yaw)
+        for field in ("point", "yaw", "width", "open_gap", "top", "rim"):
+            np.testing.assert_array_equal(getattr(plan, field), getattr(one_pass, field), err_msg=f"{field} {block}")
+    subset = rng.random(n) < 0.3
+    plan = plan_grasps(feature[subset], keypoints[subset], yaw[subset])
+    np.testing.assert_array_equal(plan.point, one_pass.point[subset])
+    np.testing.assert_array_equal(plan.yaw, one_pass.yaw[subset])

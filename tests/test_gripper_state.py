@@ -92,8 +92,8 @@ def test_scene_owns_the_substeps():
     scene = PickupScene(cfg, [setup])
     assert scene.substeps == cfg.solver.substeps == 4 and scene.solver.config.substeps == 1
     calls = []
-    step = scene.solver.step
-    scene.solver.step = lambda *a: calls.append(a[-1]) or step(*a)
+    advance = scene.solver.advance
+    scene.solver.advance = lambda *a: calls.append(a[-1]) or advance(*a)
     pos, quat = scene.gripper.flange_pose()
     scene.step(pos, quat, scene.gripper.gap.copy())
     assert calls == [cfg.dt / 4] * 4
@@ -116,3 +116,82 @@ def test_camera_task_and_recorders_use_public_scene_accessors():
     assert {attr for _, attr in used} <= public, sorted(u for u in used if u[1] not in public)
     for attr in public - {"config", "num_worlds", "gripper", "model", "state", "solver", "substeps"}:
         assert hasattr(PickupScene, attr)
+
+
+def test_lift_puts_the_lowest_pad_corner_at_the_clearance():
+    """Against all 16 pad-box corners enumerated (independent of the closed form the lift uses),
+    for random wrist poses (gimbal-lock and axis-aligned angles included) and gaps: no corner ends
+    below GROUND_CLEARANCE, a lifted world's lowest corner is exactly at it (float64 rounding), an
+    unlifted one is left as it was, and the returned pad poses are those of the returned joints."""
+    from defgrasp_env.gripper.gripper import _CORNER_SIGNS
+    from defgrasp_env.transforms import quat_rotate
+
+    rng = np.random.default_rng(7)
+    n = 4000
+    q = np.zeros((n, 6))
+    q[:, 0], q[:, 2] = rng.uniform(-0.3, 0.3, n), rng.uniform(-0.3, 0.3, n)
+    q[:, 1] = rng.uniform(-0.05, 0.3, n)
+    q[:, 3:] = rng.uniform(-1.5, 1.5, (n, 3))
+    q[:400, 3:] = rng.choice([0.0, np.pi / 2, -np.pi / 2, 1e-12], (400, 3))
+    gap = rng.uniform(GAP_MIN, GAP_MAX, n)
+    g = _gripper(n)
+    lifted, centers, quats = g.lift_above_ground(q, gap)
+    corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], _CORNER_SIGNS * PAD_BOX_HALF_EXTENTS)
+    lowest = corners[..., 1].reshape(n, -1).min(axis=1)
+    raised = lifted[:, 1] > q[:, 1]
+    assert 100 < raised.sum() < n - 100
+    assert np.all(lowest >= GROUND_CLEARANCE - 1e-15)
+    np.testing.assert_allclose(lowest[raised], GROUND_CLEARANCE, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(lifted[~raised], q[~raised])
+    ref_centers, ref_quats = g.pad_poses(lifted, gap)
+    np.testing.assert_allclose(centers, ref_centers, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(quats, ref_quats)
+
+
+def test_wrist_limit_retries_solve_from_the_untouched_substep_start():
+    """The wrist pressing a stiff cuboid down into the ground with a 1 N limit: the scene retries
+    substeps; every solve reads the scene's current state, which no solve writes (the double
+    buffer), and the state after each substep is the last solve's output."""
+    cfg = PickupConfig(wrist_force_limit=1.0)
+    setup = WorldSetup("cuboid", Material(500.0, 1e7, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
+    scene = PickupScene(cfg, [setup])
+    solves = []
+    advance = scene.solver.advance
+
+    def checked(state_in, state_out, control, dt):
+        assert state_in is scene.state and state_out is not state_in
+        before = state_in.positions.numpy().copy()
+        advance(state_in, state_out, control, dt)
+        np.testing.assert_array_equal(state_in.positions.numpy(), before)
+        solves.append(state_out)
+
+    scene.solver.advance = checked
+    pos, quat = scene.gripper.flange_pose()
+    steps = 30
+    for k in range(steps):  # down at 0.1 m/s from 0.3 m: the closed pads reach the cuboid's top at ~0.19 m
+        pos[:, 1] -= 0.005
+        substeps_before = len(solves)
+        scene.step(pos, quat, np.full(1, GAP_MIN))
+        assert scene.state is solves[-1] and len(solves) >= substeps_before + scene.substeps
+    assert len(solves) > steps * scene.substeps  # the limit did retry
+    assert scene.gripper.wrist_force[0] <= 1.0 * 1.1 + 5.0
+
+
+@pytest.mark.parametrize("substeps", [5, 4])
+def test_state_is_the_same_object_after_every_step(substeps):
+    """Zero-copy views of ``scene.state`` see every step: the two alternating states end a step of
+    an odd number of substeps with a copy back, so ``state`` is the same object after each step."""
+    from defgrasp_env.sim.solver import SolverConfig
+
+    cfg = PickupConfig(solver=SolverConfig(substeps=substeps))
+    setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.array([0.0, 0.01, 0.0]), np.array([0, 0, 0, 1.0]))
+    scene = PickupScene(cfg, [setup])
+    assert scene.substeps == substeps
+    state, view = scene.state, scene.state.positions.numpy()  # on the CPU: a view of the array
+    first = view.copy()
+    pos, quat = scene.gripper.flange_pose()
+    for _ in range(2):
+        scene.step(pos, quat, scene.gripper.gap.copy())
+        assert scene.state is state
+    assert not np.array_equal(view, first)  # the object fell 1 cm: the view saw it
+    np.testing.assert_array_equal(view, scene.state.positions.numpy())

@@ -60,13 +60,13 @@ def test_finite_flags_only_the_world_with_a_nan():
     scene = venv.unwrapped.scene
     for field, value in (("positions", np.nan), ("velocities", np.inf)):
         state = type(scene.state)(**{k: wp.clone(getattr(scene.state, k)) for k in scene.state.__dataclass_fields__})
-        readouts = SceneReadouts(scene.model, state, [keypoint_indices(scene.mesh(w).nodes, scene.mesh(w).surface)
+        readouts = SceneReadouts(scene.model, [state], [keypoint_indices(scene.mesh(w).nodes, scene.mesh(w).surface)
                                                       for w in range(3)])
         host = getattr(state, field).numpy()
         last = scene.model.node_start[2] - 1  # the last node of world 1
         host[last, 2] = value
         getattr(state, field).assign(host)
-        r = readouts.compute()
+        r = readouts.compute(state)
         assert r.finite.tolist() == [True, False, True], field
 
 

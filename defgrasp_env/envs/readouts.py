@@ -13,7 +13,7 @@ import warp as wp
 from ..layout import NUM_KEYPOINTS
 from ..sim.model import Model
 from ..sim.state import State
-from .scene_kernels import gather_keypoints, world_readouts
+from .scene_kernels import gather_keypoints, pack_readouts, world_readouts
 
 
 @dataclass(frozen=True)
@@ -34,18 +34,19 @@ class StepReadout:
 
 
 class SceneReadouts:
-    """Device buffers and recorded launches of the readouts of one model's ``state``.
+    """Device buffers and recorded launches of the readouts of one model's states.
 
     Public device arrays (valid after ``compute``, overwritten by the next): ``feature_position``,
     ``feature_velocity`` ([W] vec3d), ``keypoints`` ([W*NUM_KEYPOINTS] vec3), ``finite`` ([W] int32).
 
     Args:
         model: the simulation's model (its ``node_start`` offsets and device).
-        state: the state the readouts read (its arrays are bound to the recorded launches).
+        states: the states the readouts may read (the scene's two alternating states; their arrays
+            are bound to the launches recorded for each).
         keypoints: per world, the object-local node ids of its keypoints (<= NUM_KEYPOINTS each).
     """
 
-    def __init__(self, model: Model, state: State, keypoints: list[np.ndarray]):
+    def __init__(self, model: Model, states: list[State], keypoints: list[np.ndarray]):
         d, w = model.device, model.num_worlds
         self.num_worlds = w
         self._device = d
@@ -58,19 +59,28 @@ class SceneReadouts:
         self.feature_velocity = wp.zeros(w, dtype=wp.vec3d, device=d)
         self.keypoints = wp.zeros(w * NUM_KEYPOINTS, dtype=wp.vec3, device=d)
         self.finite = wp.zeros(w, dtype=wp.int32, device=d)
+        self._packed = wp.zeros((w, 7 + 3 * NUM_KEYPOINTS), dtype=wp.float64, device=d)  # one download
+        pack = wp.launch(pack_readouts, dim=w, inputs=[self.feature_position, self.feature_velocity, self.keypoints,
+                                                        self.finite, NUM_KEYPOINTS],
+                         outputs=[self._packed], device=d, record_cmd=True)
         # recorded once (a couple of microseconds of Python per launch, as the solver's launches)
-        self._launches = (
+        self._launches = [(state, (
             wp.launch(world_readouts, dim=w, inputs=[state.positions, state.velocities, self._node_start],
                       outputs=[self.feature_position, self.feature_velocity, self.finite], device=d,
                       record_cmd=True),
             wp.launch(gather_keypoints, dim=w * NUM_KEYPOINTS, inputs=[state.positions, self._keypoint_index],
-                      outputs=[self.keypoints], device=d, record_cmd=True))
+                      outputs=[self.keypoints], device=d, record_cmd=True), pack)) for state in states]
 
-    def compute(self) -> StepReadout:
-        """Launch the readout kernels on the state and bring the [W, ...] results to the host."""
+    def compute(self, state: State) -> StepReadout:
+        """Launch the readout kernels on ``state`` (one of the constructor's ``states``) and bring
+        the [W, ...] results to the host, packed in one download."""
         w = self.num_worlds
-        for cmd in self._launches:
+        launches = next((cmds for s, cmds in self._launches if s is state), None)
+        if launches is None:
+            raise ValueError("state must be one of the states the readouts were built for")
+        for cmd in launches:
             cmd.launch()
-        return StepReadout(self.feature_position.numpy().copy(), self.feature_velocity.numpy().copy(),
-                           self.keypoints.numpy().reshape(w, NUM_KEYPOINTS, 3).astype(np.float64),
-                           self.finite.numpy() != 0)
+        packed = self._packed.numpy()
+        return StepReadout(packed[:, 0:3].copy(), packed[:, 3:6].copy(),
+                           packed[:, 6:6 + 3 * NUM_KEYPOINTS].reshape(w, NUM_KEYPOINTS, 3).copy(),
+                           packed[:, 6 + 3 * NUM_KEYPOINTS] != 0)

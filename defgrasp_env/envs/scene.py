@@ -27,6 +27,7 @@ from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.model import ContactParams, set_world_material
 from ..sim.pad_motion import max_pad_travel, substeps_for_travel
+from ..sim.solve_report import SolveReport
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
 from ..transforms import quat_to_matrix
@@ -35,7 +36,8 @@ from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model
-from .scene_kernels import gather_rows, scatter_rows, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds
+from .scene_kernels import (gather_rows, pack_pad_loads, scatter_rows, unpack_pad_targets,
+                            zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
 
 
 @functools.lru_cache(maxsize=16)
@@ -91,12 +93,16 @@ class PickupScene:
     """W worlds of the pickup task in one simulation (flat arrays, per-world offsets).
 
     Public: ``config``, ``num_worlds``, ``gripper`` (the W grippers' state and kinematics),
-    ``model`` / ``state`` (the FEM's static data and full state, Newton style: read, do not write),
-    ``solver`` (built with ``substeps=1``),
+    ``model`` / ``state`` (the FEM's static data and current full state, Newton style: read, do not
+    write), ``solver`` (built with ``substeps=1``),
     ``substeps``, and the read-only accessors ``object_names``, ``setups``, ``materials``,
     ``mesh(w)`` and the readouts below (``readout()``: reduced on the device once per state).
     ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object: read
-    them from the scene after each reset rather than holding on to them.
+    them from the scene after each reset rather than holding on to them. Between resets ``state``
+    is the same object after every ``step`` (zero-copy views of its arrays see each step); within a
+    step two states alternate (a substep's solves read the current one, untouched, and write the
+    other, which becomes current when a solve is accepted), and a step of an odd number of
+    substeps ends with one copy back.
     """
 
     def __init__(self, config: PickupConfig, setups: list[WorldSetup]):
@@ -124,10 +130,19 @@ class PickupScene:
                                     [(s.position, s.quat) for s in setups], [half, half], contact, config.device)
         self.solver = ImplicitSolver(self.model, dataclasses.replace(config.solver, substeps=1))
         self.state = State.from_model(self.model)
-        self._substep_start = State.from_model(self.model)  # a substep's start, for wrist-limit retries
+        self._home_state = self.state  # what ``state`` is between steps
+        # the other state: a substep's solves (wrist-limit retries included) read ``state``, the
+        # substep's untouched start, and write this one; the two swap when a solve is accepted
+        self._next_state = State.from_model(self.model)
         self._control = Control.from_model(self.model)
-        self._readouts = SceneReadouts(self.model, self.state, [object_keypoints(s.object_name, config.object_resolution)
-                                                    for s in setups])
+        self._readouts = SceneReadouts(self.model, [self.state, self._next_state],
+                                       [object_keypoints(s.object_name, config.object_resolution) for s in setups])
+        self._report = SolveReport(self.num_worlds, self.model.device)  # the control step's solver report
+        self._pad_loads = wp.zeros(self.num_worlds * self.model.pads_per_world, dtype=wp.vec4,
+                                   device=self.model.device)  # a solve's pad forces, packed for one download
+        self._pad_targets = wp.zeros(len(self._pad_loads), dtype=wp.transform, device=self.model.device)
+        self._solves = 0  # solves run by ``_solve_substep`` (the wrist limit's accepted solve is its last)
+        self._last_pad_loads = np.zeros((self.num_worlds, self.model.pads_per_world, 4), np.float32)
         self._readout: StepReadout | None = None
         world = np.arange(self.num_worlds, dtype=np.int32)
         self._world_ids = wp.array(world, dtype=wp.int32, device=self.model.device)  # [W]: row w is world w
@@ -233,25 +248,39 @@ class PickupScene:
         self.gripper.begin_step(target_pos, target_quat)
         count = self.substeps
         h = self.config.dt / count
-        reports = []
         for k in range(count):
             self.gripper.plan_substep(k, count, h, target_gap, active)
-            self._substep_start.copy_from(self.state)
-            report, force, _ = limited_substep(lambda fraction: self._solve_substep(fraction, h),
-                                               self.gripper.wrist_force, self.config.wrist_force_limit)
-            reports.append(report)
-            self.gripper.sense(self.state.pad_normal_force.numpy().reshape(-1, 2), force)
-        return SolveStats.combine(reports)
+            solve, force, _ = limited_substep(lambda fraction: self._solve_substep(fraction, h),
+                                              self.gripper.wrist_force, self.config.wrist_force_limit)
+            if solve != self._solves:
+                raise RuntimeError(f"the wrist force limit accepted solve {solve} of {self._solves}: only the "
+                                   "last solve's state and report are kept")
+            self.state, self._next_state = self._next_state, self.state
+            self._report.fold(self.solver.scratch, self.solver.config.penetration_bound, first=k == 0)
+            self.gripper.sense(self._last_pad_loads[..., 0], force)
+        if self.state is not self._home_state:  # an odd number of substeps
+            self._home_state.copy_from(self.state)
+            self.state, self._next_state = self._home_state, self.state
+        return self._report.download()
 
     def _solve_substep(self, wrist_fraction: np.ndarray, h: float):
-        """One solve of the planned substep from its start state with ``wrist_fraction`` [W] of the
-        wrist motion (the wrist force limit's retry); returns (solver report, wrist force [W] N)."""
-        self.state.copy_from(self._substep_start)
+        """One solve of the planned substep from its start (``state``, left untouched) into the
+        other state, with ``wrist_fraction`` [W] of the wrist motion (the wrist force limit's
+        retry). Returns (the solve's number, wrist force [W] N); its report stays on the device and
+        its pad loads [W, P, 4] (normal force N, net force xyz N) in ``_last_pad_loads``, from one
+        download."""
         pos, quat = self.gripper.move(wrist_fraction)
-        self._control.pad_target_positions.assign(pos.reshape(-1, 3).astype(np.float32))
-        self._control.pad_target_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
-        report = self.solver.step(self.state, self.state, self._control, h)
-        return report, wrist_force(self.state.pad_force.numpy().reshape(-1, 2, 3))
+        self._pad_targets.assign(np.concatenate([pos, quat], axis=-1).reshape(-1, 7).astype(np.float32))
+        wp.launch(unpack_pad_targets, dim=len(self._pad_targets), inputs=[self._pad_targets],
+                  outputs=[self._control.pad_target_positions, self._control.pad_target_orientations],
+                  device=self.model.device)
+        out = self._next_state
+        self.solver.advance(self.state, out, self._control, h)
+        wp.launch(pack_pad_loads, dim=len(self._pad_loads), inputs=[out.pad_normal_force, out.pad_force],
+                  outputs=[self._pad_loads], device=self.model.device)
+        self._last_pad_loads = self._pad_loads.numpy().reshape(self.num_worlds, -1, 4)
+        self._solves += 1
+        return self._solves, wrist_force(self._last_pad_loads[..., 1:])
 
     # -- readouts --------------------------------------------------------------------------
     def node_positions(self, w: int) -> np.ndarray:
@@ -263,7 +292,7 @@ class PickupScene:
         (``readouts.StepReadout``): reduced on the simulation's device, once per state (cached until
         the next ``step`` or reset), so observations, reward and the divergence check share it."""
         if self._readout is None:
-            self._readout = self._readouts.compute()
+            self._readout = self._readouts.compute(self.state)
         return self._readout
 
     def feature_points(self) -> tuple[np.ndarray, np.ndarray]:

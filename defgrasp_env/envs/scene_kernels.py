@@ -1,6 +1,7 @@
 """Warp kernels of the pickup scene outside the FEM solver, on the simulation's device: the
-state remap of a rebuild (worlds whose object changed at a reset) and the per-world readouts of a
-step (feature point, keypoints, finiteness), which reduce the full state to small [W, ...] arrays.
+state remap of a rebuild (worlds whose object changed at a reset), the per-world readouts of a
+step (feature point, keypoints, finiteness), which reduce the full state to small [W, ...] arrays,
+the pad loads of a solve and the readouts packed for one download, the pad targets for one upload.
 Kernels take arrays and scalars only; the launchers are in ``scene.py`` / ``readouts.py``."""
 
 from __future__ import annotations
@@ -80,3 +81,44 @@ def zero_float_rows_of_worlds(a: wp.array(dtype=wp.float32), row_world: wp.array
     i = wp.tid()
     if mask[row_world[i]] != 0:
         a[i] = 0.0
+
+
+@wp.kernel
+def pack_pad_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.array(dtype=wp.vec3),
+                   loads: wp.array(dtype=wp.vec4)):
+    """``loads[p] = (pad_normal_force[p], pad_force[p])``: what the host needs of the pads after a
+    solve, packed for one download."""
+    p = wp.tid()
+    f = pad_force[p]
+    loads[p] = wp.vec4(pad_normal_force[p], f[0], f[1], f[2])
+
+
+@wp.kernel
+def unpack_pad_targets(targets: wp.array(dtype=wp.transform), positions: wp.array(dtype=wp.vec3),
+                       orientations: wp.array(dtype=wp.quat)):
+    """Pad target poses uploaded packed as transforms (position, quaternion xyzw) -> the control's
+    position and orientation arrays (one upload per solve instead of two)."""
+    p = wp.tid()
+    t = targets[p]
+    positions[p] = wp.transform_get_translation(t)
+    orientations[p] = wp.transform_get_rotation(t)
+
+
+@wp.kernel
+def pack_readouts(feature_position: wp.array(dtype=wp.vec3d), feature_velocity: wp.array(dtype=wp.vec3d),
+                  keypoints: wp.array(dtype=wp.vec3), finite: wp.array(dtype=wp.int32), per_world: int,
+                  out: wp.array2d(dtype=wp.float64)):
+    """Row w of ``out`` [W, 7 + 3 per_world] (float64): world w's feature point, its velocity, its
+    ``per_world`` keypoints (float32 widened exactly) and its finiteness flag (0 or 1): the readouts
+    of a state packed for one download."""
+    w = wp.tid()
+    fp = feature_position[w]
+    fv = feature_velocity[w]
+    for i in range(3):
+        out[w, i] = fp[i]
+        out[w, 3 + i] = fv[i]
+    for k in range(per_world):
+        p = keypoints[w * per_world + k]
+        for i in range(3):
+            out[w, 6 + 3 * k + i] = wp.float64(p[i])
+    out[w, 6 + 3 * per_world] = wp.float64(finite[w])

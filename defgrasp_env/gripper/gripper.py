@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transforms import quat_rotate
-from ..wrist import clamp_joints, fk_analytic, ik_analytic
+from ..transforms import quat_rotate, quat_to_matrix
+from ..wrist import clamp_joints, fk_analytic, ik_joints
 from .driver import GripperConfig, GripperDriver, update_grip_stiffness
-from .linkage import GAP_MAX, GAP_MIN, pad_boxes
+from .linkage import GAP_MAX, GAP_MIN, pad_boxes, pad_centers, theta_from_gap
 
 __all__ = ["GROUND_CLEARANCE", "Gripper", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
 
@@ -39,15 +39,25 @@ PAD_BOX_HALF_EXTENTS = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2,
 _CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
+def _pad_box_centers(flange_pos: np.ndarray, flange_quat: np.ndarray, gap: np.ndarray):
+    """Collision-box centres [W, 2, 3] (m, world) of the pads and the flange rotations [W, 3, 3]
+    (the boxes' orientation) for flange poses [W, 3] m, [W, 4] xyzw and jaw gaps [W] m (clipped).
+    The boxes mirror each other across the flange's y-z plane, so the right pad's lateral term is
+    the left one's negated (exactly, as in the per-pad product)."""
+    left = pad_centers(theta_from_gap(np.clip(gap, GAP_MIN, GAP_MAX)))[:, 0]   # [W, 3] in G, z = 0
+    R = quat_to_matrix(flange_quat)                                            # [W, 3, 3]
+    lateral = R[:, :, 0] * (left[:, 0] + PAD_BACKING / 2)[:, None]
+    down = R[:, :, 1] * left[:, 1, None]
+    across = R[:, :, 2] * left[:, 2, None]
+    rotated = np.stack([(lateral + down) + across, (-lateral + down) + across], axis=1)
+    return flange_pos[:, None, :] + rotated, R
+
+
 def pad_box_poses(flange_pos: np.ndarray, flange_quat: np.ndarray, gap: np.ndarray):
     """Collision-box centres [W, 2, 3] (m) and orientations [W, 2, 4] (xyzw) of the pads (pad plus
     backing, half extents ``PAD_BOX_HALF_EXTENTS``) for flange poses [W, 3] m, [W, 4] xyzw (world)
     and jaw gaps [W] (m, clipped to the stroke)."""
-    centers = pad_boxes(gap=np.clip(gap, GAP_MIN, GAP_MAX))[0].copy()      # [W,2,3] in G
-    centers[:, 0, 0] += PAD_BACKING / 2
-    centers[:, 1, 0] -= PAD_BACKING / 2
-    world = flange_pos[:, None, :] + quat_rotate(flange_quat[:, None, :], centers)
-    return world, np.repeat(flange_quat[:, None, :], 2, axis=1)
+    return _pad_box_centers(flange_pos, flange_quat, gap)[0], np.repeat(flange_quat[:, None, :], 2, axis=1)
 
 
 def pad_reach() -> float:
@@ -145,10 +155,18 @@ class Gripper:
 
     def lift_above_ground(self, q: np.ndarray, gap: np.ndarray):
         """Raise the flange so that no pad box corner is below ``GROUND_CLEARANCE``. Returns the
-        joints [W, 6] and the pad poses (as :meth:`pad_poses`) for them."""
-        centers, quats = self.pad_poses(q, gap)
-        corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], _CORNER_SIGNS * PAD_BOX_HALF_EXTENTS)
-        lowest = corners[..., 1].reshape(len(q), -1).min(axis=1)
+        joints [W, 6] and the pad poses (as :meth:`pad_poses`) for them.
+
+        The lowest corner of a box with centre c, rotation R and half extents h is at height
+        ``c_y - sum_j |R[1, j]| h_j``; both pads share R. (The terms are summed x, z, y: the order
+        in which numpy's einsum summed them over the eight corners before, so the lift is the
+        same to the bit.)"""
+        pos, quat = fk_analytic(q)
+        centers, R = _pad_box_centers(pos, quat, gap)
+        quats = np.repeat(quat[:, None, :], 2, axis=1)
+        r, h = np.abs(R[:, 1, :]), PAD_BOX_HALF_EXTENTS
+        reach = (-(r[:, 0] * h[0]) - r[:, 2] * h[2]) - r[:, 1] * h[1]   # lowest corner below the centre
+        lowest = np.minimum(centers[:, 0, 1], centers[:, 1, 1]) + reach
         lifted = q.copy()
         lifted[:, 1] += np.maximum(GROUND_CLEARANCE - lowest, 0.0)
         lifted = clamp_joints(lifted)
@@ -160,7 +178,7 @@ class Gripper:
         """Start a control period toward flange targets [W, 3] m, [W, 4] xyzw (joint limits
         enforced; the wrist turns the shortest way round)."""
         self._q_start = self._q.copy()
-        q_move = clamp_joints(ik_analytic(target_pos, target_quat).q) - self._q_start
+        q_move = clamp_joints(ik_joints(target_pos, target_quat)) - self._q_start
         q_move[:, 3:] = (q_move[:, 3:] + np.pi) % (2 * np.pi) - np.pi
         self._q_move = q_move
 

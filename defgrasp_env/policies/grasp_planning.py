@@ -41,6 +41,10 @@ __all__ = ["GraspPlan", "plan_grasps", "closing_yaw", "PAD_HALF_LENGTH"]
 PAD_HALF_LENGTH = float(PAD_HALF_EXTENTS[1])
 _ANGLES = np.deg2rad(np.arange(0.0, 180.0, 1.0))
 _DIRS = np.stack([np.cos(_ANGLES), np.sin(_ANGLES)], axis=1)  # [A, 2] (x, z)
+#: Worlds per block of the [worlds, K, A] candidate evaluation: blocks stay in the CPU cache (at
+#: N = 4096 one pass over all worlds at once is ~2x slower); rows are independent, so blocking does
+#: not change a bit of the result.
+_BLOCK = 64
 
 
 @dataclass(frozen=True)
@@ -75,6 +79,25 @@ def _wrap_half_turn(a: np.ndarray) -> np.ndarray:
     return (a + np.pi / 2) % np.pi - np.pi / 2
 
 
+def _narrowest_directions(rel: np.ndarray, current_yaw: np.ndarray, tie_tolerance: float):
+    """Per world, the narrowest centred half-opening ``best`` [N] (m) over the candidate closing
+    directions and the index ``pick`` [N] into ``_DIRS`` of the direction chosen among those within
+    ``tie_tolerance`` of it (closest to ``current_yaw`` [N] rad), for keypoints ``rel`` [N, K, 2]
+    (x, z, m) relative to the feature point; evaluated in blocks of ``_BLOCK`` worlds."""
+    n = len(rel)
+    best, pick = np.empty(n), np.empty(n, dtype=np.intp)
+    dir_yaw = closing_yaw(_DIRS)                                           # [A]
+    for start in range(0, n, _BLOCK):
+        rows = slice(start, start + _BLOCK)
+        half = np.abs(rel[rows] @ _DIRS.T).max(axis=1)                    # [B, A] centred half-opening
+        best[rows] = half.min(axis=1)
+        # among the near-narrowest directions, the one closest to the current closing axis
+        turn = np.abs(_wrap_half_turn(dir_yaw[None, :] - current_yaw[rows, None]))
+        cost = np.where(half <= best[rows, None] + tie_tolerance, turn, np.inf)
+        pick[rows] = np.argmin(cost, axis=1)
+    return best, pick
+
+
 def plan_grasps(feature: np.ndarray, keypoints: np.ndarray, current_yaw: np.ndarray, *,
                 tie_tolerance: float = 0.003, rim_margin: float = 0.008, rim_clearance: float = 0.012,
                 ground_clearance: float = 0.003) -> GraspPlan:
@@ -88,13 +111,7 @@ def plan_grasps(feature: np.ndarray, keypoints: np.ndarray, current_yaw: np.ndar
     feature = np.asarray(feature, np.float64)
     keypoints = np.asarray(keypoints, np.float64)
     rel = keypoints[:, :, [0, 2]] - feature[:, None, [0, 2]]              # [N, K, 2]
-    half = np.abs(rel @ _DIRS.T).max(axis=1)                               # [N, A] centred half-opening
-    best = half.min(axis=1)
-    # among the near-narrowest directions, the one closest to the current closing axis
-    dir_yaw = closing_yaw(_DIRS)                                           # [A]
-    turn = np.abs(_wrap_half_turn(dir_yaw[None, :] - np.asarray(current_yaw, np.float64)[:, None]))
-    cost = np.where(half <= best[:, None] + tie_tolerance, turn, np.inf)
-    pick = np.argmin(cost, axis=1)
+    best, pick = _narrowest_directions(rel, np.asarray(current_yaw, np.float64), tie_tolerance)
     straddle_dir = _DIRS[pick]                                             # [N, 2]
     width = 2.0 * best
 

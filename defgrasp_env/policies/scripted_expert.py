@@ -250,14 +250,16 @@ class ScriptedPickupExpert:
         self._offset = np.where(self._fresh[:, None], feature - tcp, self._offset)
         self._fresh[:] = False
 
-        # --- planning (APPROACH re-plans every step; later phases keep the frozen plan)
-        plan = plan_grasps(feature, keypoints, yaw_now)
+        # --- planning (APPROACH re-plans every step; later phases keep the frozen plan): only the
+        # worlds that re-plan are planned (a world's plan depends on its own inputs only)
         replan = self.phase == APPROACH
-        self._plan_point = np.where(replan[:, None], plan.point, self._plan_point)
-        self._plan_yaw = np.where(replan, plan.yaw, self._plan_yaw)
-        self._plan_width = np.where(replan, plan.width, self._plan_width)
-        self._plan_gap = np.where(replan, plan.open_gap, self._plan_gap)
-        self._plan_top = np.where(replan, plan.top, self._plan_top)
+        if replan.any():
+            plan = plan_grasps(feature[replan], keypoints[replan], yaw_now[replan])
+            self._plan_point[replan] = plan.point
+            self._plan_yaw[replan] = plan.yaw
+            self._plan_width[replan] = plan.width
+            self._plan_gap[replan] = plan.open_gap
+            self._plan_top[replan] = plan.top
         hover_y = self._plan_top + PAD_HALF_LENGTH + c.hover_clearance
 
         target_tcp = tcp.copy()

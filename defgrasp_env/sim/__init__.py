@@ -21,6 +21,7 @@ from .materials import Material
 from .meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from .model import ContactParams, Model, build_model, set_world_material
 from .pad_motion import MAX_PAD_TRAVEL, max_pad_travel, substeps_for_travel
+from .solve_report import SolveReport
 from .solver import ImplicitSolver, SolverConfig, SolveStats
 from .solver_launches import SubstepLaunches
 from .solver_scratch import SolverScratch
@@ -28,7 +29,7 @@ from .state import Control, State
 
 __all__ = [
     "ContactParams", "Control", "ImplicitSolver", "MAX_PAD_TRAVEL", "Material", "Model", "OBJECT_SHAPES",
-    "SolveStats", "SolverConfig", "SolverScratch", "State", "SubstepLaunches", "TetMesh", "build_model",
+    "SolveReport", "SolveStats", "SolverConfig", "SolverScratch", "State", "SubstepLaunches", "TetMesh", "build_model",
     "max_pad_travel", "make_object_mesh", "mesh_from_surface", "meshing", "set_world_material",
     "substeps_for_travel",
 ]

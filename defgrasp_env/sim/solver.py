@@ -13,14 +13,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 import warp as wp
 
 from .materials import check_range
 from .model import Model
+from .solve_report import SolveReport, SolveStats
 from .solver_launches import SubstepLaunches, record_substep_launches
 from .solver_scratch import SolverScratch
 from .state import Control, State
+
+__all__ = ["ImplicitSolver", "SolveStats", "SolverConfig"]
+
+#: Launch sets (one per substep length and (state_in, state_out, control) triple) kept at most.
+_LAUNCH_SETS = 8
 
 
 @dataclass(frozen=True)
@@ -75,67 +80,50 @@ class SolverConfig:
         check_range("penetration_bound", self.penetration_bound, 0.0, math.inf, "m")
 
 
-@dataclass
-class SolveStats:
-    """Per-world convergence report of one ``step`` (numpy arrays of shape [W])."""
-
-    newton_iterations: np.ndarray   # int: Newton iterations summed over substeps
-    cg_iterations: np.ndarray       # int: CG iterations summed over Newton iterations and substeps
-    last_update: np.ndarray         # float, m: largest node update of the last full Newton step
-    residual_force: np.ndarray      # float, N: largest node force residual at the returned state
-    penetration: np.ndarray         # float, m: deepest ground/pad penetration at the returned state
-    diverged: np.ndarray            # bool: the world blew up (NaN, runaway update); its state was kept
-    converged: np.ndarray           # bool: every substep's Newton loop met newton_tolerance, not diverged
-    penetrated: np.ndarray          # bool: a substep's solve left a node deeper than
-    #                                 SolverConfig.penetration_bound (put back to 0.9 x it: positions
-    #                                 clamped, velocities follow), or the returned state is deeper
-
-    @classmethod
-    def combine(cls, reports: "list[SolveStats]") -> "SolveStats":
-        """One report for consecutive steps: iterations summed, the last state's update and
-        residual, the deepest penetration, and any step's divergence/non-convergence/penetration."""
-        return cls(
-            newton_iterations=np.sum([r.newton_iterations for r in reports], axis=0),
-            cg_iterations=np.sum([r.cg_iterations for r in reports], axis=0),
-            last_update=reports[-1].last_update,
-            residual_force=reports[-1].residual_force,
-            penetration=np.max([r.penetration for r in reports], axis=0),
-            diverged=np.any([r.diverged for r in reports], axis=0),
-            converged=np.all([r.converged for r in reports], axis=0),
-            penetrated=np.any([r.penetrated for r in reports], axis=0),
-        )
-
-
 class ImplicitSolver:
     """Advances a ``State`` of a ``Model`` by ``dt`` under a ``Control``.
 
-    Scratch arrays (``SolverScratch``) and the recorded kernel launches (``SubstepLaunches``) are
-    made once per model (and per substep length), so a step costs a couple of microseconds of
-    Python per launch. Usage::
+    Scratch arrays (``SolverScratch``) are made once per model and the kernel launches
+    (``SubstepLaunches``) are recorded once per substep length and per (state_in, state_out,
+    control) triple they are bound to (a few are kept), so a step costs a couple of microseconds
+    of Python per launch and copies no state besides the start positions and velocities.
+    Usage::
 
         solver = ImplicitSolver(model, SolverConfig())
         stats = solver.step(state_in, state_out, control, dt=0.05)
+
+    ``advance`` is ``step`` without the report's download: the report stays on the device, in
+    ``scratch``, for ``SolveReport.fold`` (a caller that runs several solves per control step
+    downloads one report per step).
     """
 
     def __init__(self, model: Model, config: SolverConfig = SolverConfig()):
         self.model = model
         self.config = config
-        self.work = State.from_model(model)       # the solver's own copy of the state
-        self.work_control = Control.from_model(model)
         self.scratch = SolverScratch.from_model(model)
-        self._launches: dict[float, SubstepLaunches] = {}
+        self._report = SolveReport(model.num_worlds, model.device)
+        self._launches: dict[tuple, tuple] = {}
 
     # -- public --------------------------------------------------------------------------------
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> SolveStats:
-        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object)."""
+        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object)
+        and return the per-world report (one device-to-host copy)."""
+        self.advance(state_in, state_out, control, dt)
+        self._report.fold(self.scratch, self.config.penetration_bound, first=True)
+        return self._report.download()
+
+    def advance(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
+        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object;
+        distinct, ``state_in`` is only read). Every array of ``state_out`` is written; its report
+        is left in ``scratch`` (``SolveReport.fold``)."""
         check_range("dt", dt, 0.0, math.inf, "s")
-        cfg, s, work = self.config, self.scratch, self.work
-        run = self._substep_launches(dt / cfg.substeps)
-        for name in ("positions", "velocities", "pad_positions", "pad_orientations"):
-            wp.copy(getattr(work, name), getattr(state_in, name))
-        for name in self.work_control.__dataclass_fields__:
-            wp.copy(getattr(self.work_control, name), getattr(control, name))
-        wp.copy(s.step_start, state_in.positions)
+        cfg, s = self.config, self.scratch
+        run = self._substep_launches(dt / cfg.substeps, state_in, state_out, control)
+        if state_in is not state_out:
+            wp.copy(state_out.positions, state_in.positions)
+            wp.copy(state_out.velocities, state_in.velocities)
+        else:  # the start positions are overwritten: keep them for the prescribed axes
+            wp.copy(s.step_start, state_in.positions)
         for a in (s.newton_it, s.cg_total, s.diverged, s.unconverged, s.clamped, s.penetration):
             a.zero_()
         for k in range(cfg.substeps):
@@ -148,23 +136,10 @@ class ImplicitSolver:
             run.clamp.launch()
             run.end.launch()
             if k == cfg.substeps - 1:
-                self._evaluate_outputs(run)
-            wp.copy(work.velocities, s.v_new)
-        wp.copy(work.pad_positions, self.work_control.pad_target_positions)
-        wp.copy(work.pad_orientations, self.work_control.pad_target_orientations)
-        state_out.copy_from(work)
-        diverged = s.diverged.numpy().astype(bool)
-        penetration = s.penetration.numpy().copy()
-        return SolveStats(
-            newton_iterations=s.newton_it.numpy().copy(),
-            cg_iterations=s.cg_total.numpy().copy(),
-            last_update=s.last_dx.numpy().copy(),
-            residual_force=s.res_norm.numpy().copy(),
-            penetration=penetration,
-            diverged=diverged,
-            converged=~diverged & (s.unconverged.numpy() == 0),
-            penetrated=(penetration > cfg.penetration_bound) | (s.clamped.numpy() != 0),
-        )
+                self._evaluate_outputs(run, state_out)
+            wp.copy(state_out.velocities, s.v_new)
+        wp.copy(state_out.pad_positions, control.pad_target_positions)
+        wp.copy(state_out.pad_orientations, control.pad_target_orientations)
 
     # -- internals ---------------------------------------------------------------------------
     def _newton(self, run: SubstepLaunches) -> None:
@@ -215,19 +190,28 @@ class ImplicitSolver:
             if cfg.check_every and not self.scratch.searching.numpy().any():
                 break
 
-    def _evaluate_outputs(self, run: SubstepLaunches) -> None:
+    def _evaluate_outputs(self, run: SubstepLaunches, state_out: State) -> None:
         """Forces, stresses and pad loads at the returned positions, and the final residual
         (evaluated with the last substep's start velocities, so the inertia term is included)."""
-        work, s = self.work, self.scratch
-        for a in (work.pad_normal_force, work.pad_force, work.mean_von_mises, s.res_norm):
+        s = self.scratch
+        for a in (state_out.pad_normal_force, state_out.pad_force, state_out.mean_von_mises, s.res_norm):
             a.zero_()
         for cmd in run.outputs:
             cmd.launch()
         s.rz.zero_()
 
-    def _substep_launches(self, h: float) -> SubstepLaunches:
-        """Recorded launches for substeps of length ``h`` (s)."""
-        if h not in self._launches:
-            self._launches[h] = record_substep_launches(self.model, self.config, self.scratch, self.work,
-                                                        self.work_control, h)
-        return self._launches[h]
+    def _substep_launches(self, h: float, state_in: State, state_out: State, control: Control) -> SubstepLaunches:
+        """Recorded launches for substeps of length ``h`` (s) from ``state_in`` into ``state_out``
+        under ``control`` (the arrays they are bound to); the least recently used set is dropped."""
+        key = (h, id(state_in), id(state_out), id(control))
+        entry = self._launches.pop(key, None)
+        if entry is None or entry[0] is not state_in or entry[1] is not state_out or entry[2] is not control:
+            step_start = self.scratch.step_start if state_in is state_out else state_in.positions
+            entry = (state_in, state_out, control,
+                     record_substep_launches(self.model, self.config, self.scratch, state_out, control, h,
+                                             start_pads=(state_in.pad_positions, state_in.pad_orientations),
+                                             step_start=step_start))
+        self._launches[key] = entry  # most recently used last
+        while len(self._launches) > _LAUNCH_SETS:
+            self._launches.pop(next(iter(self._launches)))
+        return entry[3]

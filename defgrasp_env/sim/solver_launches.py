@@ -55,6 +55,8 @@ class _Context:
     control: Control
     h: float
     substeps: int
+    start_pads: tuple   # (positions, orientations) [W*P] of the pads at the step's start
+    step_start: object  # [N] vec3: node positions at the step's start (prescribed-axis lerp)
 
     def rec(self, kernel, dim, *inputs):
         return wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device, record_cmd=True)
@@ -116,17 +118,17 @@ def _coarse(c: _Context, active, with_matrix: int) -> list:
 
 
 def _pads(c: _Context) -> list:
-    m, s, work, ctl, k_sub = c.model, c.scratch, c.work, c.control, c.substeps
+    m, s, ctl, k_sub = c.model, c.scratch, c.control, c.substeps
     if not m.pads_per_world:
         return [[] for _ in range(k_sub)]
-    return [[c.rec(kc.interpolate_pads, m.num_worlds * m.pads_per_world, work.pad_positions, work.pad_orientations,
+    return [[c.rec(kc.interpolate_pads, m.num_worlds * m.pads_per_world, *c.start_pads,
                    ctl.pad_target_positions, ctl.pad_target_orientations, k / k_sub, (k + 1) / k_sub, *s.pads)]
             for k in range(k_sub)]
 
 
 def _begin(c: _Context) -> list:
     m, s, work = c.model, c.scratch, c.work
-    return [c.rec(ksub.begin_substep, m.num_nodes, work.positions, work.velocities, s.step_start,
+    return [c.rec(ksub.begin_substep, m.num_nodes, work.positions, work.velocities, c.step_start,
                   c.control.prescribed_positions, m.free_axes, (k + 1) / c.substeps, c.h, s.x_start)
             for k in range(c.substeps)]
 
@@ -198,9 +200,12 @@ def _outputs(c: _Context) -> list:
 
 
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
-                            h: float) -> SubstepLaunches:
-    """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step."""
-    c = _Context(model, scratch, work, control, h, config.substeps)
+                            h: float, start_pads: tuple, step_start: wp.array) -> SubstepLaunches:
+    """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step,
+    iterating in ``work`` (the output state: positions and velocities hold the step's start when
+    it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
+    ``step_start`` at the step's start, toward ``control``."""
+    c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start)
     s, x = scratch, work.positions
     return SubstepLaunches(
         pads=_pads(c), begin=_begin(c), lag=_lag(c), evaluate=_evaluate(c), cg=_cg(c, config),

@@ -5,12 +5,13 @@ R = Rz(roll) Rx(pitch) Ry(yaw). See ``spec`` (joint table, limits, reachable set
 (closed-form FK/IK, numpy) and ``kinematics`` (pytorch-kinematics FK and iterative IK).
 """
 
-from .analytic import IKResult, fk_analytic, fk_matrix_analytic, ik_analytic
+from .analytic import IKResult, fk_analytic, fk_matrix_analytic, ik_analytic, ik_joints
 from .spec import FLANGE_LINK, JOINT_LOWER, JOINT_NAMES, JOINT_UPPER, WRIST_URDF_PATH, clamp_joints
 
 __all__ = [
     "FLANGE_LINK", "IKResult", "JOINT_LOWER", "JOINT_NAMES", "JOINT_UPPER", "WRIST_URDF_PATH",
     "WristKinematics", "clamp_joints", "fk_analytic", "fk_matrix_analytic", "ik_analytic",
+    "ik_joints",
 ]
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from ..transforms import matrix_to_quat, quat_angle_between, quat_to_matrix
 from .spec import JOINT_LOWER, JOINT_UPPER
 
-__all__ = ["IKResult", "rot_x", "rot_y", "rot_z", "fk_matrix_analytic", "fk_analytic", "ik_analytic", "pose_errors"]
+__all__ = ["IKResult", "rot_x", "rot_y", "rot_z", "fk_matrix_analytic", "fk_analytic", "ik_analytic", "ik_joints", "pose_errors"]
 
 
 class IKResult(NamedTuple):
@@ -115,6 +115,37 @@ def pose_errors(q, target_pos, target_quat) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
+def _ik_targets(target_pos, target_quat) -> tuple[np.ndarray, np.ndarray]:
+    """Validated targets broadcast to one batch: positions [..., 3] m, rotation matrices [..., 3, 3]."""
+    p = np.asarray(target_pos, dtype=np.float64)
+    if p.ndim < 1 or p.shape[-1] != 3 or not np.all(np.isfinite(p)):
+        raise ValueError(f"target_pos must be a finite array of shape [..., 3], got shape {p.shape}")
+    R = quat_to_matrix(target_quat)  # validates the quaternion
+    batch = np.broadcast_shapes(p.shape[:-1], R.shape[:-2])
+    return np.broadcast_to(p, batch + (3,)), np.broadcast_to(R, batch + (3, 3))
+
+
+def _ik_solve(p: np.ndarray, R: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Joints [..., 6] (clamped to ``lower``/``upper``) for flange positions p [..., 3] and rotations R [..., 3, 3]."""
+    r = R[..., :, 1]  # flange y axis in the world
+    pitch = np.arcsin(np.clip(r[..., 2], -1.0, 1.0))
+    locked = np.hypot(r[..., 0], r[..., 1]) < 1e-9
+    roll = np.where(locked, 0.0, np.arctan2(-r[..., 0], r[..., 1]))
+    roll = np.clip(roll, lower[3], upper[3])
+    pitch = np.clip(pitch, lower[4], upper[4])
+    # remaining rotation about y; atan2 of the y-rotation part is the least-squares yaw
+    M = np.swapaxes(rot_z(roll) @ rot_x(pitch), -1, -2) @ R
+    yaw = np.arctan2(M[..., 0, 2] - M[..., 2, 0], M[..., 0, 0] + M[..., 2, 2])
+    return np.clip(np.concatenate([p, roll[..., None], pitch[..., None], yaw[..., None]], axis=-1), lower, upper)
+
+
+def ik_joints(target_pos, target_quat, *, lower=JOINT_LOWER, upper=JOINT_UPPER) -> np.ndarray:
+    """``ik_analytic(...).q`` (the same values, float64 [..., 6]) without its residual errors: for
+    callers that only move the wrist (a control step), at half the cost."""
+    p, R = _ik_targets(target_pos, target_quat)
+    return _ik_solve(p, R, np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64))
+
+
 def ik_analytic(
     target_pos,
     target_quat,
@@ -131,26 +162,7 @@ def ik_analytic(
     joint limits and flagged ``converged = False`` with their residual errors. ``lower``/``upper``
     [6] default to the packaged URDF's limits (roll and pitch limits must lie within [-pi/2, pi/2]).
     """
-    lower = np.asarray(lower, dtype=np.float64)
-    upper = np.asarray(upper, dtype=np.float64)
-    p = np.asarray(target_pos, dtype=np.float64)
-    if p.ndim < 1 or p.shape[-1] != 3 or not np.all(np.isfinite(p)):
-        raise ValueError(f"target_pos must be a finite array of shape [..., 3], got shape {p.shape}")
-    R = quat_to_matrix(target_quat)  # validates the quaternion
-    batch = np.broadcast_shapes(p.shape[:-1], R.shape[:-2])
-    p = np.broadcast_to(p, batch + (3,))
-    R = np.broadcast_to(R, batch + (3, 3))
-
-    r = R[..., :, 1]  # flange y axis in the world
-    pitch = np.arcsin(np.clip(r[..., 2], -1.0, 1.0))
-    locked = np.hypot(r[..., 0], r[..., 1]) < 1e-9
-    roll = np.where(locked, 0.0, np.arctan2(-r[..., 0], r[..., 1]))
-    roll = np.clip(roll, lower[3], upper[3])
-    pitch = np.clip(pitch, lower[4], upper[4])
-    # remaining rotation about y; atan2 of the y-rotation part is the least-squares yaw
-    M = np.swapaxes(rot_z(roll) @ rot_x(pitch), -1, -2) @ R
-    yaw = np.arctan2(M[..., 0, 2] - M[..., 2, 0], M[..., 0, 0] + M[..., 2, 2])
-
-    q = np.clip(np.concatenate([p, roll[..., None], pitch[..., None], yaw[..., None]], axis=-1), lower, upper)
+    p, R = _ik_targets(target_pos, target_quat)
+    q = _ik_solve(p, R, np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64))
     pos_err, rot_err = pose_errors(q, p, matrix_to_quat(R))
     return IKResult(q, pos_err, rot_err, (pos_err < pos_tolerance) & (rot_err < rot_tolerance))
