@@ -6,8 +6,10 @@
 Per (object, E): one seeded episode of ``ScriptedPickupExpert`` in ``DeformablePickup-v0`` (CPU,
 state observations; up to ``--max-steps`` control steps, ends early on success). Reported per
 control step (``env.step`` wall time; the expert's own time is not included): median and p95 step
-time and the rates they give (p95 rate = 1 / the 95th percentile of the step time), the median and
-largest Newton and CG iterations per step (``info``, summed over the physics substeps and the wrist
+time and the rates they give (p95 rate = 1 / the 95th percentile of the step time), the same
+percentiles of the process's CPU time per step (``time.process_time``: less disturbed than the wall
+time by other processes on a shared machine; Warp's CPU kernels run on the calling thread), the
+median and largest Newton and CG iterations per step (``info``, summed over the physics substeps and the wrist
 force limit's re-solves), the launches from Python per step (kernel launches and graph replays),
 the fraction of steps whose solve met the Newton tolerance (``info["sim_converged"]``) and whether
 the episode succeeded.
@@ -75,13 +77,14 @@ def run(obj: str, e: float, seed: int, max_steps: int, counter: LaunchCounter) -
     env.step(expert(obs))  # warm-up: kernels compiled and loaded
     obs, _ = env.reset(seed=seed)
     expert.reset()
-    times, newton, cg, launches, converged, success = [], [], [], [], [], False
+    times, cpu, newton, cg, launches, converged, success = [], [], [], [], [], [], False
     while True:
         action = expert(obs)
         before = counter.count
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         obs, _, terminated, truncated, info = env.step(action)
         times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
         launches.append(counter.count - before)
         newton.append(int(info["newton_iterations"]))
         cg.append(int(info["cg_iterations"]))
@@ -90,21 +93,24 @@ def run(obj: str, e: float, seed: int, max_steps: int, counter: LaunchCounter) -
         if terminated or truncated:
             break
     env.close()
-    t = np.array(times)
+    t, c = np.array(times), np.array(cpu)
     return {"object": obj, "E": e, "steps": len(t), "p50_ms": 1e3 * np.median(t),
-            "p95_ms": 1e3 * np.percentile(t, 95), "newton": (np.median(newton), max(newton)),
+            "p95_ms": 1e3 * np.percentile(t, 95), "cpu_p50_ms": 1e3 * np.median(c),
+            "cpu_p95_ms": 1e3 * np.percentile(c, 95), "newton": (np.median(newton), max(newton)),
             "cg": (np.median(cg), max(cg)), "launches": (np.median(launches), max(launches)),
             "converged": float(np.mean(converged)), "success": success}
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| object | E (Pa) | steps | step p50 / p95 (ms) | rate p50 / p95 (Hz) | Newton it./step "
+    lines = ["| object | E (Pa) | steps | step p50 / p95 (ms) | rate p50 / p95 (Hz) | CPU time p50 / p95 (ms) "
+             "| Newton it./step "
              "med / max | CG it./step med / max | launches/step med / max | converged | success |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(
             f"| {r['object']} | {r['E']:.0e} | {r['steps']} | {r['p50_ms']:.1f} / {r['p95_ms']:.1f} | "
-            f"{1e3 / r['p50_ms']:.1f} / {1e3 / r['p95_ms']:.1f} | {r['newton'][0]:.0f} / {r['newton'][1]} | "
+            f"{1e3 / r['p50_ms']:.1f} / {1e3 / r['p95_ms']:.1f} | {r['cpu_p50_ms']:.1f} / {r['cpu_p95_ms']:.1f} | "
+            f"{r['newton'][0]:.0f} / {r['newton'][1]} | "
             f"{r['cg'][0]:.0f} / {r['cg'][1]} | {r['launches'][0]:.0f} / {r['launches'][1]} | "
             f"{100 * r['converged']:.0f} % | {r['success']} |")
     return "\n".join(lines) + "\n"

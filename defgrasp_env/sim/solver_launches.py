@@ -3,9 +3,10 @@
 A substep of length h: ``pads`` (pad poses at the substep's start and end), ``begin`` (save the start,
 initial guess), ``lag`` (contact faces, lagged friction, guess fixes, rotation seeds), then Newton
 iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coarse correction),
-``cg`` (one CG iteration, repeated), ``coarse_post``, the line search (``energy0`` once,
+``cg`` (a block of CG iterations, repeated), ``coarse_post``, the line search (``energy0`` once,
 ``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` decides the extra iterations;
-``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and, after the last substep, ``outputs`` (forces, stresses, residual).
+``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
+after the last substep, ``outputs`` (forces, stresses, residual).
 Launches are recorded once per substep length (``wp.launch(record_cmd=True)``). Each phase is a list
 holding one ``LaunchSequence`` of its launches: on the CPU a Warp graph (``wp.ScopedCapture``)
 replayed by Warp's C++ loop (a replay costs ~15 us of Python instead of ~15-25 us per launch), else
@@ -33,7 +34,7 @@ from .state import Control, State
 
 class LaunchSequence:
     """Recorded launches replayed in order by ``launch()``: as one captured graph on the CPU where
-    Warp records CPU graphs (Warp >= 1.19), else one by one (CUDA, older Warp). Both run the same
+    Warp records CPU graphs (Warp 1.19 does), else one by one (CUDA; a Warp that cannot capture on the CPU). Both run the same
     kernels on the same arrays in the same order, so the results are bit-identical."""
 
     def __init__(self, commands: list, device):
