@@ -1,13 +1,13 @@
 """Node aggregates of each world: the coarse space of the solver's linear solves.
 
-The CG preconditioner of ``kernels/coarse_space.py`` adds a coarse solve on the piecewise rigid
-motions of a few node aggregates per world. A slender object (a rope, a beam), where
+The CG preconditioner of ``kernels/coarse_space.py`` adds a coarse solve on the piecewise-constant
+translations of a few node aggregates per world. A slender object (a rope, a beam), where
 block-Jacobi CG is slowest (a correction takes ~ its length in elements of iterations to cross it),
 is cut into slices of equal node counts along its length: recursive bisection of the world's rest
 nodes at the median along the principal axis of each piece, as long as the piece is at least
 ``ELONGATION`` times longer along that axis than along the next one. A compact object stays one
-aggregate (its rigid motions; measured with translations only on the expert's episodes: cutting a
-sphere into octants cost 15-25 % more CG iterations, cutting the rope into 8 slices saved 11-37 %).
+aggregate (its rigid translations: measured on the expert's episodes, cutting a sphere or a cuboid
+into octants cost 15-25 % more CG iterations, cutting the rope into 8 slices saved 11-37 %).
 The cuts follow the principal axes, not the coordinate axes, so a turned object is cut the same
 way (up to nodes tied at a cut).
 """
@@ -61,17 +61,3 @@ def node_aggregates(rest_positions: np.ndarray, node_start: np.ndarray, pieces: 
         sl = slice(int(node_start[w]), int(node_start[w + 1]))
         index[sl] = bisect_nodes(rest_positions[sl], pieces)
     return index
-
-
-def aggregate_anchors(rest_positions: np.ndarray, node_start: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """Global index [N] int32 of each node's anchor: the node of its aggregate (``index``, from
-    ``node_aggregates``) nearest to the aggregate's rest centroid (the origin of its rotations)."""
-    anchor = np.empty(len(rest_positions), dtype=np.int32)
-    x = np.asarray(rest_positions, dtype=np.float64)
-    for w in range(len(node_start) - 1):
-        start, stop = int(node_start[w]), int(node_start[w + 1])
-        for a in np.unique(index[start:stop]):
-            nodes = start + np.flatnonzero(index[start:stop] == a)
-            centre = x[nodes].mean(axis=0)
-            anchor[nodes] = nodes[np.argmin(np.linalg.norm(x[nodes] - centre, axis=1))]
-    return anchor

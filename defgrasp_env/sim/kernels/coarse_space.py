@@ -1,17 +1,14 @@
-"""Coarse space of the per-world linear solves: piecewise rigid motions of node aggregates.
+"""Coarse space of the per-world linear solves: piecewise-constant translations of node aggregates.
 
 Block-Jacobi CG barely moves the smooth, long-wavelength modes of a Newton system A dx = r: the
-rigid motions of a stiff object (a translation's stiffness m/h^2 is ~1e5 times below the elastic
-one; a gripped object pivots about its contacts) and the bending of a slender one (a rope: CG
-needs ~ its length in elements of iterations to carry a correction from end to end). Every world's
-nodes are split into at most K aggregates (``sim/aggregates.py``); T [3N x 6K] holds the
-infinitesimal rigid motions of each aggregate a: columns (a, k) = e_k (translations) and
-(a, 3 + k) = e_k x l_i (rotations; l_i = x_i - x_anchor(a), the lever arm of node i from its
-aggregate's anchor node at the current Newton iterate, ``coarse_levers``), on the nodes of a,
-masked by the free axes. Per Newton iteration the coarse matrix E = T^T A T (6K x 6K, float64) is
-assembled from the node terms (mass/h^2 + contact blocks) and the tets (12 or fewer unit-motion
-Hessian products each; a uniform translation does not strain a tet, so those columns are skipped
-for tets inside one aggregate with all axes free), Cholesky-factored and inverted per world.
+rigid translations of a stiff object (their stiffness m/h^2 is ~1e5 times below the elastic one)
+and the bending of a slender one (a rope: CG needs ~ its length in elements of iterations to carry
+a correction from end to end). Every world's nodes are split into at most K aggregates (``sim/aggregates.py``);
+T [3N x 3K] holds the translations of each aggregate, column (a, k) = e_k on the nodes of aggregate
+a, masked by the free axes. Per Newton iteration the coarse matrix E = T^T A T (3K x 3K, float64)
+is assembled from the node terms (mass/h^2 + contact blocks) and the tets that straddle two or more
+aggregates (a uniform translation does not strain a tet, so tets inside one aggregate add nothing,
+exactly, when all their axes are free), Cholesky-factored and inverted per world.
 It is used (a) before CG: dx0 = T E^-1 T^T r, residual r - A dx0, (b) inside CG: the two-level
 additive preconditioner z = P r + T E^-1 T^T r (P block Jacobi; SPD, so CG stays CG), and (c) after
 CG: dx += T E^-1 T^T r (the best A-norm correction in the coarse space).
@@ -25,46 +22,16 @@ from .elastic import row, stress_differential
 
 
 @wp.func
-def aggregate_part(coef: wp.array2d(dtype=float), w: int, a: int, free: wp.vec3, lever: wp.vec3):
-    """(T c)_i = t_a + omega_a x l_i (masked) for a node of aggregate ``a`` of world ``w``."""
-    t = wp.vec3(coef[w, 6 * a], coef[w, 6 * a + 1], coef[w, 6 * a + 2])
-    omega = wp.vec3(coef[w, 6 * a + 3], coef[w, 6 * a + 4], coef[w, 6 * a + 5])
-    return wp.cw_mul(free, t + wp.cross(omega, lever))
+def aggregate_part(coef: wp.array2d(dtype=float), w: int, a: int, free: wp.vec3):
+    """(T c)_i for a node of aggregate ``a`` of world ``w`` with free axes ``free``."""
+    return wp.cw_mul(free, wp.vec3(coef[w, 3 * a], coef[w, 3 * a + 1], coef[w, 3 * a + 2]))
 
 
 @wp.func
-def add_rhs(rhs: wp.array2d(dtype=float), w: int, a: int, v: wp.vec3, lever: wp.vec3):
-    """rhs += T_i^T v for a masked node vector v: (v, l_i x v) on aggregate ``a``."""
-    m = wp.cross(lever, v)
-    for k in range(3):
-        wp.atomic_add(rhs, w, 6 * a + k, v[k])
-        wp.atomic_add(rhs, w, 6 * a + 3 + k, m[k])
-
-
-@wp.func
-def motion_column(j: int, lever: wp.vec3):
-    """Column j (0-2: translation e_j, 3-5: rotation e_(j-3) x l) of a node's rigid-motion block."""
-    e = wp.vec3(0.0)
-    if j < 3:
-        e[j] = 1.0
-        return e
-    e[j - 3] = 1.0
-    return wp.cross(e, lever)
-
-
-@wp.kernel
-def coarse_levers(
-    x: wp.array(dtype=wp.vec3),
-    node_anchor: wp.array(dtype=int),
-    node_world: wp.array(dtype=int),
-    world_active: wp.array(dtype=int),
-    lever: wp.array(dtype=wp.vec3),
-):
-    """l_i = x_i - x_anchor(i) at the Newton iterate (m)."""
-    i = wp.tid()
-    if world_active[node_world[i]] == 0:
-        return
-    lever[i] = x[i] - x[node_anchor[i]]
+def add_rhs(rhs: wp.array2d(dtype=float), w: int, a: int, v: wp.vec3):
+    wp.atomic_add(rhs, w, 3 * a, v[0])
+    wp.atomic_add(rhs, w, 3 * a + 1, v[1])
+    wp.atomic_add(rhs, w, 3 * a + 2, v[2])
 
 
 @wp.func
@@ -93,36 +60,21 @@ def coarse_assemble_nodes(
     world_active: wp.array(dtype=int),
     inv_dt2: float,
     r: wp.array(dtype=wp.vec3),
-    lever: wp.array(dtype=wp.vec3),
     matrix: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
 ):
-    """E += T_i^T (M/h^2 + contact block) T_i and rhs += T_i^T r (r already masked)."""
+    """E += T^T (M/h^2 + contact blocks) T and rhs += T^T r (r already masked)."""
     i = wp.tid()
     w = node_world[i]
     if world_active[w] == 0:
         return
     a = node_aggregate[i]
-    fr = free[i]
-    frm = wp.diag(fr)
-    block = frm * (mass[i] * inv_dt2 * wp.identity(n=3, dtype=float) + contact_hessian[i]) * frm
-    l = lever[i]
-    for j in range(6):
-        d = wp.cw_mul(fr, motion_column(j, l))
-        out = block * d
-        rot = wp.cross(l, out)
+    fr = wp.diag(free[i])
+    block = fr * (mass[i] * inv_dt2 * wp.identity(n=3, dtype=float) + contact_hessian[i]) * fr
+    for j in range(3):
         for k in range(3):
-            wp.atomic_add(matrix, w, 6 * a + k, 6 * a + j, wp.float64(out[k]))
-            wp.atomic_add(matrix, w, 6 * a + 3 + k, 6 * a + j, wp.float64(rot[k]))
-    add_rhs(rhs, w, a, r[i], l)
-
-
-@wp.func
-def tet_row(dm_inv: wp.mat33, a: int):
-    """b_a of node a of a tet (F = sum_a x_a (outer) b_a)."""
-    if a == 0:
-        return -(row(dm_inv, 0) + row(dm_inv, 1) + row(dm_inv, 2))
-    return row(dm_inv, a - 1)
+            wp.atomic_add(matrix, w, 3 * a + j, 3 * a + k, wp.float64(block[j, k]))
+    add_rhs(rhs, w, a, r[i])
 
 
 @wp.kernel
@@ -139,13 +91,11 @@ def coarse_assemble_tets(
     world_active: wp.array(dtype=int),
     free: wp.array(dtype=wp.vec3),
     node_aggregate: wp.array(dtype=int),
-    lever: wp.array(dtype=wp.vec3),
     matrix: wp.array3d(dtype=wp.float64),
 ):
-    """E += T^T K_t T per tet: for each aggregate b of the tet's nodes and each of its 6 rigid
-    motions, the Hessian product (``stress_differential``) of that motion on the tet's nodes of b,
-    projected on the motions of the aggregates of all 4 nodes. Translations are skipped for a tet
-    inside one aggregate with all axes free (exactly zero)."""
+    """E += T^T K_t T for the tets t with nodes in two or more aggregates (or a prescribed axis):
+    the tet's 12 unit-vector Hessian products (``stress_differential``), summed into the blocks of
+    the aggregates of their nodes."""
     t = wp.tid()
     w = tet_world[t]
     if world_active[w] == 0:
@@ -153,11 +103,14 @@ def coarse_assemble_tets(
     idx = tets[t]
     a0 = node_aggregate[idx[0]]
     all_free = free[idx[0]] + free[idx[1]] + free[idx[2]] + free[idx[3]]
-    first = 0
     if (a0 == node_aggregate[idx[1]] and a0 == node_aggregate[idx[2]] and a0 == node_aggregate[idx[3]]
             and all_free[0] + all_free[1] + all_free[2] == 12.0):
-        first = 3
+        return
     dm_inv = rest_inv[t]
+    b1 = row(dm_inv, 0)
+    b2 = row(dm_inv, 1)
+    b3 = row(dm_inv, 2)
+    b0 = -(b1 + b2 + b3)
     cof = tet_cof[t]
     r = tet_r[t]
     twist = tet_twist[t]
@@ -165,26 +118,32 @@ def coarse_assemble_tets(
     lam = tet_lambda[t]
     v0 = rest_volume[t]
     for v in range(4):
-        b = node_aggregate[idx[v]]
-        seen = 0
-        for u in range(v):
-            if node_aggregate[idx[u]] == b:
-                seen = 1
-        if seen == 0:
-            for j in range(first, 6):
-                df = wp.mat33(0.0)
+        bv = b0
+        if v == 1:
+            bv = b1
+        elif v == 2:
+            bv = b2
+        elif v == 3:
+            bv = b3
+        fv = free[idx[v]]
+        av = node_aggregate[idx[v]]
+        for j in range(3):
+            if fv[j] != 0.0:
+                e = wp.vec3(0.0)
+                e[j] = 1.0
+                dp = stress_differential(wp.outer(e, bv), cof, r, twist, mu, lam, v0)
                 for u in range(4):
-                    if node_aggregate[idx[u]] == b:
-                        d = wp.cw_mul(free[idx[u]], motion_column(j, lever[idx[u]]))
-                        df += wp.outer(d, tet_row(dm_inv, u))
-                dp = stress_differential(df, cof, r, twist, mu, lam, v0)
-                for u in range(4):
-                    out = wp.cw_mul(free[idx[u]], dp * tet_row(dm_inv, u))
-                    rot = wp.cross(lever[idx[u]], out)
+                    bu = b0
+                    if u == 1:
+                        bu = b1
+                    elif u == 2:
+                        bu = b2
+                    elif u == 3:
+                        bu = b3
+                    col = wp.cw_mul(free[idx[u]], dp * bu)
                     au = node_aggregate[idx[u]]
                     for k in range(3):
-                        wp.atomic_add(matrix, w, 6 * au + k, 6 * b + j, wp.float64(out[k]))
-                        wp.atomic_add(matrix, w, 6 * au + 3 + k, 6 * b + j, wp.float64(rot[k]))
+                        wp.atomic_add(matrix, w, 3 * au + k, 3 * av + j, wp.float64(col[k]))
 
 
 @wp.kernel
@@ -254,7 +213,6 @@ def coarse_guess(
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
     coef: wp.array2d(dtype=float),
-    lever: wp.array(dtype=wp.vec3),
     dx: wp.array(dtype=wp.vec3),
     guess: wp.array(dtype=wp.vec3),
 ):
@@ -263,7 +221,7 @@ def coarse_guess(
     w = node_world[i]
     if world_active[w] == 0:
         return
-    d = aggregate_part(coef, w, node_aggregate[i], free[i], lever[i])
+    d = aggregate_part(coef, w, node_aggregate[i], free[i])
     dx[i] = dx[i] + d
     guess[i] = d
 
@@ -302,7 +260,6 @@ def coarse_reduce(
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
-    lever: wp.array(dtype=wp.vec3),
     rhs: wp.array2d(dtype=float),
 ):
     """rhs += T^T r (r masked)."""
@@ -310,7 +267,7 @@ def coarse_reduce(
     w = node_world[i]
     if world_active[w] == 0:
         return
-    add_rhs(rhs, w, node_aggregate[i], r[i], lever[i])
+    add_rhs(rhs, w, node_aggregate[i], r[i])
 
 
 @wp.kernel
@@ -335,7 +292,6 @@ def coarse_correct(
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
     coef: wp.array2d(dtype=float),
-    lever: wp.array(dtype=wp.vec3),
     dx: wp.array(dtype=wp.vec3),
 ):
     """dx += T coef."""
@@ -343,4 +299,4 @@ def coarse_correct(
     w = node_world[i]
     if world_active[w] == 0:
         return
-    dx[i] = dx[i] + aggregate_part(coef, w, node_aggregate[i], free[i], lever[i])
+    dx[i] = dx[i] + aggregate_part(coef, w, node_aggregate[i], free[i])

@@ -1,5 +1,5 @@
 """Per-world linear solves of the Newton systems: conjugate gradients preconditioned by block
-Jacobi plus a coarse solve on the rigid motions of node aggregates (two-level additive,
+Jacobi plus a coarse solve on the translations of node aggregates (two-level additive,
 ``coarse_space.py``).
 
 Every world runs its own CG (its own alpha, beta and stopping test) inside one set of flat arrays,
@@ -110,7 +110,6 @@ def cg_update_solution(
     z: wp.array(dtype=wp.vec3),
     rz_new: wp.array(dtype=float),
     cg_update: wp.array(dtype=float),
-    lever: wp.array(dtype=wp.vec3),
     coarse_rhs: wp.array2d(dtype=float),
 ):
     """dx += alpha p, r -= alpha A p, z = P r (block-Jacobi part); per world: r.z, the largest
@@ -130,7 +129,7 @@ def cg_update_solution(
     zi = wp.cw_mul(precond[i] * ri, free[i])
     z[i] = zi
     wp.atomic_add(rz_new, w, wp.dot(ri, zi))
-    add_rhs(coarse_rhs, w, node_aggregate[i], ri, lever[i])
+    add_rhs(coarse_rhs, w, node_aggregate[i], ri)
 
 
 @wp.kernel
@@ -184,7 +183,6 @@ def cg_update_direction(
     node_aggregate: wp.array(dtype=int),
     cg_active: wp.array(dtype=int),
     coarse_coef: wp.array2d(dtype=float),
-    lever: wp.array(dtype=wp.vec3),
     beta: wp.array(dtype=float),
     z: wp.array(dtype=wp.vec3),
     p: wp.array(dtype=wp.vec3),
@@ -195,7 +193,7 @@ def cg_update_direction(
     w = node_world[i]
     if cg_active[w] == 0:
         return
-    zi = z[i] + aggregate_part(coarse_coef, w, node_aggregate[i], free[i], lever[i])
+    zi = z[i] + aggregate_part(coarse_coef, w, node_aggregate[i], free[i])
     z[i] = zi
     p[i] = zi + beta[w] * p[i]
     ap[i] = wp.vec3(0.0)
