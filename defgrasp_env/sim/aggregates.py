@@ -6,8 +6,9 @@ block-Jacobi CG is slowest (a correction takes ~ its length in elements of itera
 is cut into slices of equal node counts along its length: recursive bisection of the world's rest
 nodes at the median along the principal axis of each piece, as long as the piece is at least
 ``ELONGATION`` times longer along that axis than along the next one. A compact object stays one
-aggregate (its rigid translations: measured on the expert's episodes, cutting a sphere or a cuboid
-into octants cost 15-25 % more CG iterations, cutting the rope into 8 slices saved 11-37 %).
+aggregate (its rigid translations; measured on the expert's episodes at E = 1e4 and 1e7: cutting
+the sphere into 8 pieces cost 14-23 % more CG iterations, the torus 7-8 % fewer; cutting the rope
+into 8 slices saved 11-37 %).
 The cuts follow the principal axes, not the coordinate axes, so a turned object is cut the same
 way (up to nodes tied at a cut).
 """
