@@ -204,9 +204,12 @@ def test_coulomb_hold_and_slip_threshold(mu):
     # threshold: the squeeze force where it starts to slide
     n_onset = 0.5 * (rows[onset, 1] + rows[onset - 1, 1])
     assert n_onset == pytest.approx(n_star, rel=0.10), (n_onset / n_star)
-    # below the threshold (pads stopped at the onset gap, 2 mu N < m g) it keeps sliding down
+    # below the threshold (pads stopped at the onset gap, 2 mu N < m g) it keeps sliding down: it
+    # slides on by > 1 mm at > 10 x the stick speed (the Newton solves after the onset stop at the
+    # iteration limit, so the path can differ with the linear solver: it may land on the ground,
+    # 20 mm down, within the 0.5 s)
     assert rows[-1, 2] < rows[onset, 2] - 0.001
-    assert rows[-1, 3] < -10.0 * stick
+    assert rows[onset:, 3].min() < -10.0 * stick
 
 
 # --------------------------------------------------------------------------------------------

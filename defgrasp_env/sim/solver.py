@@ -2,10 +2,11 @@
 
 Each substep solves  M/h^2 (x - x_start - h v) = f_elastic(x) + f_contact(x) + M g + f_ext  for x by
 Newton's method (projected elastic Hessian, exact contact normal Hessian, lagged friction), each
-Newton system by block-Jacobi preconditioned CG with a coarse correction on the rigid translations
-(kernels/linear_solve.py), a backtracking line search on the incremental potential
-(kernels/energy.py, kernels/line_search.py), all per world. The scratch arrays are a
-``SolverScratch``; the launches of each phase of a substep are recorded by ``solver_launches``.
+Newton system by CG preconditioned by block Jacobi plus a coarse solve on the translations of node
+aggregates (kernels/linear_solve.py, kernels/coarse_space.py, sim/aggregates.py), a backtracking
+line search on the incremental potential (kernels/energy.py, kernels/line_search.py), all per world.
+The scratch arrays are a ``SolverScratch``; the launches of each phase of a substep are recorded by
+``solver_launches``.
 """
 
 from __future__ import annotations
@@ -165,11 +166,14 @@ class ImplicitSolver:
                 break
 
     def _run_cg(self, run: SubstepLaunches) -> None:
+        """CG in blocks of ``run.cg_block`` iterations (a world stops at its own test or at
+        ``cg_iterations``; later iterations of a block skip it), checking between blocks whether
+        all worlds have stopped."""
         cfg, active = self.config, self.scratch.cg_active
-        for it in range(cfg.cg_iterations):
+        for _ in range(-(-cfg.cg_iterations // run.cg_block)):
             for cmd in run.cg:
                 cmd.launch()
-            if cfg.check_every and (it + 1) % cfg.check_every == 0 and not active.numpy().any():
+            if cfg.check_every and not active.numpy().any():
                 break
 
     def _line_search(self, run: SubstepLaunches, first: bool) -> None:

@@ -3,11 +3,15 @@
 A substep of length h: ``pads`` (pad poses at the substep's start and end), ``begin`` (save the start,
 initial guess), ``lag`` (contact faces, lagged friction, guess fixes, rotation seeds), then Newton
 iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coarse correction),
-``cg`` (one CG iteration, repeated), ``coarse_post``, the line search (``energy0`` once,
+``cg`` (a block of CG iterations, repeated), ``coarse_post``, the line search (``energy0`` once,
 ``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` decides the extra iterations;
-``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and, after the last substep, ``outputs`` (forces, stresses, residual).
-Launches are recorded once per substep length (``wp.launch(record_cmd=True)``): replaying one costs
-a couple of microseconds of Python.
+``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
+after the last substep, ``outputs`` (forces, stresses, residual).
+Launches are recorded once per substep length (``wp.launch(record_cmd=True)``). Each phase is a list
+holding one ``LaunchSequence`` of its launches: on the CPU a Warp graph (``wp.ScopedCapture``)
+replayed by Warp's C++ loop (a replay costs ~15 us of Python instead of ~15-25 us per launch), else
+the launches one by one. ``cg`` holds ``cg_block`` CG iterations (``SolverConfig.check_every``, or
+all of ``cg_iterations`` when it is 0): CG iterations of a world that has stopped are no-ops.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from dataclasses import dataclass
 
 import warp as wp
 
+from .kernels import coarse_space as kcs
 from .kernels import contact as kc
 from .kernels import elastic as ke
 from .kernels import energy as kenergy
@@ -27,9 +32,34 @@ from .solver_scratch import SolverScratch
 from .state import Control, State
 
 
+class LaunchSequence:
+    """Recorded launches replayed in order by ``launch()``: as one captured graph on the CPU where
+    Warp records CPU graphs (Warp 1.19 does), else one by one (CUDA; a Warp that cannot capture on the CPU). Both run the same
+    kernels on the same arrays in the same order, so the results are bit-identical."""
+
+    def __init__(self, commands: list, device):
+        self.commands = list(commands)
+        self.graph = None
+        if self.commands and wp.get_device(device).is_cpu:
+            try:
+                with wp.ScopedCapture(device=device) as capture:
+                    for cmd in self.commands:
+                        cmd.launch()
+                self.graph = capture.graph
+            except RuntimeError:  # this Warp cannot capture on the CPU: launch one by one
+                self.graph = None
+
+    def launch(self) -> None:
+        if self.graph is not None:
+            wp.capture_launch(self.graph)
+        else:
+            for cmd in self.commands:
+                cmd.launch()
+
+
 @dataclass
 class SubstepLaunches:
-    """Recorded launches of each phase (lists are launched in order)."""
+    """Launches of each phase (lists are launched in order; see the module docstring)."""
 
     pads: list          # [substeps] lists: pad poses at fractions k/K and (k+1)/K of the step
     begin: list         # [substeps] launches: substep start, initial guess (prescribed axes at (k+1)/K)
@@ -45,6 +75,7 @@ class SubstepLaunches:
     clamp: object
     end: object
     outputs: list
+    cg_block: int       # CG iterations per launch of ``cg``
 
 
 @dataclass
@@ -93,28 +124,35 @@ def _begin_solve(c: _Context, active):
                  s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm)
 
 
-def _coarse(c: _Context, active, with_matrix: int) -> list:
-    """Coarse solve on the rigid translations: before CG (with_matrix=1: builds T^T A T, starts CG
-    from dx = T c) and after it (corrects dx with the CG residual)."""
+def _coarse_before(c: _Context, active) -> list:
+    """Coarse solve before CG: assemble and invert T^T A T, start CG from dx = T (T^T A T)^-1 T^T r
+    with the residual and CG vectors that follow (kernels/coarse_space.py)."""
     m, s, n = c.model, c.scratch, c.model.num_nodes
-    cmds = []
-    if with_matrix:
-        cmds.append(c.rec(klin.coarse_clear, n, m.node_world, active, *s.coarse_at))
-        for k in range(3):
-            if not s.all_free:  # a uniform translation does not strain a tet: K T_k = 0
-                cmds.append(c.rec(ke.hessian_product_tets, m.num_tets, s.coarse_t[k], m.tets, m.tet_rest_inv,
-                                  m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active,
-                                  s.coarse_at[k], s.tet_r, s.tet_twist))
-            cmds.append(c.rec(klin.cg_node_product, n, s.coarse_t[k], m.node_mass, s.contact_hessian, m.free_axes,
-                              m.node_world, active, 1.0 / (c.h * c.h), s.coarse_at[k], s.coarse_scratch))
-    cmds += [
-        c.rec(klin.coarse_reduce, n, *s.coarse_at, s.residual, m.free_axes, m.node_world, active, with_matrix,
-              s.coarse_m, s.coarse_rhs),
-        c.rec(klin.coarse_solve, m.num_worlds, active, with_matrix, s.coarse_m, s.coarse_rhs, s.coarse_inv,
-              s.coarse_coef, s.rz if with_matrix else s.coarse_scratch),
-        c.rec(klin.coarse_apply, n, *s.coarse_at, s.precond, m.free_axes, m.node_world, active, s.coarse_coef,
-              with_matrix, s.dx, s.residual, s.z, s.p, s.rz)]
-    return cmds
+    return [
+        c.rec(kcs.coarse_assemble_nodes, n, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
+              s.node_aggregate, active, 1.0 / (c.h * c.h), s.residual, s.coarse_matrix, s.coarse_rhs),
+        c.rec(kcs.coarse_assemble_tets, m.num_tets, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
+              m.tet_lambda, s.cofactor, s.tet_r, s.tet_twist, m.tet_world, active, m.free_axes, s.node_aggregate,
+              s.coarse_matrix),
+        c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_size, s.coarse_matrix, s.coarse_lower_inv,
+              s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),
+        c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx,
+              s.coarse_guess),
+        c.rec(ke.hessian_product_tets, m.num_tets, s.coarse_guess, m.tets, m.tet_rest_inv, m.tet_rest_volume,
+              m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
+        c.rec(klin.cg_node_product, n, s.coarse_guess, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
+              active, 1.0 / (c.h * c.h), s.ap, s.coarse_scratch),
+        c.rec(kcs.coarse_start_cg, n, s.precond, m.free_axes, m.node_world, active, s.residual, s.ap, s.z, s.p,
+              s.rz)]
+
+
+def _coarse_after(c: _Context, active) -> list:
+    """Coarse correction after CG: dx += T (T^T A T)^-1 T^T r with CG's final residual r."""
+    m, s, n = c.model, c.scratch, c.model.num_nodes
+    return [c.rec(kcs.coarse_reduce, n, s.residual, m.node_world, s.node_aggregate, active, s.coarse_rhs),
+            c.rec(kcs.coarse_solve, m.num_worlds, active, s.coarse_size, s.coarse_inverse, s.coarse_rhs,
+                  s.coarse_coef),
+            c.rec(kcs.coarse_correct, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx)]
 
 
 def _pads(c: _Context) -> list:
@@ -146,7 +184,7 @@ def _lag(c: _Context) -> list:
 def _evaluate(c: _Context) -> list:
     s, x = c.scratch, c.work.positions
     return [_nodes(c, x, s.newton_active, 0), _tets(c, x, s.newton_active), _begin_solve(c, s.newton_active),
-            *_coarse(c, s.newton_active, 1),
+            *_coarse_before(c, s.newton_active),
             c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.rz, s.rz0, s.cg_active)]
 
 
@@ -158,12 +196,14 @@ def _cg(c: _Context, config) -> list:
               m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
         c.rec(klin.cg_node_product, n, s.p, m.node_mass, s.contact_hessian, m.free_axes, m.node_world, active,
               1.0 / (c.h * c.h), s.ap, s.p_ap),
-        c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, active, s.rz, s.p_ap,
-              s.dx, s.residual, s.z, s.rz_new, s.cg_update),
-        c.rec(klin.cg_update_direction, n, s.z, m.node_world, active, s.rz, s.rz_new, s.p, s.ap),
-        c.rec(klin.cg_end_iteration, m.num_worlds, s.rz, s.rz_new, s.rz0, s.p_ap, config.cg_tolerance ** 2,
-              config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.cg_it, s.cg_total,
-              active, s.cg_update)]
+        c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate, active,
+              s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs),
+        c.rec(klin.cg_end_iteration, m.num_worlds, s.rz0, config.cg_tolerance ** 2,
+              config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.coarse_size,
+              s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it, s.cg_total,
+              active, s.cg_update),
+        c.rec(klin.cg_update_direction, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef,
+              s.cg_beta, s.z, s.p, s.ap)]
 
 
 def _trial(c: _Context, config) -> list:
@@ -207,16 +247,21 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     ``step_start`` at the step's start, toward ``control``."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start)
     s, x = scratch, work.positions
+    block = config.check_every or config.cg_iterations
+
+    def seq(commands: list) -> list:
+        return [LaunchSequence(commands, model.device)]
+
     return SubstepLaunches(
-        pads=_pads(c), begin=_begin(c), lag=_lag(c), evaluate=_evaluate(c), cg=_cg(c, config),
-        coarse_post=_coarse(c, s.newton_active, 0),
-        energy0=[_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)],
+        pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c)),
+        cg=seq(_cg(c, config) * block), coarse_post=seq(_coarse_after(c, s.newton_active)),
+        energy0=seq([_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)]),
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
-        trial=_trial(c, config), apply=_apply(c, config), depth=_depth(c, config),
+        trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=seq(_depth(c, config)),
         clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, model.free_axes, s.pad_pos1, s.pad_rot1,
                     model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
                     0.9 * config.penetration_bound, x, s.clamped),
         end=c.rec(ksub.end_substep, model.num_nodes, s.x_start, model.node_world, s.diverged, 1.0 / h, x, s.v_new),
-        outputs=_outputs(c),
+        outputs=seq(_outputs(c)), cg_block=block,
     )

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import warp as wp
 
+from .aggregates import node_aggregates
 from .model import Model
 
 
@@ -18,8 +18,9 @@ class SolverScratch:
     """Per-node, per-tet and per-world work arrays of ``ImplicitSolver`` (device arrays).
 
     Newton's iterate is the work state's ``positions``; each Newton iteration solves
-    ``A dx = r`` (A = M/h^2 + contact Hessian + elastic Hessian) by block-Jacobi preconditioned CG
-    with a coarse correction on the rigid translations, then line-searches along ``dx``.
+    ``A dx = r`` (A = M/h^2 + contact Hessian + elastic Hessian) by CG preconditioned by block
+    Jacobi plus a coarse solve on the translations of node aggregates (``kernels/coarse_space.py``),
+    then line-searches along ``dx``.
     """
 
     # substep bookkeeping
@@ -58,6 +59,8 @@ class SolverScratch:
     penetration: wp.array       # float, m: deepest contact at the returned state
     step_length: wp.array       # float: line-search step length
     cg_update: wp.array         # float, m: largest node move of the last CG iteration
+    cg_beta: wp.array           # float: CG's beta of the current iteration
+    coarse_scratch: wp.array    # float: p . A p of the coarse guess (unused)
     depth: wp.array             # float, m: deepest contact of the iterate (extra iterations)
     newton_active: wp.array     # int: world still iterating Newton
     cg_active: wp.array         # int: world still iterating CG
@@ -72,15 +75,16 @@ class SolverScratch:
     searching: wp.array         # int: world still line-searching
     energy0: wp.array           # float64: incremental potential of the accepted iterate
     energy_trial: wp.array      # float64: that of the trial
-    # coarse correction on the rigid translations T_k = e_k (masked by the free axes)
-    all_free: bool              # host: no prescribed axis (K T_k = 0)
-    coarse_t: list              # 3 x [N] vec3: T_k
-    coarse_at: list             # 3 x [N] vec3: A T_k
-    coarse_m: wp.array          # [W] mat33: T^T A T
-    coarse_inv: wp.array        # [W] mat33: its inverse
-    coarse_rhs: wp.array        # [W] vec3: T^T r
-    coarse_coef: wp.array       # [W] vec3: coarse solution
-    coarse_scratch: wp.array    # [W] float
+    # coarse space: translations of K node aggregates per world (C = 3K unknowns, sim/aggregates.py;
+    # K: the most aggregates of any world)
+    coarse_size: int            # host: C
+    node_aggregate: wp.array    # [N] int: world-local aggregate of each node
+    coarse_matrix: wp.array     # [W, C, C] float64: T^T A T (assembled, then its Cholesky factor)
+    coarse_lower_inv: wp.array  # [W, C, C] float64: inverse of the Cholesky factor
+    coarse_inverse: wp.array    # [W, C, C] float64: (T^T A T)^-1 of the current Newton iteration
+    coarse_rhs: wp.array        # [W, C] float: T^T r
+    coarse_coef: wp.array       # [W, C] float: (T^T A T)^-1 T^T r
+    coarse_guess: wp.array      # [N] vec3, m: T coef of the coarse initial guess
 
     @classmethod
     def from_model(cls, model: Model) -> "SolverScratch":
@@ -100,7 +104,12 @@ class SolverScratch:
         def per_world(dtype):
             return wp.zeros(w, dtype=dtype, device=d)
 
-        free = model.free_axes.numpy()
+        aggregate = node_aggregates(model.rest_positions.numpy(), model.node_start)
+        size = 3 * (int(aggregate.max()) + 1)
+
+        def coarse(dtype, ndim):
+            return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)
+
         names = [f.name for f in cls.__dataclass_fields__.values()]
         floats = names[names.index("rz"):names.index("newton_active")]
         ints = names[names.index("newton_active"):names.index("energy0")]
@@ -113,10 +122,10 @@ class SolverScratch:
             pad_pos0=vec(pads), pad_rot0=quat(pads), pad_pos1=vec(pads), pad_rot1=quat(pads),
             **{k: per_world(float) for k in floats}, **{k: per_world(int) for k in ints},
             energy0=per_world(wp.float64), energy_trial=per_world(wp.float64),
-            all_free=bool(free.all()),
-            coarse_t=[wp.array(free * np.eye(3, dtype=np.float32)[k], dtype=wp.vec3, device=d) for k in range(3)],
-            coarse_at=[vec(), vec(), vec()], coarse_m=mat(w), coarse_inv=mat(w), coarse_rhs=vec(w),
-            coarse_coef=vec(w), coarse_scratch=wp.zeros(w, dtype=float, device=d),
+            coarse_size=size, node_aggregate=wp.array(aggregate, dtype=int, device=d),
+            coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
+            coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
+            coarse_guess=vec(),
         )
         scratch.all_on.fill_(1)
         scratch.step_length.fill_(1.0)  # begin_line_search resets it; with no line search it stays 1

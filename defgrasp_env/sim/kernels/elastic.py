@@ -186,6 +186,17 @@ def evaluate_tets(
         wp.atomic_add(diag_block, idx[a], block)
 
 
+@wp.func
+def stress_differential(df: wp.mat33, cof: wp.mat33, r: wp.mat33, twist: float, mu: float, lam: float,
+                        volume: float):
+    """V0 dP of the Hessian above for a change ``df`` of F (its product with b_a is the force change
+    of node a); ``cof``, ``r``, ``twist``: the tet's stored cof(F), R and twist factor."""
+    m = wp.transpose(r) * df
+    # remove the fraction (1 - c) of the skew part of M = R^T dF (the rotation, -dR/dF)
+    df_shear = df - (0.5 * (1.0 - twist)) * (r * (m - wp.transpose(m)))
+    return volume * (2.0 * mu * df_shear + lam * wp.ddot(cof, df) * cof)
+
+
 @wp.kernel
 def hessian_product_tets(
     direction: wp.array(dtype=wp.vec3),
@@ -214,12 +225,7 @@ def hessian_product_tets(
     p0 = direction[idx[0]]
     df = wp.outer(direction[idx[1]] - p0, b1) + wp.outer(direction[idx[2]] - p0, b2) + wp.outer(
         direction[idx[3]] - p0, b3)
-    cof = tet_cof[t]
-    r = tet_r[t]
-    m = wp.transpose(r) * df
-    # remove the fraction (1 - c) of the skew part of M = R^T dF (the rotation, -dR/dF)
-    df_shear = df - (0.5 * (1.0 - tet_twist[t])) * (r * (m - wp.transpose(m)))
-    dp = rest_volume[t] * (2.0 * tet_mu[t] * df_shear + tet_lambda[t] * wp.ddot(cof, df) * cof)
+    dp = stress_differential(df, tet_cof[t], tet_r[t], tet_twist[t], tet_mu[t], tet_lambda[t], rest_volume[t])
     wp.atomic_add(product, idx[0], dp * b0)
     wp.atomic_add(product, idx[1], dp * b1)
     wp.atomic_add(product, idx[2], dp * b2)

@@ -1,11 +1,17 @@
-"""Per-world linear solves of the Newton systems: block-Jacobi preconditioned conjugate gradients
-with a coarse correction on the rigid translations.
+"""Per-world linear solves of the Newton systems: conjugate gradients preconditioned by block
+Jacobi plus a coarse solve on the translations of node aggregates (two-level additive,
+``coarse_space.py``).
 
 Every world runs its own CG (its own alpha, beta and stopping test) inside one set of flat arrays,
 so a world's result never depends on the other worlds. Per-world flags switch finished worlds off.
+One CG iteration is five launches: ``hessian_product_tets`` (elastic.py), ``cg_node_product``,
+``cg_update_solution``, ``cg_end_iteration`` (per world: coarse part, stopping test, beta) and
+``cg_update_direction``.
 """
 
 import warp as wp
+
+from .coarse_space import add_rhs, aggregate_part, coarse_coefficients
 
 
 @wp.func
@@ -95,6 +101,7 @@ def cg_update_solution(
     precond: wp.array(dtype=wp.mat33),
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
     cg_active: wp.array(dtype=int),
     rz: wp.array(dtype=float),
     p_ap: wp.array(dtype=float),
@@ -103,8 +110,10 @@ def cg_update_solution(
     z: wp.array(dtype=wp.vec3),
     rz_new: wp.array(dtype=float),
     cg_update: wp.array(dtype=float),
+    coarse_rhs: wp.array2d(dtype=float),
 ):
-    """dx += alpha p, r -= alpha A p, z = P r; per world: r.z and the largest |alpha p| (m)."""
+    """dx += alpha p, r -= alpha A p, z = P r (block-Jacobi part); per world: r.z, the largest
+    |alpha p| (m) and the coarse right-hand side T^T r."""
     i = wp.tid()
     w = node_world[i]
     if cg_active[w] == 0:
@@ -120,176 +129,71 @@ def cg_update_solution(
     zi = wp.cw_mul(precond[i] * ri, free[i])
     z[i] = zi
     wp.atomic_add(rz_new, w, wp.dot(ri, zi))
-
-
-@wp.kernel
-def cg_update_direction(
-    z: wp.array(dtype=wp.vec3),
-    node_world: wp.array(dtype=int),
-    cg_active: wp.array(dtype=int),
-    rz: wp.array(dtype=float),
-    rz_new: wp.array(dtype=float),
-    p: wp.array(dtype=wp.vec3),
-    ap: wp.array(dtype=wp.vec3),
-):
-    i = wp.tid()
-    w = node_world[i]
-    if cg_active[w] == 0:
-        return
-    beta = 0.0
-    if rz[w] > 0.0:
-        beta = rz_new[w] / rz[w]
-    p[i] = z[i] + beta * p[i]
-    ap[i] = wp.vec3(0.0)
+    add_rhs(coarse_rhs, w, node_aggregate[i], ri)
 
 
 @wp.kernel
 def cg_end_iteration(
-    rz: wp.array(dtype=float),
-    rz_new: wp.array(dtype=float),
     rz_initial: wp.array(dtype=float),
-    p_ap: wp.array(dtype=float),
     rel_tol_sq: float,
     update_tol: float,
     max_iterations: int,
+    coarse_size: int,
+    coarse_inverse: wp.array3d(dtype=wp.float64),
+    coarse_rhs: wp.array2d(dtype=float),
+    coarse_coef: wp.array2d(dtype=float),
+    rz: wp.array(dtype=float),
+    rz_new: wp.array(dtype=float),
+    p_ap: wp.array(dtype=float),
+    beta: wp.array(dtype=float),
     cg_iterations: wp.array(dtype=int),
     cg_iterations_total: wp.array(dtype=int),
     cg_active: wp.array(dtype=int),
     cg_update: wp.array(dtype=float),
 ):
-    """Stop a world's CG on relative residual, on an iteration that moved no node by more than
+    """Per world: the coarse part of z (coef = E^-1 T^T r; r.z gains g . E^-1 g), beta, and the
+    stopping test: stop on relative residual, on an iteration that moved no node by more than
     ``update_tol`` (m: the absolute test, as r.z cannot fall below float32 noise near a
-    solution; applied from the 8th iteration on), on the iteration cap, or on a non-positive curvature."""
+    solution; applied from the 8th iteration on), on the iteration cap, or on a non-positive
+    curvature."""
     w = wp.tid()
     if cg_active[w] == 0:
         return
+    rz_next = rz_new[w] + coarse_coefficients(w, coarse_size, coarse_inverse, coarse_rhs, coarse_coef)
     it = cg_iterations[w] + 1
     cg_iterations[w] = it
     cg_iterations_total[w] = cg_iterations_total[w] + 1
     stalled = cg_update[w] <= update_tol and it >= 8  # CG can creep for a few iterations first
-    if rz_new[w] <= rel_tol_sq * rz_initial[w] or stalled or it >= max_iterations or p_ap[w] <= 0.0:
+    if rz_next <= rel_tol_sq * rz_initial[w] or stalled or it >= max_iterations or p_ap[w] <= 0.0:
         cg_active[w] = 0
+    b = 0.0
+    if rz[w] > 0.0:
+        b = rz_next / rz[w]
+    beta[w] = b
     cg_update[w] = 0.0
-    rz[w] = rz_new[w]
+    rz[w] = rz_next
     rz_new[w] = 0.0
     p_ap[w] = 0.0
 
 
-# -- coarse (rigid translation) correction of the linear solve ------------------------------------
-# Block-Jacobi CG barely moves the rigid translations of a stiff object (their stiffness m/dt^2 is
-# ~1e5 times below the elastic one), so a falling object did not fall. Each Newton system is
-# therefore also solved on the 3 translations T_k = e_k (masked by the free axes) per world
-# (Galerkin: (T^T A T) c = T^T r) before CG (initial guess) and after it (correction).
-
-
 @wp.kernel
-def coarse_clear(
-    node_world: wp.array(dtype=int),
-    world_active: wp.array(dtype=int),
-    at0: wp.array(dtype=wp.vec3),
-    at1: wp.array(dtype=wp.vec3),
-    at2: wp.array(dtype=wp.vec3),
-):
-    i = wp.tid()
-    if world_active[node_world[i]] == 0:
-        return
-    at0[i] = wp.vec3(0.0)
-    at1[i] = wp.vec3(0.0)
-    at2[i] = wp.vec3(0.0)
-
-
-@wp.kernel
-def coarse_reduce(
-    at0: wp.array(dtype=wp.vec3),
-    at1: wp.array(dtype=wp.vec3),
-    at2: wp.array(dtype=wp.vec3),
-    r: wp.array(dtype=wp.vec3),
+def cg_update_direction(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
-    world_active: wp.array(dtype=int),
-    with_matrix: int,
-    coarse_matrix: wp.array(dtype=wp.mat33),
-    coarse_rhs: wp.array(dtype=wp.vec3),
-):
-    """Per world: coarse_rhs += T^T r and (if with_matrix) coarse_matrix += T^T A T, where
-    at_k = A T_k and (T_j . v)_i = free_i[j] v_i[j]."""
-    i = wp.tid()
-    w = node_world[i]
-    if world_active[w] == 0:
-        return
-    fr = free[i]
-    wp.atomic_add(coarse_rhs, w, wp.cw_mul(fr, r[i]))
-    if with_matrix != 0:
-        a0 = at0[i]
-        a1 = at1[i]
-        a2 = at2[i]
-        m = wp.mat33(fr[0] * a0[0], fr[0] * a1[0], fr[0] * a2[0],
-                     fr[1] * a0[1], fr[1] * a1[1], fr[1] * a2[1],
-                     fr[2] * a0[2], fr[2] * a1[2], fr[2] * a2[2])
-        wp.atomic_add(coarse_matrix, w, m)
-
-
-@wp.kernel
-def coarse_solve(
-    world_active: wp.array(dtype=int),
-    store_inverse: int,
-    coarse_matrix: wp.array(dtype=wp.mat33),
-    coarse_rhs: wp.array(dtype=wp.vec3),
-    coarse_inverse: wp.array(dtype=wp.mat33),
-    coarse_coef: wp.array(dtype=wp.vec3),
-    rz: wp.array(dtype=float),
-):
-    """coef = (T^T A T)^-1 T^T r per world (axes fixed on every node get coef 0); clears the
-    sums and rz (recomputed by coarse_apply)."""
-    w = wp.tid()
-    coarse_coef[w] = wp.vec3(0.0)
-    if world_active[w] == 0:
-        return
-    if store_inverse != 0:
-        m = coarse_matrix[w]
-        for k in range(3):
-            if m[k, k] <= 0.0:
-                m[k, k] = 1.0
-        inv = wp.mat33(0.0)
-        det = wp.determinant(m)
-        if wp.isfinite(det) and det > 0.0:
-            inv = wp.inverse(m)
-        coarse_inverse[w] = inv
-    coarse_coef[w] = coarse_inverse[w] * coarse_rhs[w]
-    coarse_matrix[w] = wp.mat33(0.0)
-    coarse_rhs[w] = wp.vec3(0.0)
-    rz[w] = 0.0
-
-
-@wp.kernel
-def coarse_apply(
-    at0: wp.array(dtype=wp.vec3),
-    at1: wp.array(dtype=wp.vec3),
-    at2: wp.array(dtype=wp.vec3),
-    precond: wp.array(dtype=wp.mat33),
-    free: wp.array(dtype=wp.vec3),
-    node_world: wp.array(dtype=int),
-    world_active: wp.array(dtype=int),
-    coarse_coef: wp.array(dtype=wp.vec3),
-    update_residual: int,
-    dx: wp.array(dtype=wp.vec3),
-    r: wp.array(dtype=wp.vec3),
+    node_aggregate: wp.array(dtype=int),
+    cg_active: wp.array(dtype=int),
+    coarse_coef: wp.array2d(dtype=float),
+    beta: wp.array(dtype=float),
     z: wp.array(dtype=wp.vec3),
     p: wp.array(dtype=wp.vec3),
-    rz: wp.array(dtype=float),
+    ap: wp.array(dtype=wp.vec3),
 ):
-    """dx += T coef; if update_residual, also r -= A T coef and restart CG's z = p = P r, rz."""
+    """z += T coef (the coarse part), p = z + beta p, ap = 0, in the worlds still iterating."""
     i = wp.tid()
     w = node_world[i]
-    if world_active[w] == 0:
+    if cg_active[w] == 0:
         return
-    c = coarse_coef[w]
-    fr = free[i]
-    dx[i] = dx[i] + wp.cw_mul(fr, c)
-    if update_residual != 0:
-        ri = wp.cw_mul(r[i] - (c[0] * at0[i] + c[1] * at1[i] + c[2] * at2[i]), fr)
-        r[i] = ri
-        zi = wp.cw_mul(precond[i] * ri, fr)
-        z[i] = zi
-        p[i] = zi
-        wp.atomic_add(rz, w, wp.dot(ri, zi))
+    zi = z[i] + aggregate_part(coarse_coef, w, node_aggregate[i], free[i])
+    z[i] = zi
+    p[i] = zi + beta[w] * p[i]
+    ap[i] = wp.vec3(0.0)

@@ -1,0 +1,302 @@
+"""Coarse space of the per-world linear solves: piecewise-constant translations of node aggregates.
+
+Block-Jacobi CG barely moves the smooth, long-wavelength modes of a Newton system A dx = r: the
+rigid translations of a stiff object (their stiffness m/h^2 is ~1e5 times below the elastic one)
+and the bending of a slender one (a rope: CG needs ~ its length in elements of iterations to carry
+a correction from end to end). Every world's nodes are split into at most K aggregates (``sim/aggregates.py``);
+T [3N x 3K] holds the translations of each aggregate, column (a, k) = e_k on the nodes of aggregate
+a, masked by the free axes. Per Newton iteration the coarse matrix E = T^T A T (3K x 3K, float64)
+is assembled from the node terms (mass/h^2 + contact blocks) and the tets that straddle two or more
+aggregates (a uniform translation does not strain a tet, so tets inside one aggregate add nothing,
+exactly, when all their axes are free), Cholesky-factored and inverted per world.
+It is used (a) before CG: dx0 = T E^-1 T^T r, residual r - A dx0, (b) inside CG: the two-level
+additive preconditioner z = P r + T E^-1 T^T r (P block Jacobi; SPD, so CG stays CG), and (c) after
+CG: dx += T E^-1 T^T r (the best A-norm correction in the coarse space).
+A world whose E is not numerically positive definite gets E^-1 = 0 (block Jacobi alone) for that
+Newton iteration.
+"""
+
+import warp as wp
+
+from .elastic import row, stress_differential
+
+
+@wp.func
+def aggregate_part(coef: wp.array2d(dtype=float), w: int, a: int, free: wp.vec3):
+    """(T c)_i for a node of aggregate ``a`` of world ``w`` with free axes ``free``."""
+    return wp.cw_mul(free, wp.vec3(coef[w, 3 * a], coef[w, 3 * a + 1], coef[w, 3 * a + 2]))
+
+
+@wp.func
+def add_rhs(rhs: wp.array2d(dtype=float), w: int, a: int, v: wp.vec3):
+    wp.atomic_add(rhs, w, 3 * a, v[0])
+    wp.atomic_add(rhs, w, 3 * a + 1, v[1])
+    wp.atomic_add(rhs, w, 3 * a + 2, v[2])
+
+
+@wp.func
+def coarse_coefficients(w: int, size: int, inverse: wp.array3d(dtype=wp.float64),
+                        rhs: wp.array2d(dtype=float), coef: wp.array2d(dtype=float)):
+    """coef = E^-1 g for g = rhs (T^T r), then rhs = 0; returns g . E^-1 g."""
+    g_c = wp.float64(0.0)
+    for i in range(size):
+        s = wp.float64(0.0)
+        for j in range(size):
+            s += inverse[w, i, j] * wp.float64(rhs[w, j])
+        coef[w, i] = float(s)
+        g_c += s * wp.float64(rhs[w, i])
+    for i in range(size):
+        rhs[w, i] = 0.0
+    return float(g_c)
+
+
+@wp.kernel
+def coarse_assemble_nodes(
+    mass: wp.array(dtype=float),
+    contact_hessian: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    inv_dt2: float,
+    r: wp.array(dtype=wp.vec3),
+    matrix: wp.array3d(dtype=wp.float64),
+    rhs: wp.array2d(dtype=float),
+):
+    """E += T^T (M/h^2 + contact blocks) T and rhs += T^T r (r already masked)."""
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    a = node_aggregate[i]
+    fr = wp.diag(free[i])
+    block = fr * (mass[i] * inv_dt2 * wp.identity(n=3, dtype=float) + contact_hessian[i]) * fr
+    for j in range(3):
+        for k in range(3):
+            wp.atomic_add(matrix, w, 3 * a + j, 3 * a + k, wp.float64(block[j, k]))
+    add_rhs(rhs, w, a, r[i])
+
+
+@wp.kernel
+def coarse_assemble_tets(
+    tets: wp.array(dtype=wp.vec4i),
+    rest_inv: wp.array(dtype=wp.mat33),
+    rest_volume: wp.array(dtype=float),
+    tet_mu: wp.array(dtype=float),
+    tet_lambda: wp.array(dtype=float),
+    tet_cof: wp.array(dtype=wp.mat33),
+    tet_r: wp.array(dtype=wp.mat33),
+    tet_twist: wp.array(dtype=float),
+    tet_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    free: wp.array(dtype=wp.vec3),
+    node_aggregate: wp.array(dtype=int),
+    matrix: wp.array3d(dtype=wp.float64),
+):
+    """E += T^T K_t T for the tets t with nodes in two or more aggregates (or a prescribed axis):
+    the tet's 12 unit-vector Hessian products (``stress_differential``), summed into the blocks of
+    the aggregates of their nodes."""
+    t = wp.tid()
+    w = tet_world[t]
+    if world_active[w] == 0:
+        return
+    idx = tets[t]
+    a0 = node_aggregate[idx[0]]
+    all_free = free[idx[0]] + free[idx[1]] + free[idx[2]] + free[idx[3]]
+    if (a0 == node_aggregate[idx[1]] and a0 == node_aggregate[idx[2]] and a0 == node_aggregate[idx[3]]
+            and all_free[0] + all_free[1] + all_free[2] == 12.0):
+        return
+    dm_inv = rest_inv[t]
+    b1 = row(dm_inv, 0)
+    b2 = row(dm_inv, 1)
+    b3 = row(dm_inv, 2)
+    b0 = -(b1 + b2 + b3)
+    cof = tet_cof[t]
+    r = tet_r[t]
+    twist = tet_twist[t]
+    mu = tet_mu[t]
+    lam = tet_lambda[t]
+    v0 = rest_volume[t]
+    for v in range(4):
+        bv = b0
+        if v == 1:
+            bv = b1
+        elif v == 2:
+            bv = b2
+        elif v == 3:
+            bv = b3
+        fv = free[idx[v]]
+        av = node_aggregate[idx[v]]
+        for j in range(3):
+            if fv[j] != 0.0:
+                e = wp.vec3(0.0)
+                e[j] = 1.0
+                dp = stress_differential(wp.outer(e, bv), cof, r, twist, mu, lam, v0)
+                for u in range(4):
+                    bu = b0
+                    if u == 1:
+                        bu = b1
+                    elif u == 2:
+                        bu = b2
+                    elif u == 3:
+                        bu = b3
+                    col = wp.cw_mul(free[idx[u]], dp * bu)
+                    au = node_aggregate[idx[u]]
+                    for k in range(3):
+                        wp.atomic_add(matrix, w, 3 * au + k, 3 * av + j, wp.float64(col[k]))
+
+
+@wp.kernel
+def coarse_factor(
+    world_active: wp.array(dtype=int),
+    size: int,
+    matrix: wp.array3d(dtype=wp.float64),
+    lower_inv: wp.array3d(dtype=wp.float64),
+    inverse: wp.array3d(dtype=wp.float64),
+    rhs: wp.array2d(dtype=float),
+    coef: wp.array2d(dtype=float),
+    rz: wp.array(dtype=float),
+):
+    """Per world: E^-1 by Cholesky (E = L L^T, E^-1 = L^-T L^-1; unknowns with a zero diagonal, i.e.
+    empty aggregates or axes prescribed on all of an aggregate's nodes, get 1), coef = E^-1 rhs;
+    clears E, rhs and rz (recomputed by ``coarse_start_cg``)."""
+    w = wp.tid()
+    if world_active[w] == 0:
+        return
+    ok = int(1)
+    for j in range(size):
+        if matrix[w, j, j] <= wp.float64(0.0):
+            matrix[w, j, j] = wp.float64(1.0)
+    for j in range(size):  # Cholesky, in place in the lower triangle
+        if ok == 1:
+            s = matrix[w, j, j]
+            for k in range(j):
+                s -= matrix[w, j, k] * matrix[w, j, k]
+            if not (s > wp.float64(1.0e-12) * matrix[w, j, j]):
+                ok = 0
+            else:
+                d = wp.sqrt(s)
+                matrix[w, j, j] = d
+                for i in range(j + 1, size):
+                    s2 = matrix[w, i, j]
+                    for k in range(j):
+                        s2 -= matrix[w, i, k] * matrix[w, j, k]
+                    matrix[w, i, j] = s2 / d
+    for j in range(size):  # L^-1 (lower)
+        for i in range(size):
+            lower_inv[w, i, j] = wp.float64(0.0)
+        if ok == 1:
+            lower_inv[w, j, j] = wp.float64(1.0) / matrix[w, j, j]
+            for i in range(j + 1, size):
+                s = wp.float64(0.0)
+                for k in range(j, i):
+                    s += matrix[w, i, k] * lower_inv[w, k, j]
+                lower_inv[w, i, j] = -s / matrix[w, i, i]
+    for i in range(size):  # E^-1 = L^-T L^-1 (symmetric by construction)
+        for j in range(i + 1):
+            s = wp.float64(0.0)
+            for k in range(i, size):
+                s += lower_inv[w, k, i] * lower_inv[w, k, j]
+            inverse[w, i, j] = s
+            inverse[w, j, i] = s
+    for i in range(size):
+        for j in range(size):
+            matrix[w, i, j] = wp.float64(0.0)
+    coarse_coefficients(w, size, inverse, rhs, coef)
+    rz[w] = 0.0
+
+
+@wp.kernel
+def coarse_guess(
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    coef: wp.array2d(dtype=float),
+    dx: wp.array(dtype=wp.vec3),
+    guess: wp.array(dtype=wp.vec3),
+):
+    """dx += T coef; guess = T coef (the direction whose A-product ``coarse_start_cg`` subtracts)."""
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    d = aggregate_part(coef, w, node_aggregate[i], free[i])
+    dx[i] = dx[i] + d
+    guess[i] = d
+
+
+@wp.kernel
+def coarse_start_cg(
+    precond: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    r: wp.array(dtype=wp.vec3),
+    ap: wp.array(dtype=wp.vec3),
+    z: wp.array(dtype=wp.vec3),
+    p: wp.array(dtype=wp.vec3),
+    rz: wp.array(dtype=float),
+):
+    """r -= A T coef (in ``ap``), then CG's z = p = P r, rz = r . z and ap = 0. T^T r = 0 after the
+    coarse solve, so the coarse part of the first z vanishes (up to rounding) and is left out."""
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    fr = free[i]
+    ri = wp.cw_mul(r[i] - ap[i], fr)
+    r[i] = ri
+    zi = wp.cw_mul(precond[i] * ri, fr)
+    z[i] = zi
+    p[i] = zi
+    ap[i] = wp.vec3(0.0)
+    wp.atomic_add(rz, w, wp.dot(ri, zi))
+
+
+@wp.kernel
+def coarse_reduce(
+    r: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    rhs: wp.array2d(dtype=float),
+):
+    """rhs += T^T r (r masked)."""
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    add_rhs(rhs, w, node_aggregate[i], r[i])
+
+
+@wp.kernel
+def coarse_solve(
+    world_active: wp.array(dtype=int),
+    size: int,
+    inverse: wp.array3d(dtype=wp.float64),
+    rhs: wp.array2d(dtype=float),
+    coef: wp.array2d(dtype=float),
+):
+    """coef = E^-1 rhs with the E^-1 of this Newton iteration; clears rhs."""
+    w = wp.tid()
+    if world_active[w] == 0:
+        return
+    coarse_coefficients(w, size, inverse, rhs, coef)
+
+
+@wp.kernel
+def coarse_correct(
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    coef: wp.array2d(dtype=float),
+    dx: wp.array(dtype=wp.vec3),
+):
+    """dx += T coef."""
+    i = wp.tid()
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    dx[i] = dx[i] + aggregate_part(coef, w, node_aggregate[i], free[i])
