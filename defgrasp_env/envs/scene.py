@@ -278,7 +278,7 @@ class PickupScene:
         self.solver.advance(self.state, out, self._control, h)
         wp.launch(pack_pad_loads, dim=len(self._pad_loads), inputs=[out.pad_normal_force, out.pad_force],
                   outputs=[self._pad_loads], device=self.model.device)
-        self._last_pad_loads = self._pad_loads.numpy().reshape(self.num_worlds, -1, 4)
+        self._last_pad_loads = self._pad_loads.numpy().reshape(self.num_worlds, -1, 4).copy()  # CPU: numpy() views
         self._solves += 1
         return self._solves, wrist_force(self._last_pad_loads[..., 1:])
 
