@@ -59,7 +59,8 @@ def test_aggregates_of_a_tiny_mesh_and_bad_counts():
 
 def squeezed_rope(fixed: bool):
     """A rope (E = 1e5) lying along x, stretched and bent a little, optionally with the x axis of
-    its first nodes prescribed; its solver after one step (Hessian data at the returned state)."""
+    its first nodes prescribed; its solver after one step (Hessian data at the returned state), the
+    state and control it stepped."""
     mesh = make_object_mesh("rope")
     n = len(mesh.nodes)
     fixed_axes = None
@@ -76,7 +77,7 @@ def squeezed_rope(fixed: bool):
     state.positions.assign(x.astype(np.float32))
     solver = ImplicitSolver(model, SolverConfig(substeps=1, newton_iterations=1))
     solver.step(state, state, control, dt=DT)
-    return model, solver
+    return model, solver, state, control
 
 
 @pytest.mark.parametrize("fixed", [False, True])
@@ -84,11 +85,11 @@ def test_coarse_matrix_is_the_galerkin_product(fixed):
     """The assembled coarse matrix equals T^T (A T) with A T computed column by column by the CG's
     Hessian-product kernels (elastic tets + mass/contact nodes), to float32 rounding: with all axes
     free (inner tets skipped) and with prescribed axes (T masked, every tet assembled)."""
-    model, solver = squeezed_rope(fixed)
+    model, solver, state, control = squeezed_rope(fixed)
     s, n, d = solver.scratch, model.num_nodes, model.device
     size = s.coarse_size
     assert size == 24
-    run = solver._substep_launches(DT)
+    run = solver._substep_launches(DT, state, state, control)
     s.newton_active.fill_(1)
     s.coarse_matrix.zero_()
     s.coarse_rhs.zero_()
