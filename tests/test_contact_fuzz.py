@@ -5,11 +5,10 @@ under dive / sideways-sweep / rotate-while-pressing / random action sequences.
 Checked on every physics substep, independently of the solver (node positions against the pad
 boxes and the ground): no node goes through a pad; no simulation diverges; a step that leaves a
 node deeper than 1 mm is always flagged ``sim_penetrated`` (never silently returned); no node
-ends a substep deeper than 1 mm (a solve that leaves one deeper is clamped back and flagged).
-Not asserted here: the wrist force. The limiter stops the wrist, but a soft object pinched between
-a pad and the ground (or wrapped round a pad edge) can still read several hundred N with the
-wrist stopped (bench_contact_fuzz.py's ``wrist max`` column; test_wrist_force_limit.py checks
-the limit where the wrist itself presses).
+ends a substep deeper than 1 mm (a solve that leaves one deeper is clamped back and flagged);
+tip forces within grip limit + wrist limit and the wrist force within its limit, both + 10 %
+(the limiter's tolerance) + 10 N (the object's momentum and weight; see
+test_actuator_force_bounds.py, which also checks other parameters).
 """
 
 from __future__ import annotations
@@ -22,9 +21,12 @@ import pytest
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
 from bench_contact_fuzz import MODULI, run_cell  # noqa: E402
 
+from defgrasp_env.gripper import GripperConfig  # noqa: E402
 from defgrasp_env.sim.meshing import OBJECT_SHAPES  # noqa: E402
+from defgrasp_env.wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE, tip_force_bound  # noqa: E402
 
 STEPS = 5
+MARGIN = 10.0  # N, the object's momentum and weight
 
 
 @pytest.mark.slow
@@ -36,3 +38,6 @@ def test_adversarial_actions(name, e):
     assert r["diverged"] == 0
     assert r["unflagged"] == 0
     assert r["deepest"] < 1e-3, r["deepest"]
+    grip = GripperConfig().grip_force_limit
+    assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + MARGIN, r
+    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + MARGIN, r

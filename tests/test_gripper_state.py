@@ -93,7 +93,7 @@ def test_scene_owns_the_substeps():
     assert scene.substeps == cfg.solver.substeps == 4 and scene.solver.config.substeps == 1
     calls = []
     step = scene.solver.step
-    scene.solver.step = lambda *a: calls.append(a[-1]) or step(*a)
+    scene.solver.step = lambda *a, **k: calls.append(a[3]) or step(*a, **k)  # a[3]: dt
     pos, quat = scene.gripper.flange_pose()
     scene.step(pos, quat, scene.gripper.gap.copy())
     assert calls == [cfg.dt / 4] * 4
