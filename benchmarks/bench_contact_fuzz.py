@@ -22,7 +22,8 @@ pad collision boxes and the ground, independently of the solver's own report:
 * ``tip max``: the largest pad normal force, N, and ``wrist max``: the largest net force of the
   pads on the object, N, after any physics substep (the accepted solve's forces, which the env's
   ``left/right_tip_normal_force`` and ``wrist_force`` report for the last substep of a step);
-  ``ms/step``: mean wall time of a step.
+  ``impact``: ``impact_margin``, N, what the limits do not bound (the object stopped by a stopped
+  pad); ``ms/step``: mean wall time of a step.
 
 Prints a table (one row per cell, worst over the sequences) and appends it to benchmarks/RESULTS.md.
 """
@@ -45,8 +46,10 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import defgrasp_env  # noqa: E402,F401
+from defgrasp_env.envs.actions import max_flange_step  # noqa: E402
 from defgrasp_env.envs.config import PickupConfig  # noqa: E402
-from defgrasp_env.gripper import PAD_BOX_HALF_EXTENTS, GripperConfig  # noqa: E402
+from defgrasp_env.gripper import PAD_BOX_HALF_EXTENTS, GripperConfig, pad_reach  # noqa: E402
+from defgrasp_env.sim.pad_motion import max_pad_travel  # noqa: E402
 from defgrasp_env.sim.meshing import OBJECT_SHAPES  # noqa: E402
 from defgrasp_env.transforms import quat_rotate  # noqa: E402
 from defgrasp_env.wrist.force_limit import FORCE_TOLERANCE, tip_force_bound  # noqa: E402
@@ -143,13 +146,25 @@ class SubstepMonitor:
         self._pending, self._start = None, None
 
 
+def impact_margin(env) -> float:
+    """Force (N) the actuator limits cannot bound: an object thrown by the pads at their largest
+    legal speed v (``max_pad_travel`` per control period) and stopped by a pad whose wrist and jaw
+    stopped (``wrist.force_limit``: a stop, no yield) within one physics substep h, plus its weight:
+    m v / h + m g (net force = momentum change / h in the backward-Euler step). The transient
+    part of a contact, as ISO/TS 15066 separates it from the quasi-static one."""
+    config, scene = env.unwrapped.config, env.unwrapped.scene
+    mass = float(scene.model.node_mass.numpy().sum())
+    v = max_pad_travel(*max_flange_step(config), pad_reach(), config.gripper.closing_speed * config.dt) / config.dt
+    return mass * v / (config.dt / scene.substeps) + mass * 9.81
+
+
 def run_cell(name: str, e: float, steps: int, seed: int = 0, sequences=SEQUENCES, **env_kwargs) -> dict:
     """The fuzz of one object x E cell (see the module docstring); ``env_kwargs`` override the env's
     settings (default: the largest legal speeds)."""
     kwargs = dict(max_linear_speed=2.0, max_angular_speed=2 * math.pi, init_yaw_noise=0.0) | env_kwargs
     env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=e, **kwargs)
     out = dict(deepest=0.0, crossed=0, flagged=0, unflagged=0, diverged=0, clamped=0, substeps=0, tip=0.0, wrist=0.0,
-               times=[])
+               impact=0.0, times=[])
     monitor = None
     try:
         for sequence in sequences:
@@ -176,6 +191,7 @@ def run_cell(name: str, e: float, steps: int, seed: int = 0, sequences=SEQUENCES
             out["clamped"] += monitor.clamped
             out["substeps"] += monitor.substeps
             out["tip"], out["wrist"] = max(out["tip"], monitor.tip), max(out["wrist"], monitor.wrist)
+            out["impact"] = max(out["impact"], impact_margin(env))
     finally:
         env.close()
     return out
@@ -189,7 +205,7 @@ def main() -> None:
     p.add_argument("--no-append", action="store_true")
     args = p.parse_args()
     rows = ["| object | E (Pa) | deepest (mm) | crossed | flagged | unflagged | diverged | clamped | tip max (N) "
-            "| wrist max (N) | ms/step |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| wrist max (N) | impact (N) | ms/step |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     print(rows[0])
     worst, tip, wrist, clamped, substeps = 0.0, 0.0, 0.0, 0, 0
     for name in args.objects:
@@ -199,15 +215,16 @@ def main() -> None:
             clamped, substeps = clamped + r["clamped"], substeps + r["substeps"]
             rows.append(f"| {name} | {e:.0e} | {r['deepest'] * 1e3:.3f} | {r['crossed']} | {r['flagged']} | "
                         f"{r['unflagged']} | "
-                        f"{r['diverged']} | {r['clamped']} | {r['tip']:.1f} | {r['wrist']:.1f} | "
+                        f"{r['diverged']} | {r['clamped']} | {r['tip']:.1f} | {r['wrist']:.1f} | {r['impact']:.1f} | "
                         f"{1e3 * np.mean(r['times']):.0f} |")
             print(rows[-1], flush=True)
     limit, grip = PickupConfig().wrist_force_limit, GripperConfig().grip_force_limit
     rows.append(f"\nDeepest penetration over the fuzz: {worst * 1e3:.3f} mm; the clamp fired in {clamped} of "
                 f"{substeps} substeps ({100 * clamped / max(substeps, 1):.1f} %); largest tip force {tip:.1f} N "
                 f"(bound (grip + wrist limit) x (1 + {FORCE_TOLERANCE:g}) = "
-                f"{tip_force_bound(grip, limit) * (1 + FORCE_TOLERANCE):.0f} N); largest wrist force {wrist:.1f} N "
-                f"(limit x (1 + {FORCE_TOLERANCE:g}) = {limit * (1 + FORCE_TOLERANCE):.0f} N)")
+                f"{tip_force_bound(grip, limit) * (1 + FORCE_TOLERANCE):.0f} N, + the cell's impact); largest wrist "
+                f"force {wrist:.1f} N (limit x (1 + {FORCE_TOLERANCE:g}) = {limit * (1 + FORCE_TOLERANCE):.0f} N, "
+                "+ the cell's impact)")
     print(rows[-1])
     text = (f"\n## bench_contact_fuzz ({datetime.date.today()}, {host()}, load {os.getloadavg()[0]:.1f}, "
             f"{git_state()})\n\n{args.steps} steps x sequences {', '.join(SEQUENCES)} per cell; "

@@ -4,16 +4,20 @@ A pad's normal force is bounded by what the actuators can exert: the jaw squeeze
 grip-force limit G and the arm pushes with at most its wrist limit W, so one pad reads at most
 G + W (``wrist.force_limit.tip_force_bound``), and the wrist force (net pad force) at most W. The
 scene's limiter accepts a substep whose load is within ``FORCE_TOLERANCE`` (10 %) of a limit, so
-the bounds asserted are (G + W)(1 + tol) and W(1 + tol), plus MARGIN for what no actuator does:
-the object's momentum and weight. A 30 g torus stopped from 2 m/s within a 12.5 ms substep
-pushes 5 N, the heaviest object at these settings (a 500 kg/m^3 cuboid, ~0.1 kg) weighs 1 N:
-MARGIN = 10 N covers both twice over.
+the bounds asserted are (G + W)(1 + tol) and W(1 + tol), plus what no actuator limit bounds: the
+wrist and jaw stop (they do not yield), so an object the pads threw and a stopped pad stops within
+one substep h adds its momentum change m v / h to the net force, plus its weight
+(``bench_contact_fuzz.impact_margin``, with v the largest legal pad speed: 85 N at 2 m/s and
+2 pi rad/s with 21 substeps of 2.4 ms, for a 37 g cylinder; the transient part of a contact,
+which ISO/TS 15066 bounds separately, at twice the quasi-static limit). Measured: a cuboid swept
+at 2 m/s into a stopped pad added 14 N within a substep.
 
 Reproduction (``test_torus_sweep_pinch``): the fuzz case that read 17.7 kN on one pad with a 122 N
 wrist force (``bench_contact_fuzz.py``, torus E = 1e7, ``sweep``, 10 steps). The cause was not the
 actuators' travel (with wrist and jaw stopped in the substep the solve still read 1.1 kN) but
 Newton stopping at its 4-iteration limit on a stiff pad contact: the converged solve reads 24 N.
-Over a limit, the scene now re-solves with ``SolverConfig.patient_iterations`` before it believes
+Over a limit, the scene now re-solves with ``SolverConfig.patient_iterations`` (60: 28 were not
+enough for a sphere E = 1e5 swept at 2 m/s, which still read 1.2 kN) before it believes
 the forces, and then moves wrist and jaw by the fraction that keeps them within the limits.
 
 ``test_bounds_held_out`` runs parameters the fix was not tuned on: other moduli (3e5, 3e6 Pa), a
@@ -40,14 +44,13 @@ from defgrasp_env.gripper import GripperConfig  # noqa: E402
 from defgrasp_env.sim.state import Control, State  # noqa: E402
 from defgrasp_env.wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE, tip_force_bound  # noqa: E402
 
-MARGIN = 10.0  # N: the object's momentum and weight (module docstring)
 
 
 def test_torus_sweep_pinch():
     r = run_cell("torus", 1e7, 10, sequences=("sweep",))
     grip = GripperConfig().grip_force_limit
-    assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + MARGIN, r
-    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + MARGIN, r
+    assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
+    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
     assert r["crossed"] == 0 and r["diverged"] == 0 and r["unflagged"] == 0
 
 
@@ -60,9 +63,10 @@ def test_bounds_held_out(name, e):
     runs = [run_cell(name, e, 8, seed=5, sequences=("dive", "sweep", "random"), **settings),
             run_cell(name, e, 8, seed=6, sequences=("random",), **settings)]
     worst_tip, worst_wrist = max(r["tip"] for r in runs), max(r["wrist"] for r in runs)
+    impact = max(r["impact"] for r in runs)
     assert not any(r["diverged"] or r["crossed"] or r["unflagged"] for r in runs), runs
-    assert worst_tip <= tip_force_bound(grip, wrist_limit) * (1 + FORCE_TOLERANCE) + MARGIN, (worst_tip, worst_wrist)
-    assert worst_wrist <= wrist_limit * (1 + FORCE_TOLERANCE) + MARGIN, (worst_tip, worst_wrist)
+    assert worst_tip <= tip_force_bound(grip, wrist_limit) * (1 + FORCE_TOLERANCE) + impact, (worst_tip, impact)
+    assert worst_wrist <= wrist_limit * (1 + FORCE_TOLERANCE) + impact, (worst_wrist, impact)
 
 
 def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical():

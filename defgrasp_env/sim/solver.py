@@ -66,7 +66,7 @@ class SolverConfig:
     check_every: int = 4
     penetration_bound: float = 1e-3
     penetration_iterations: int = 8
-    patient_iterations: int = 28
+    patient_iterations: int = 60
 
     def __post_init__(self) -> None:
         for name, low in (("substeps", 1), ("newton_iterations", 1), ("cg_iterations", 1),
