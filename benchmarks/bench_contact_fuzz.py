@@ -206,7 +206,7 @@ def main() -> None:
     args = p.parse_args()
     rows = ["| object | E (Pa) | deepest (mm) | crossed | flagged | unflagged | diverged | clamped | tip max (N) "
             "| wrist max (N) | impact (N) | ms/step |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    print(rows[0])
+    print("\n".join(rows))
     worst, tip, wrist, clamped, substeps = 0.0, 0.0, 0.0, 0, 0
     for name in args.objects:
         for e in args.moduli:
