@@ -15,8 +15,15 @@ pad collision boxes and the ground, independently of the solver's own report:
 * ``crossed``: node paths through a pad (see ``SubstepMonitor``), summed over the substeps;
 * ``flagged``: steps the env flagged ``sim_penetrated``; ``unflagged``: steps that ended a substep
   deeper than 1 mm without that flag (must be 0); ``diverged``: steps flagged diverged;
-* ``tip max``: the largest tip normal force reading, N; ``wrist max``: the largest
-  ``wrist_force`` in info, N (when the env reports it); ``ms/step``: mean wall time of a step.
+* ``clamped``: substeps (of ``steps`` x sequences x the env's substeps per step) whose accepted
+  solve left a node deeper than the 1 mm bound, put back to 0.9 mm by the solver's clamp
+  (``SolveStats.penetrated`` of that solve): how often the depth bound is met by clamping rather
+  than by the contact itself;
+* ``tip max``: the largest pad normal force, N, and ``wrist max``: the largest net force of the
+  pads on the object, N, after any physics substep (the accepted solve's forces, which the env's
+  ``left/right_tip_normal_force`` and ``wrist_force`` report for the last substep of a step);
+  ``impact``: ``impact_margin``, N, what the limits do not bound (the object stopped by a stopped
+  pad); ``ms/step``: mean wall time of a step.
 
 Prints a table (one row per cell, worst over the sequences) and appends it to benchmarks/RESULTS.md.
 """
@@ -39,9 +46,13 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import defgrasp_env  # noqa: E402,F401
-from defgrasp_env.gripper import PAD_BOX_HALF_EXTENTS  # noqa: E402
+from defgrasp_env.envs.actions import max_flange_step  # noqa: E402
+from defgrasp_env.envs.config import PickupConfig  # noqa: E402
+from defgrasp_env.gripper import PAD_BOX_HALF_EXTENTS, GripperConfig, pad_reach  # noqa: E402
+from defgrasp_env.sim.pad_motion import max_pad_travel  # noqa: E402
 from defgrasp_env.sim.meshing import OBJECT_SHAPES  # noqa: E402
 from defgrasp_env.transforms import quat_rotate  # noqa: E402
+from defgrasp_env.wrist.force_limit import FORCE_TOLERANCE, tip_force_bound  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
 
 MODULI = (1e4, 1e5, 1e6, 1e7)
@@ -97,26 +108,29 @@ class SubstepMonitor:
     the env goes on from, is counted (``commit`` after each env step)."""
 
     def __init__(self, scene):
-        self.scene, self.depth, self.crossed, self.step_depth = scene, 0.0, 0, 0.0
+        self.scene, self.depth, self.crossed, self.step_depth, self.clamped = scene, 0.0, 0, 0.0, 0
+        self.substeps, self.tip, self.wrist = 0, 0.0, 0.0
         self._pending, self._start = None, None
         solver = scene.solver
         step = solver.step
         half = PAD_BOX_HALF_EXTENTS
 
-        def checked_step(state_in, state_out, control, dt):
+        def checked_step(state_in, state_out, control, dt, *args):
             x0 = state_in.positions.numpy().copy()
             if self._start is None or not np.array_equal(x0, self._start):
                 self.commit()
             self._start = x0
             c0 = state_in.pad_positions.numpy().astype(np.float64).copy()
             q0 = state_in.pad_orientations.numpy().astype(np.float64).copy()
-            report = step(state_in, state_out, control, dt)
+            report = step(state_in, state_out, control, dt, *args)
             x1 = state_out.positions.numpy()
             c1 = control.pad_target_positions.numpy().astype(np.float64)
             q1 = control.pad_target_orientations.numpy().astype(np.float64)
             l0, l1 = local_coordinates(x0, c0, q0), local_coordinates(x1, c1, q1)
             depth = max(float(np.min(half - np.abs(l1), axis=2).max()), float(-x1[:, 1].min()))
-            self._pending = (depth, int(crossed_box(l0, l1, half).sum()))
+            tip = float(state_out.pad_normal_force.numpy().max())
+            wrist = float(np.linalg.norm(state_out.pad_force.numpy().reshape(-1, 2, 3).sum(axis=1), axis=-1).max())
+            self._pending = (depth, int(crossed_box(l0, l1, half).sum()), int(report.penetrated.any()), tip, wrist)
             return report
 
         solver.step = checked_step
@@ -126,13 +140,31 @@ class SubstepMonitor:
             self.depth = max(self.depth, self._pending[0])
             self.step_depth = max(self.step_depth, self._pending[0])
             self.crossed += self._pending[1]
+            self.clamped += self._pending[2]
+            self.substeps += 1
+            self.tip, self.wrist = max(self.tip, self._pending[3]), max(self.wrist, self._pending[4])
         self._pending, self._start = None, None
 
 
-def run_cell(name: str, e: float, steps: int, seed: int = 0, sequences=SEQUENCES) -> dict:
-    env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=e, max_linear_speed=2.0,
-                   max_angular_speed=2 * math.pi, init_yaw_noise=0.0)
-    out = dict(deepest=0.0, crossed=0, flagged=0, unflagged=0, diverged=0, tip=0.0, wrist=0.0, times=[])
+def impact_margin(env) -> float:
+    """Force (N) the actuator limits cannot bound: an object thrown by the pads at their largest
+    legal speed v (``max_pad_travel`` per control period) and stopped by a pad whose wrist and jaw
+    stopped (``wrist.force_limit``: a stop, no yield) within one physics substep h, plus its weight:
+    m v / h + m g (net force = momentum change / h in the backward-Euler step). The transient
+    part of a contact, as ISO/TS 15066 separates it from the quasi-static one."""
+    config, scene = env.unwrapped.config, env.unwrapped.scene
+    mass = float(scene.model.node_mass.numpy().sum())
+    v = max_pad_travel(*max_flange_step(config), pad_reach(), config.gripper.closing_speed * config.dt) / config.dt
+    return mass * v / (config.dt / scene.substeps) + mass * 9.81
+
+
+def run_cell(name: str, e: float, steps: int, seed: int = 0, sequences=SEQUENCES, **env_kwargs) -> dict:
+    """The fuzz of one object x E cell (see the module docstring); ``env_kwargs`` override the env's
+    settings (default: the largest legal speeds)."""
+    kwargs = dict(max_linear_speed=2.0, max_angular_speed=2 * math.pi, init_yaw_noise=0.0) | env_kwargs
+    env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=e, **kwargs)
+    out = dict(deepest=0.0, crossed=0, flagged=0, unflagged=0, diverged=0, clamped=0, substeps=0, tip=0.0, wrist=0.0,
+               impact=0.0, times=[])
     monitor = None
     try:
         for sequence in sequences:
@@ -141,7 +173,8 @@ def run_cell(name: str, e: float, steps: int, seed: int = 0, sequences=SEQUENCES
             scene = env.unwrapped.scene
             if monitor is None or monitor.scene is not scene:
                 monitor = SubstepMonitor(scene)
-            monitor.depth, monitor.crossed = 0.0, 0
+            monitor.depth, monitor.crossed, monitor.clamped, monitor.substeps = 0.0, 0, 0, 0
+            monitor.tip, monitor.wrist = 0.0, 0.0
             for k in range(steps):
                 monitor.step_depth = 0.0
                 t0 = time.perf_counter()
@@ -151,12 +184,14 @@ def run_cell(name: str, e: float, steps: int, seed: int = 0, sequences=SEQUENCES
                 out["flagged"] += int(info["sim_penetrated"])
                 out["unflagged"] += int(monitor.step_depth > PENETRATION_BOUND and not info["sim_penetrated"])
                 out["diverged"] += int(info["sim_diverged"])
-                out["tip"] = max(out["tip"], info["left_tip_normal_force"], info["right_tip_normal_force"])
-                out["wrist"] = max(out["wrist"], info["wrist_force"])
                 if terminated or truncated:
                     break
             out["deepest"] = max(out["deepest"], monitor.depth)
             out["crossed"] += monitor.crossed
+            out["clamped"] += monitor.clamped
+            out["substeps"] += monitor.substeps
+            out["tip"], out["wrist"] = max(out["tip"], monitor.tip), max(out["wrist"], monitor.wrist)
+            out["impact"] = max(out["impact"], impact_margin(env))
     finally:
         env.close()
     return out
@@ -169,19 +204,27 @@ def main() -> None:
     p.add_argument("--moduli", nargs="+", type=float, default=list(MODULI))
     p.add_argument("--no-append", action="store_true")
     args = p.parse_args()
-    rows = ["| object | E (Pa) | deepest (mm) | crossed | flagged | unflagged | diverged | tip max (N) | wrist max (N) "
-            "| ms/step |", "|---|---|---|---|---|---|---|---|---|---|"]
-    print(rows[0])
-    worst = 0.0
+    rows = ["| object | E (Pa) | deepest (mm) | crossed | flagged | unflagged | diverged | clamped | tip max (N) "
+            "| wrist max (N) | impact (N) | ms/step |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    print("\n".join(rows))
+    worst, tip, wrist, clamped, substeps = 0.0, 0.0, 0.0, 0, 0
     for name in args.objects:
         for e in args.moduli:
             r = run_cell(name, e, args.steps)
-            worst = max(worst, r["deepest"])
+            worst, tip, wrist = max(worst, r["deepest"]), max(tip, r["tip"]), max(wrist, r["wrist"])
+            clamped, substeps = clamped + r["clamped"], substeps + r["substeps"]
             rows.append(f"| {name} | {e:.0e} | {r['deepest'] * 1e3:.3f} | {r['crossed']} | {r['flagged']} | "
                         f"{r['unflagged']} | "
-                        f"{r['diverged']} | {r['tip']:.1f} | {r['wrist']:.1f} | {1e3 * np.mean(r['times']):.0f} |")
+                        f"{r['diverged']} | {r['clamped']} | {r['tip']:.1f} | {r['wrist']:.1f} | {r['impact']:.1f} | "
+                        f"{1e3 * np.mean(r['times']):.0f} |")
             print(rows[-1], flush=True)
-    rows.append(f"\nDeepest penetration over the fuzz: {worst * 1e3:.3f} mm")
+    limit, grip = PickupConfig().wrist_force_limit, GripperConfig().grip_force_limit
+    rows.append(f"\nDeepest penetration over the fuzz: {worst * 1e3:.3f} mm; the clamp fired in {clamped} of "
+                f"{substeps} substeps ({100 * clamped / max(substeps, 1):.1f} %); largest tip force {tip:.1f} N "
+                f"(bound (grip + wrist limit) x (1 + {FORCE_TOLERANCE:g}) = "
+                f"{tip_force_bound(grip, limit) * (1 + FORCE_TOLERANCE):.0f} N, + the cell's impact); largest wrist "
+                f"force {wrist:.1f} N (limit x (1 + {FORCE_TOLERANCE:g}) = {limit * (1 + FORCE_TOLERANCE):.0f} N, "
+                "+ the cell's impact)")
     print(rows[-1])
     text = (f"\n## bench_contact_fuzz ({datetime.date.today()}, {host()}, load {os.getloadavg()[0]:.1f}, "
             f"{git_state()})\n\n{args.steps} steps x sequences {', '.join(SEQUENCES)} per cell; "

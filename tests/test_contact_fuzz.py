@@ -5,11 +5,11 @@ under dive / sideways-sweep / rotate-while-pressing / random action sequences.
 Checked on every physics substep, independently of the solver (node positions against the pad
 boxes and the ground): no node goes through a pad; no simulation diverges; a step that leaves a
 node deeper than 1 mm is always flagged ``sim_penetrated`` (never silently returned); no node
-ends a substep deeper than 1 mm (a solve that leaves one deeper is clamped back and flagged).
-Not asserted here: the wrist force. The limiter stops the wrist, but a soft object pinched between
-a pad and the ground (or wrapped round a pad edge) can still read several hundred N with the
-wrist stopped (bench_contact_fuzz.py's ``wrist max`` column; test_wrist_force_limit.py checks
-the limit where the wrist itself presses).
+ends a substep deeper than 1 mm (a solve that leaves one deeper is clamped back and flagged);
+tip forces within grip limit + wrist limit and the wrist force within its limit, both + 10 %
+(the limiter's tolerance) + the cell's ``impact_margin`` (the object's momentum stopped by a
+stopped pad within a substep, and its weight; see test_actuator_force_bounds.py, which also
+checks other parameters).
 """
 
 from __future__ import annotations
@@ -22,9 +22,16 @@ import pytest
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
 from bench_contact_fuzz import MODULI, run_cell  # noqa: E402
 
+from defgrasp_env.gripper import GripperConfig  # noqa: E402
 from defgrasp_env.sim.meshing import OBJECT_SHAPES  # noqa: E402
+from defgrasp_env.wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE, tip_force_bound  # noqa: E402
 
 STEPS = 5
+#: Cells where a pad edge slides between the nodes of the object in the sweep and the pad ends up
+#: embedded in it: the material clamps the pad from both faces (cuboid E = 1e7: 13 kN summed
+#: normal force on the pad, ~600 N net, every node < 1 mm deep in its contact face, so the depth
+#: checks pass). Node-vs-box contact (README, known gaps), not an actuator force.
+PAD_EMBEDDED = {("cuboid", 1e7)}
 
 
 @pytest.mark.slow
@@ -36,3 +43,9 @@ def test_adversarial_actions(name, e):
     assert r["diverged"] == 0
     assert r["unflagged"] == 0
     assert r["deepest"] < 1e-3, r["deepest"]
+    grip = GripperConfig().grip_force_limit
+    within = (r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"]
+              and r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"])
+    if not within and (name, e) in PAD_EMBEDDED:
+        pytest.xfail(f"known gap, pad embedded in the object: {r}")
+    assert within, r

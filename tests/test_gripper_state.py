@@ -86,6 +86,29 @@ def test_inactive_worlds_keep_wrist_and_jaw_bit_for_bit():
     assert not np.array_equal(g.q[0], q0[0]) and g.gap[0] < gap0[0]
 
 
+def test_move_fraction_scales_the_wrist_and_the_closing_jaw_only():
+    """``move(fraction)``: the wrist moves ``fraction`` of its planned substep motion, the jaw
+    ``fraction`` of a planned closing (world 0) but all of a planned opening (world 1), and a retry
+    from the same plan with fraction 1 gives the unscaled substep bit for bit."""
+    g = _gripper(2)
+    g.begin_step(*g.flange_pose())
+    g.substep(0, 1, 0.05, np.full(2, GAP_MIN), np.ones(2, bool))  # both close 7.5 mm
+    g.sense(np.zeros((2, 2)))
+    pos, quat = g.flange_pose()
+    q0, gap0 = g.q.copy(), g.gap.copy()
+    g.begin_step(pos + np.array([0.0, -0.02, 0.0]), quat)
+    g.plan_substep(0, 1, 0.05, np.array([GAP_MIN, GAP_MAX]), np.ones(2, bool))
+    g.move(np.ones(2))
+    q_full, gap_full = g.q.copy(), g.gap.copy()
+    assert gap_full[0] < gap0[0] and gap_full[1] > gap0[1]
+    g.move(np.array([0.25, 0.25]))
+    np.testing.assert_allclose(g.q, q0 + 0.25 * (q_full - q0), atol=1e-12)
+    assert g.gap[0] == pytest.approx(gap0[0] + 0.25 * (gap_full[0] - gap0[0]), abs=1e-12)
+    assert g.gap[1] == gap_full[1]
+    g.move(np.ones(2))
+    assert np.array_equal(g.q, q_full) and np.array_equal(g.gap, gap_full)
+
+
 def test_scene_owns_the_substeps():
     cfg = PickupConfig()
     setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
@@ -93,7 +116,7 @@ def test_scene_owns_the_substeps():
     assert scene.substeps == cfg.solver.substeps == 4 and scene.solver.config.substeps == 1
     calls = []
     advance = scene.solver.advance
-    scene.solver.advance = lambda *a: calls.append(a[-1]) or advance(*a)
+    scene.solver.advance = lambda *a, **k: calls.append(a[3]) or advance(*a, **k)  # a[3]: dt
     pos, quat = scene.gripper.flange_pose()
     scene.step(pos, quat, scene.gripper.gap.copy())
     assert calls == [cfg.dt / 4] * 4

@@ -1,5 +1,6 @@
-"""Wrist force limit (``defgrasp_env.wrist.force_limit``): pure functions against a spring contact
-whose force is known in closed form, and the env's wrist pressing a stiff object into the ground."""
+"""Actuator force limits (``defgrasp_env.wrist.force_limit``): pure functions against a spring
+contact whose force is known in closed form, and the env's wrist pressing a stiff object into the
+ground."""
 
 from __future__ import annotations
 
@@ -8,17 +9,17 @@ import numpy as np
 import pytest
 
 import defgrasp_env  # noqa: F401
-from defgrasp_env.wrist.force_limit import (DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE, limited_substep,
-                                            wrist_force)
+from defgrasp_env.wrist.force_limit import (DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE, actuator_load,
+                                            limited_substep, tip_force_bound, wrist_force)
 
 
-def spring_contact(gap, stiffness, travel, calls, preload=0.0):
+def spring_contact(gap, stiffness, travel, calls, preload=0.0, limit=150.0):
     """solve(scale): the wrist moves scale * travel (m) toward a spring (N/m) ``gap`` (m) away
-    (or already pressing it with ``preload``, N, where gap = 0)."""
+    (or already pressing it with ``preload``, N, where gap = 0); returns (force N, load = force / limit)."""
     def solve(scale):
         calls.append(scale.copy())
         force = preload + stiffness * np.maximum(scale * travel - gap, 0.0)
-        return "report", force
+        return force, force / limit
     return solve
 
 
@@ -30,9 +31,19 @@ def test_wrist_force_is_the_net_pad_force():
 
 def test_free_motion_is_one_solve_at_full_scale():
     calls = []
-    report, force, scale = limited_substep(spring_contact(np.array([0.01]), 1e5, np.array([0.005]), calls),
-                                           np.zeros(1), 150.0)
-    assert len(calls) == 1 and scale.tolist() == [1.0] and force.tolist() == [0.0]
+    force, load, scale = limited_substep(spring_contact(np.array([0.01]), 1e5, np.array([0.005]), calls),
+                                         np.zeros(1))
+    assert len(calls) == 1 and scale.tolist() == [1.0] and force.tolist() == [0.0] and load.tolist() == [0.0]
+
+
+def test_actuator_load_is_the_largest_force_over_its_limit():
+    """Wrist force over the wrist limit, or a pad's normal force over grip + wrist limit, whichever
+    is larger (hand-computed); no limit (inf) gives 0."""
+    wrist = np.array([75.0, 10.0, 0.0])
+    tip = np.array([[10.0, 10.0], [0.0, 340.0], [85.0, 85.0]])
+    np.testing.assert_allclose(actuator_load(wrist, tip, 150.0, 20.0), [0.5, 2.0, 0.5])
+    assert tip_force_bound(20.0, 150.0) == 170.0
+    np.testing.assert_array_equal(actuator_load(wrist, tip, np.inf, 20.0), [0.0, 0.0, 0.0])
 
 
 @pytest.mark.parametrize("stiffness", [1e3, 1e5, 1e7])
@@ -43,7 +54,8 @@ def test_stiff_contact_is_stopped_at_the_limit(stiffness):
     limit, calls = 150.0, []
     gap = np.array([0.02, 0.004, 0.0])
     solve = spring_contact(gap, stiffness, np.array([0.01, 0.01, 0.01]), calls, np.array([0.0, 0.0, limit]))
-    _, force, scale = limited_substep(solve, np.array([0.0, 0.0, limit]), limit)
+    force, load, scale = limited_substep(solve, np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(load, force / limit)
     assert scale[0] == 1.0 and force[0] == 0.0
     assert force[1] <= limit * (1 + FORCE_TOLERANCE)
     if stiffness * 0.006 > limit * (1 + FORCE_TOLERANCE):   # the full move would exceed the limit

@@ -61,12 +61,15 @@ class DeformablePickupEnv(gym.Env):
     is [0, 0.6, 0] m. The gripper hangs on an invisible 6-DOF wrist (3 prismatic + 3 revolute
     joints, ``defgrasp_env/assets/wrist_6dof.urdf``); its pads are kinematic boxes with Coulomb
     friction. One step is one control period (default 1/20 s). The wrist is force-limited like a
-    collaborative arm: it stops moving while the net force its pads exert on the object would
-    exceed ``wrist_force_limit`` (default 150 N, a UR e-Series default safety limit), as the jaw
-    stops at ``gripper.grip_force_limit``; so a tip force stays within about grip limit + wrist
-    limit, except where the object is pinched between a pad and the ground or wrapped round a pad
-    edge (see the README's known gaps). No node goes through a pad at any legal speed; a state with a node deeper than 1 mm
-    in a pad or the ground is flagged (``sim_penetrated``).
+    collaborative arm: within each physics substep, wrist and closing jaw move only the fraction
+    of their motion that keeps the net force of the pads on the object (``wrist_force``) within
+    ``wrist_force_limit`` (default 150 N, a UR e-Series default safety limit) and each pad's normal
+    force within ``gripper.grip_force_limit`` + ``wrist_force_limit``, both +10 %
+    (``wrist.force_limit``; forces of a converged solve; wrist and jaw stop, they do not yield, so a
+    stopped pad still takes the impact of an object it threw, and a pad embedded in an object reads
+    its clamp: README, known gaps); between substeps the jaw holds the grip force at
+    ``gripper.grip_force_limit``. No node goes through a pad at any legal speed; a state
+    with a node deeper than 1 mm in a pad or the ground is flagged (``sim_penetrated``).
 
     **Action space** (``action_mode``; names, slices, units and bounds in ``defgrasp_env.layout``):
       * ``"delta"`` (default, ``DELTA_ACTION``): Box [-1, 1]^7 = flange linear velocity (3) x
@@ -98,8 +101,8 @@ class DeformablePickupEnv(gym.Env):
 
     **Info**: ``is_success``, ``grasped``, ``pierced``, ``goal_distance`` (m), reward terms, tip
     forces (N), ``wrist_force`` (N, net force of the pads on the object), jaw gap (m), mean von
-    Mises stress (Pa), solver iterations (of the accepted solves, summed over substeps; a wrist
-    force-limit retry is not counted)/residual/penetration (m), ``sim_diverged``,
+    Mises stress (Pa), solver iterations (of the accepted solves, summed over substeps; a force-limit
+    retry is not counted)/residual/penetration (m), ``sim_diverged``,
     ``sim_converged`` (Newton met its tolerance in every substep), ``sim_penetrated`` (a node ended
     deeper than ``solver.penetration_bound``, 1 mm, in a pad or the ground); ``reset`` returns
     ``is_success``, ``object``, ``youngs_modulus`` (Pa) and ``replay_spec`` (a ``ReplaySpec``: seed

@@ -9,9 +9,10 @@ there (:meth:`Gripper.sense`).
 
 Force limits: the jaw driver's grip-force limit runs in :meth:`Gripper.plan_substep` on the forces
 of the previous :meth:`Gripper.sense`. The wrist's force limit (``wrist.force_limit``) needs the
-solver: the scene may apply a planned substep several times with a fraction of the wrist motion
-(:meth:`Gripper.move`) and keeps the solve whose net pad force, handed to :meth:`Gripper.sense`,
-is within the limit.
+solver: the scene may apply a planned substep several times with a fraction of the wrist's motion
+and the jaw's closing (:meth:`Gripper.move`) and keeps the solve whose forces, handed to
+:meth:`Gripper.sense`, are within the limits (the wrist force, and each pad's normal force within
+the grip-force limit plus the wrist limit).
 
 Frames and units: world frame (y up), m, rad, N; quaternions xyzw; joints
 ``q = (x, y, z, roll, pitch, yaw)`` of ``defgrasp_env.wrist``; pad index 0 = left (+x_G), 1 = right.
@@ -87,7 +88,7 @@ class Gripper:
 
     One control period: :meth:`begin_step` (wrist targets), then per physics substep
     :meth:`plan_substep` (the jaw driver's move and the wrist's planned joints), :meth:`move` (apply
-    them, possibly again with a fraction of the wrist motion; returns the pad poses) and
+    them, possibly again with a fraction of the motion; returns the pad poses) and
     :meth:`sense` (pad forces). :meth:`substep` is plan + move of the whole motion.
     """
 
@@ -197,15 +198,18 @@ class Gripper:
         q = np.where(active[:, None], self._wrist_joints((k + 1) / count), self._q)
         self._plan = (self._q, np.where(active, gap, self._gap), q)
 
-    def move(self, wrist_fraction: np.ndarray | None = None):
-        """Apply the planned substep: the jaw to its planned gap and the wrist ``wrist_fraction`` [W]
-        (in [0, 1]; default 1) of its planned substep motion, lifted so that the pads stay above the
-        ground. May be called again (a retry from the same start) with another fraction. Returns the
-        pad box centres [W, 2, 3] (m) and orientations [W, 2, 4] (xyzw) to move to."""
+    def move(self, fraction: np.ndarray | None = None):
+        """Apply the planned substep: ``fraction`` [W] (in [0, 1]; default 1) of the wrist's planned
+        substep motion and of the jaw's planned closing (a planned opening is applied whole: it only
+        lowers the forces), with the wrist lifted so that the pads stay above the ground. May be
+        called again (a retry from the same start, ``wrist.force_limit``) with another fraction.
+        Returns the pad box centres [W, 2, 3] (m) and orientations [W, 2, 4] (xyzw) to move to."""
         q_before, gap, q = self._plan
-        if wrist_fraction is not None:
-            f = np.asarray(wrist_fraction, dtype=np.float64)[:, None]
-            q = np.where(f < 1.0, q_before + (q - q_before) * f, q)
+        if fraction is not None:
+            f = np.asarray(fraction, dtype=np.float64)
+            q = np.where(f[:, None] < 1.0, q_before + (q - q_before) * f[:, None], q)
+            gap_before = self._before[0]
+            gap = np.where((f < 1.0) & (gap < gap_before), gap_before + (gap - gap_before) * f, gap)
         # an inactive world keeps q, already above the ground: the lift leaves it as it is
         self._q, pos, quat = self.lift_above_ground(q, gap)
         self._gap = gap

@@ -51,6 +51,11 @@ class SolverConfig:
         penetration_iterations: extra Newton iterations at most per substep, after
             ``newton_iterations``, in the worlds whose iterate is still deeper than half of
             ``penetration_bound`` (a violent contact the regular iterations did not resolve).
+        patient_iterations: extra Newton iterations at most per substep, after
+            ``newton_iterations``, in the worlds a ``step`` call marks ``patient``, while their update
+            is above ``newton_tolerance`` (a caller that needs the contact forces of a converged
+            solve: an unconverged iterate of a stiff contact can read kN where the solution reads
+            tens of N).
         check_every: on the host, test every this many CG iterations, and after every Newton
             iteration and line-search trial, whether all worlds are done (0 = never: run the full
             iteration counts, with no host round trip).
@@ -67,10 +72,12 @@ class SolverConfig:
     check_every: int = 4
     penetration_bound: float = 1e-3
     penetration_iterations: int = 8
+    patient_iterations: int = 60
 
     def __post_init__(self) -> None:
         for name, low in (("substeps", 1), ("newton_iterations", 1), ("cg_iterations", 1),
-                          ("line_search_steps", 0), ("check_every", 0), ("penetration_iterations", 0)):
+                          ("line_search_steps", 0), ("check_every", 0), ("penetration_iterations", 0),
+                          ("patient_iterations", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -106,19 +113,28 @@ class ImplicitSolver:
         self._launches: dict[tuple, tuple] = {}
 
     # -- public --------------------------------------------------------------------------------
-    def step(self, state_in: State, state_out: State, control: Control, dt: float) -> SolveStats:
+    def step(self, state_in: State, state_out: State, control: Control, dt: float,
+             patient: np.ndarray | None = None) -> SolveStats:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object)
-        and return the per-world report (one device-to-host copy)."""
-        self.advance(state_in, state_out, control, dt)
+        and return the per-world report (one device-to-host copy); ``patient`` as for ``advance``."""
+        self.advance(state_in, state_out, control, dt, patient)
         self._report.fold(self.scratch, self.config.penetration_bound, first=True)
         return self._report.download()
 
-    def advance(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
+    def advance(self, state_in: State, state_out: State, control: Control, dt: float,
+                patient: np.ndarray | None = None) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object;
         distinct, ``state_in`` is only read). Every array of ``state_out`` is written; its report
-        is left in ``scratch`` (``SolveReport.fold``)."""
+        is left in ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool (default none): worlds
+        given up to ``config.patient_iterations`` extra Newton iterations per substep until they
+        meet ``newton_tolerance``; every other world's result is the same, bit for bit, as without
+        it (its ``converged`` flag stays False when the regular iterations did not converge, even
+        if the extra ones did)."""
         check_range("dt", dt, 0.0, math.inf, "s")
         cfg, s = self.config, self.scratch
+        patient_any = patient is not None and bool(np.any(patient))
+        if patient_any:
+            s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(self.model.num_worlds))
         run = self._substep_launches(dt / cfg.substeps, state_in, state_out, control)
         if state_in is not state_out:
             wp.copy(state_out.positions, state_in.positions)
@@ -133,7 +149,7 @@ class ImplicitSolver:
             run.begin[k].launch()
             for cmd in run.lag:
                 cmd.launch()
-            self._newton(run)
+            self._newton(run, cfg.patient_iterations if patient_any else 0)
             run.clamp.launch()
             run.end.launch()
             if k == cfg.substeps - 1:
@@ -141,17 +157,26 @@ class ImplicitSolver:
             wp.copy(state_out.velocities, s.v_new)
         wp.copy(state_out.pad_positions, control.pad_target_positions)
         wp.copy(state_out.pad_orientations, control.pad_target_orientations)
+        if patient_any:
+            s.patient.zero_()
 
     # -- internals ---------------------------------------------------------------------------
-    def _newton(self, run: SubstepLaunches) -> None:
+    def _newton(self, run: SubstepLaunches, patient_iterations: int = 0) -> None:
         cfg, s = self.config, self.scratch
         wp.copy(s.newton_active, s.all_on)
         s.substep_newton_it.zero_()
-        for it in range(cfg.newton_iterations + cfg.penetration_iterations):
-            if it >= cfg.newton_iterations:
-                # extra iterations only in worlds still deeper than half the penetration bound
-                for cmd in run.depth:
-                    cmd.launch()
+        regular, deep = cfg.newton_iterations, cfg.penetration_iterations
+        for it in range(regular + max(deep, patient_iterations)):
+            if it >= regular:
+                # extra iterations only in worlds still deeper than half the penetration bound ...
+                if it < regular + deep:
+                    for cmd in run.depth:
+                        cmd.launch()
+                else:
+                    s.newton_active.zero_()
+                # ... and in patient worlds not yet converged
+                if it < regular + patient_iterations:
+                    run.patient.launch()
                 if cfg.check_every and not s.newton_active.numpy().any():
                     break
             for cmd in run.evaluate:

@@ -4,7 +4,7 @@ A substep of length h: ``pads`` (pad poses at the substep's start and end), ``be
 initial guess), ``lag`` (contact faces, lagged friction, guess fixes, rotation seeds), then Newton
 iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coarse correction),
 ``cg`` (a block of CG iterations, repeated), ``coarse_post``, the line search (``energy0`` once,
-``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` decides the extra iterations;
+``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` and ``patient`` decide the extra iterations;
 ``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
 after the last substep, ``outputs`` (forces, stresses, residual).
 Launches are recorded once per substep length (``wp.launch(record_cmd=True)``). Each phase is a list
@@ -72,6 +72,7 @@ class SubstepLaunches:
     trial: list
     apply: list
     depth: list
+    patient: object
     clamp: object
     end: object
     outputs: list
@@ -259,6 +260,8 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
         trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=seq(_depth(c, config)),
+        patient=c.rec(kc.reactivate_patient_worlds, model.num_worlds, s.patient, s.last_dx, config.newton_tolerance,
+                      s.diverged, s.newton_active),
         clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, model.free_axes, s.pad_pos1, s.pad_rot1,
                     model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
                     0.9 * config.penetration_bound, x, s.clamped),

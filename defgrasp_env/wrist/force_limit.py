@@ -1,17 +1,24 @@
-"""Force limit of the position-controlled wrist: it stops when the force its pads exert exceeds a limit.
+"""Force limits of the actuators within a physics substep: the wrist and the jaw stop (or move a
+fraction of their planned substep motion) when the forces the solve measures exceed their limits.
 
 The wrist is a position-controlled robot arm. A collaborative arm stops (protective stop) when the
 force it exerts on its surroundings exceeds its safety limit; the default 150 N is the default force
 limit of Universal Robots' e-Series safety configuration and about the quasi-static contact limit of
-ISO/TS 15066 for the hand and fingers (140 N). The jaw driver limits the grip (the squeeze, which
-cancels between the two pads); this limits the *net* force of both pads on the object,
-``wrist_force = |f_left + f_right|`` (N, the force the wrist carries besides the gripper's weight).
+ISO/TS 15066 for the hand and fingers (140 N). The wrist force is the *net* force of both pads on the
+object, ``wrist_force = |f_left + f_right|`` (N, the force the wrist carries besides the gripper's
+weight). The jaw's motor limits the grip (the squeeze, which cancels between the two pads); the jaw
+driver (``gripper.driver``) regulates it between substeps, on the forces of the previous one.
 
-Per physics substep the wrist moves by a fraction ``scale`` in [0, 1] of its planned joint motion:
-1 when the resulting wrist force stays within ``limit * (1 + tolerance)``, else the fraction found
-by bracketing (Illinois regula falsi on the measured force, a few extra solves of that substep)
-that brings the force to the limit, and 0 (the wrist stops) when the force was at the limit before
-the substep or no fraction is found. The jaw still closes under its own limit meanwhile.
+Within a substep the forces are limited here: a pad's normal force can be at most the grip force
+limit plus the wrist limit (the jaw squeezes with at most the one, the arm pushes with at most the
+other; both add at most on one pad), and the wrist force at most the wrist limit. ``actuator_load``
+is the largest ratio of a force to its limit (1 = at a limit). Per substep the actuators move by a
+fraction ``scale`` in [0, 1] of the substep's planned motion (the wrist's, and the jaw's closing):
+1 when the load stays within ``1 + tolerance``; else the fraction found by bracketing (Illinois
+regula falsi on the measured load, a few extra solves of that substep) that brings the load to 1;
+and 0 (wrist and closing jaw stop) when the load was at 1 before the substep or no fraction is
+found. So a jaw that closes fast on a stiff object pinned against the ground (or the other pad), or
+a wrist that pushes a pad into one, stops within the substep, before the penalty contact reads kN.
 Pure functions on arrays (shapes [W] per world); the scene supplies ``solve``.
 """
 
@@ -23,7 +30,7 @@ import numpy as np
 
 #: Default wrist force limit (N): UR e-Series default safety force limit; ISO/TS 15066 hand ~140 N.
 DEFAULT_WRIST_FORCE_LIMIT = 150.0
-#: Relative overshoot of the limit accepted without a re-solve, and the extra solves at most.
+#: Relative overshoot of a limit accepted without a re-solve, and the extra solves at most.
 FORCE_TOLERANCE = 0.1
 MAX_RETRIES = 6
 
@@ -34,53 +41,72 @@ def wrist_force(pad_force: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.asarray(pad_force, dtype=np.float64).sum(axis=1), axis=-1)
 
 
+def tip_force_bound(grip_force_limit: float, wrist_force_limit: float) -> float:
+    """Largest normal force (N) one pad may exert: the jaw's grip-force limit plus the wrist's limit."""
+    return grip_force_limit + wrist_force_limit
+
+
+def actuator_load(wrist: np.ndarray, tip: np.ndarray, wrist_force_limit: float,
+                  grip_force_limit: float) -> np.ndarray:
+    """Load [W] (dimensionless, 1 = at a limit) of the actuators: the larger of ``wrist`` [W] (N, net
+    pad force) over ``wrist_force_limit`` and the largest of ``tip`` [W, P] (N, pad normal forces)
+    over ``tip_force_bound``; 0 where the wrist limit is ``inf`` (limits disabled)."""
+    wrist = np.asarray(wrist, dtype=np.float64)
+    tip = np.asarray(tip, dtype=np.float64).max(axis=-1)
+    if not np.isfinite(wrist_force_limit):
+        return np.zeros_like(wrist)
+    return np.maximum(wrist / wrist_force_limit, tip / tip_force_bound(grip_force_limit, wrist_force_limit))
+
+
 def next_scale(lo, hi, f_lo, f_hi, limit) -> np.ndarray:
-    """Regula falsi: the motion fraction in (lo, hi) where the force, linear between (lo, f_lo) and
+    """Regula falsi: the motion fraction in (lo, hi) where the load, linear between (lo, f_lo) and
     (hi, f_hi), reaches ``limit``; kept 10 % of the bracket away from either end (forces are zero
     until touch, so the line is a poor model near the bracket ends)."""
-    frac = (limit - f_lo) / np.maximum(f_hi - f_lo, 1e-9)
+    frac = (limit - f_lo) / np.maximum(f_hi - f_lo, 1e-12)
     return lo + (hi - lo) * np.clip(frac, 0.1, 0.9)
 
 
-def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], force_before: np.ndarray,
-                    limit: float, tolerance: float = FORCE_TOLERANCE, retries: int = MAX_RETRIES):
-    """Run one substep with the wrist force limited.
+def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], load_before: np.ndarray,
+                    tolerance: float = FORCE_TOLERANCE, retries: int = MAX_RETRIES):
+    """Run one substep with the actuator load limited to 1 (+ ``tolerance``).
 
     Args:
-        solve: ``solve(scale)`` runs the substep from the same start state with the wrist moved by
-            the fraction ``scale`` [W] of its planned motion; returns (solver report, wrist force [W] N).
-        force_before: wrist force [W] (N) at the substep start.
-        limit: wrist force limit (N); ``inf`` disables the limit.
+        solve: ``solve(scale)`` runs the substep from the same start state with the actuators moved
+            by the fraction ``scale`` [W] of their planned motion; returns (result, load [W]), the
+            load as ``actuator_load`` (1 = at a limit) and ``result`` anything the caller needs
+            (solver report, forces).
+        load_before: load [W] at the substep start.
     Returns:
-        (report, force [W], scale [W]) of the accepted solve.
+        (result, load [W], scale [W]) of the accepted solve, which is always the last one run.
     """
-    force_before = np.asarray(force_before, dtype=np.float64)
-    scale = np.ones_like(force_before)
-    report, force = solve(scale)
-    over = force > limit * (1.0 + tolerance)
+    limit = 1.0
+    load_before = np.asarray(load_before, dtype=np.float64)
+    scale = np.ones_like(load_before)
+    result, load = solve(scale)
+    over = load > limit * (1.0 + tolerance)
     if not over.any():
-        return report, force, scale
-    # stop at once where the wrist already pressed at the limit; else bracket [0, 1]
-    lo, f_lo = np.zeros_like(scale), np.minimum(force_before, limit)
-    hi, f_hi = scale.copy(), force.copy()
+        return result, load, scale
+    # stop at once where the actuators already pressed at the limit; else bracket [0, 1]
+    lo, f_lo = np.zeros_like(scale), np.minimum(load_before, limit)
+    hi, f_hi = scale.copy(), load.copy()
     side = np.zeros_like(scale)  # Illinois: halve the stale end's excess after two moves of one side
-    searching = over & (force_before < limit)
+    searching = over & (load_before < limit)
     scale = np.where(over, 0.0, 1.0)
     for _ in range(retries):
         if not searching.any():
             break
         trial = np.where(searching, next_scale(lo, hi, f_lo, f_hi, limit), scale)
-        report, force = solve(trial)
-        low = searching & (force <= limit * (1.0 + tolerance))
+        result, load = solve(trial)
+        low = searching & (load <= limit * (1.0 + tolerance))
         high = searching & ~low
-        done = low & (force >= limit * (1.0 - tolerance))
+        done = low & (load >= limit * (1.0 - tolerance))
         f_hi = np.where(low & (side < 0), limit + 0.5 * (f_hi - limit), f_hi)
         f_lo = np.where(high & (side > 0), limit - 0.5 * (limit - f_lo), f_lo)
-        lo, f_lo = np.where(low, trial, lo), np.where(low, force, f_lo)
-        hi, f_hi = np.where(high, trial, hi), np.where(high, force, f_hi)
+        lo, f_lo = np.where(low, trial, lo), np.where(low, load, f_lo)
+        hi, f_hi = np.where(high, trial, hi), np.where(high, load, f_hi)
         side = np.where(low, -1.0, np.where(high, 1.0, side))
         scale = np.where(searching, lo, scale)
         searching &= ~done
         if np.array_equal(trial, scale):
-            return report, force, scale   # the last solve is the accepted one in every world
+            return result, load, scale   # the last solve is the accepted one in every world
     return (*solve(scale), scale)

@@ -407,6 +407,15 @@ def reactivate_deep_worlds(depth: wp.array(dtype=float), bound: float, newton_ac
 
 
 @wp.kernel
+def reactivate_patient_worlds(patient: wp.array(dtype=int), last_dx: wp.array(dtype=float), tol: float,
+                              diverged: wp.array(dtype=int), newton_active: wp.array(dtype=int)):
+    """Switch Newton back on in the ``patient`` worlds whose last update (m) is still above ``tol``."""
+    w = wp.tid()
+    if patient[w] != 0 and last_dx[w] > tol and diverged[w] == 0:
+        newton_active[w] = 1
+
+
+@wp.kernel
 def clamp_depth(
     node_world: wp.array(dtype=int),
     free: wp.array(dtype=wp.vec3),

@@ -1,0 +1,108 @@
+"""Tip and wrist force readings stay within the actuators' limits under adversarial actions.
+
+A pad's normal force is bounded by what the actuators can exert: the jaw squeezes with at most its
+grip-force limit G and the arm pushes with at most its wrist limit W, so one pad reads at most
+G + W (``wrist.force_limit.tip_force_bound``), and the wrist force (net pad force) at most W. The
+scene's limiter accepts a substep whose load is within ``FORCE_TOLERANCE`` (10 %) of a limit, so
+the bounds asserted are (G + W)(1 + tol) and W(1 + tol), plus what no actuator limit bounds: the
+wrist and jaw stop (they do not yield), so an object the pads threw and a stopped pad stops within
+one substep h adds its momentum change m v / h to the net force, plus its weight
+(``bench_contact_fuzz.impact_margin``, with v the largest legal pad speed: 85 N at 2 m/s and
+2 pi rad/s with 21 substeps of 2.4 ms, for a 37 g cylinder; the transient part of a contact,
+which ISO/TS 15066 bounds separately, at twice the quasi-static limit). Measured: a cuboid swept
+at 2 m/s into a stopped pad added 14 N within a substep.
+
+Reproduction (``test_torus_sweep_pinch``): the fuzz case that read 17.7 kN on one pad with a 122 N
+wrist force (``bench_contact_fuzz.py``, torus E = 1e7, ``sweep``, 10 steps). The cause was not the
+actuators' travel (with wrist and jaw stopped in the substep the solve still read 1.1 kN) but
+Newton stopping at its 4-iteration limit on a stiff pad contact: the converged solve reads 24 N.
+Over a limit, the scene now re-solves with ``SolverConfig.patient_iterations`` (60: 28 were not
+enough for a sphere E = 1e5 swept at 2 m/s, which still read 1.2 kN) before it believes
+the forces, and then moves wrist and jaw by the fraction that keeps them within the limits.
+
+``test_bounds_held_out`` runs parameters the fix was not tuned on: other moduli (3e5, 3e6 Pa), a
+1.5 m/s, pi rad/s wrist, other limits (G = 60 N, W = 80 N), dive, sweep and random sequences of
+other seeds (5, 6).
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+from bench_contact_fuzz import action, run_cell  # noqa: E402
+
+import defgrasp_env  # noqa: E402,F401
+from defgrasp_env.envs.actions import targets  # noqa: E402
+from defgrasp_env.gripper import GripperConfig  # noqa: E402
+from defgrasp_env.sim.state import Control, State  # noqa: E402
+from defgrasp_env.wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE, tip_force_bound  # noqa: E402
+
+
+
+def test_torus_sweep_pinch():
+    r = run_cell("torus", 1e7, 10, sequences=("sweep",))
+    grip = GripperConfig().grip_force_limit
+    assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
+    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
+    assert r["crossed"] == 0 and r["diverged"] == 0 and r["unflagged"] == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, e", [("cylinder", 3e6), ("sphere", 3e5), ("cuboid", 3e6), ("torus", 3e5)])
+def test_bounds_held_out(name, e):
+    grip, wrist_limit = 60.0, 80.0
+    settings = dict(max_linear_speed=1.5, max_angular_speed=math.pi, wrist_force_limit=wrist_limit,
+                    gripper=GripperConfig(grip_force_limit=grip))
+    runs = [run_cell(name, e, 8, seed=5, sequences=("dive", "sweep", "random"), **settings),
+            run_cell(name, e, 8, seed=6, sequences=("random",), **settings)]
+    worst_tip, worst_wrist = max(r["tip"] for r in runs), max(r["wrist"] for r in runs)
+    impact = max(r["impact"] for r in runs)
+    assert not any(r["diverged"] or r["crossed"] or r["unflagged"] for r in runs), runs
+    assert worst_tip <= tip_force_bound(grip, wrist_limit) * (1 + FORCE_TOLERANCE) + impact, (worst_tip, impact)
+    assert worst_wrist <= wrist_limit * (1 + FORCE_TOLERANCE) + impact, (worst_wrist, impact)
+
+
+def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical():
+    """Two identical worlds at the state where 4 Newton iterations read kN (torus E = 1e7 after
+    3 sweep steps): one substep solved with world 0 patient. World 1's result equals, bit for bit,
+    the solve without patience; world 0 meets the Newton tolerance and reads a pad force far below
+    world 1's unconverged one."""
+    venv = gym.make_vec("DeformablePickup-v0", num_envs=2, object="torus", youngs_modulus=1e7,
+                        max_linear_speed=2.0, max_angular_speed=2 * math.pi, init_yaw_noise=0.0,
+                        init_position_noise=0.0)
+    try:
+        venv.reset(seed=0)
+        rng = np.random.default_rng(0)
+        for k in range(3):
+            venv.step(np.tile(action("sweep", k, rng).astype(np.float32), (2, 1)))
+        scene = venv.unwrapped.scene
+        pos, quat, gap = targets(scene.gripper, venv.unwrapped.config,
+                                 np.tile(action("sweep", 3, rng).astype(np.float32), (2, 1)))
+        scene.gripper.begin_step(pos, quat)
+        h = venv.unwrapped.config.dt / scene.substeps
+        scene.gripper.plan_substep(0, scene.substeps, h, gap, np.ones(2, bool))
+        control = Control.from_model(scene.model)
+        pad_pos, pad_quat = scene.gripper.move()
+        control.pad_target_positions.assign(pad_pos.reshape(-1, 3).astype(np.float32))
+        control.pad_target_orientations.assign(pad_quat.reshape(-1, 4).astype(np.float32))
+        plain_state, patient_state = State.from_model(scene.model), State.from_model(scene.model)
+        plain = scene.solver.step(scene.state, plain_state, control, h)
+        patient = scene.solver.step(scene.state, patient_state, control, h, np.array([True, False]))
+        rows = scene.model.world_nodes(1)
+        x_plain, x_patient = plain_state.positions.numpy(), patient_state.positions.numpy()
+        tip_plain = plain_state.pad_normal_force.numpy().reshape(2, 2)
+        tip_patient = patient_state.pad_normal_force.numpy().reshape(2, 2)
+    finally:
+        venv.close()
+    assert not plain.converged[0] and plain.last_update[0] > 1e-5            # the case at hand
+    np.testing.assert_array_equal(x_patient[rows], x_plain[rows])
+    np.testing.assert_array_equal(tip_patient[1], tip_plain[1])
+    assert patient.last_update[0] <= 1e-5 and patient.newton_iterations[0] > plain.newton_iterations[0]
+    assert tip_patient[0].max() < 0.1 * tip_plain[0].max(), (tip_patient, tip_plain)
