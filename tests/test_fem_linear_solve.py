@@ -128,7 +128,7 @@ def held_rope_steps(graphs: bool, steps: int = 6):
                         poses=[((0.0, 0.004, 0.0), (0.0, 0.0, 0.0, 1.0))], device="cpu")
     state, control = State.from_model(model), Control.from_model(model)
     solver = ImplicitSolver(model, SolverConfig(substeps=2))
-    run = solver._substep_launches(DT / 2)
+    run = solver._substep_launches(DT / 2, state, state, control)   # what ``step`` below replays
     if not graphs:
         for phase in (run.lag, run.evaluate, run.cg, run.coarse_post, run.energy0, run.trial, run.apply,
                       run.depth, run.outputs, *run.pads):
@@ -143,8 +143,9 @@ def test_cpu_graphs_are_bit_identical_to_single_launches():
     iteration counts) as the same launches one by one, step after step (a falling rope that lands)."""
     s1, r1 = held_rope_steps(True)
     s0, r0 = held_rope_steps(False)
-    assert any(seq.graph is not None for seq in ImplicitSolver(
-        build_model([make_object_mesh("cuboid")], [Material()], device="cpu"))._substep_launches(DT).cg)
+    cuboid = build_model([make_object_mesh("cuboid")], [Material()], device="cpu")
+    state, control = State.from_model(cuboid), Control.from_model(cuboid)
+    assert any(seq.graph is not None for seq in ImplicitSolver(cuboid)._substep_launches(DT, state, state, control).cg)
     np.testing.assert_array_equal(s1.positions.numpy(), s0.positions.numpy())
     np.testing.assert_array_equal(s1.velocities.numpy(), s0.velocities.numpy())
     assert [r.cg_iterations.tolist() for r in r1] == [r.cg_iterations.tolist() for r in r0]
