@@ -53,7 +53,7 @@ class SolverConfig:
             ``newton_iterations``, in the worlds whose iterate is still deeper than half of
             ``penetration_bound`` (a violent contact the regular iterations did not resolve).
         patient_iterations: extra Newton iterations at most per substep, after
-            ``newton_iterations``, in the worlds a ``step`` call marks ``patient``, while their update
+            ``newton_iterations``, in the worlds a ``step`` or ``advance`` call marks ``patient``, while their update
             is above ``newton_tolerance`` (a caller that needs the contact forces of a converged
             solve: an unconverged iterate of a stiff contact can read kN where the solution reads
             tens of N).

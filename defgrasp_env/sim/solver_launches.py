@@ -7,7 +7,8 @@ iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coar
 ``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` and ``patient`` decide the extra iterations;
 ``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
 after the last substep, ``outputs`` (forces, stresses, residual).
-Launches are recorded once per substep length (``wp.launch(record_cmd=True)``). Each phase is a list
+Launches are recorded once per substep length and (state in, state out, control) set
+(``wp.launch(record_cmd=True)``; ``ImplicitSolver`` keeps the 8 sets used last). Each phase is a list
 holding one ``LaunchSequence`` of its launches: on the CPU a Warp graph (``wp.ScopedCapture``)
 replayed by Warp's C++ loop (a replay costs ~15 us of Python instead of ~15-25 us per launch), else
 the launches one by one. ``cg`` holds ``cg_block`` CG iterations (``SolverConfig.check_every``, or

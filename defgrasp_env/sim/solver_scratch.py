@@ -72,7 +72,7 @@ class SolverScratch:
     unconverged: wp.array       # int: a substep stopped at the iteration limit
     clamped: wp.array           # int: a substep's solve left a node deeper than the penetration bound
     all_on: wp.array            # int: all ones
-    patient: wp.array           # int: world to iterate until newton_tolerance (ImplicitSolver.step)
+    patient: wp.array           # int: world to iterate until newton_tolerance (ImplicitSolver.advance)
     searching: wp.array         # int: world still line-searching
     energy0: wp.array           # float64: incremental potential of the accepted iterate
     energy_trial: wp.array      # float64: that of the trial
