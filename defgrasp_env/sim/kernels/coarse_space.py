@@ -18,7 +18,7 @@ Newton iteration.
 
 import warp as wp
 
-from .elastic import row, stress_differential
+from .elastic import pick_vertex, row, stress_differential
 
 
 @wp.func
@@ -118,13 +118,7 @@ def coarse_assemble_tets(
     lam = tet_lambda[t]
     v0 = rest_volume[t]
     for v in range(4):
-        bv = b0
-        if v == 1:
-            bv = b1
-        elif v == 2:
-            bv = b2
-        elif v == 3:
-            bv = b3
+        bv = pick_vertex(b0, b1, b2, b3, v)
         fv = free[idx[v]]
         av = node_aggregate[idx[v]]
         for j in range(3):
@@ -133,13 +127,7 @@ def coarse_assemble_tets(
                 e[j] = 1.0
                 dp = stress_differential(wp.outer(e, bv), cof, r, twist, mu, lam, v0)
                 for u in range(4):
-                    bu = b0
-                    if u == 1:
-                        bu = b1
-                    elif u == 2:
-                        bu = b2
-                    elif u == 3:
-                        bu = b3
+                    bu = pick_vertex(b0, b1, b2, b3, u)
                     col = wp.cw_mul(free[idx[u]], dp * bu)
                     au = node_aggregate[idx[u]]
                     for k in range(3):

@@ -36,6 +36,18 @@ def row(m: wp.mat33, i: int):
 
 
 @wp.func
+def pick_vertex(b0: wp.vec3, b1: wp.vec3, b2: wp.vec3, b3: wp.vec3, v: int):
+    """The one of a tet's four shape-function gradients ``b0..b3`` (1/m) that belongs to vertex ``v``."""
+    if v == 1:
+        return b1
+    if v == 2:
+        return b2
+    if v == 3:
+        return b3
+    return b0
+
+
+@wp.func
 def cofactor(f: wp.mat33):
     """dJ/dF: columns (f1 x f2, f2 x f0, f0 x f1) for the columns f0, f1, f2 of F."""
     f0 = column(f, 0)
@@ -171,13 +183,7 @@ def evaluate_tets(
     b3 = row(dm_inv, 2)
     b0 = -(b1 + b2 + b3)
     for a in range(4):
-        b = b0
-        if a == 1:
-            b = b1
-        elif a == 2:
-            b = b2
-        elif a == 3:
-            b = b3
+        b = pick_vertex(b0, b1, b2, b3, a)
         force = -v0 * (p * b)
         cb = cof * b
         block = v0 * (2.0 * mu * wp.dot(b, b) * wp.identity(n=3, dtype=float) + lam * wp.outer(cb, cb))
