@@ -13,6 +13,7 @@ import os
 import pathlib
 import shutil
 import subprocess
+import tempfile
 
 import numpy as np
 import pytest
@@ -32,12 +33,14 @@ def require_chromium() -> str:
 
 
 def screenshot(url: str, path: pathlib.Path, *, size=(900, 650), wait_ms: int = 10000, timeout_s: float = 180.0,
-               ready=None, attempts: int = 3) -> np.ndarray:
+               ready=None, attempts: int = 5) -> np.ndarray:
     """``ready(image) -> bool``: the page has finished drawing (on a loaded machine the viser client can
-    still be fading in when the virtual-time budget ends); up to ``attempts`` shots, each with a longer
-    budget, and the last one is returned whatever it shows (the test's own checks then decide)."""
+    still be fading in when the virtual-time budget ends, or its WebGL context can fail to start and
+    leave a white page); up to ``attempts`` shots, each in a fresh browser profile with a longer budget
+    (at most 3x ``wait_ms``), and the last one is returned whatever it shows (the test's own checks
+    then decide)."""
     for k in range(attempts):
-        img = _screenshot_once(url, path, size=size, wait_ms=wait_ms * (k + 1), timeout_s=timeout_s)
+        img = _screenshot_once(url, path, size=size, wait_ms=wait_ms * min(k + 1, 3), timeout_s=timeout_s)
         if ready is None or ready(img):
             break
     return img
@@ -48,12 +51,15 @@ def _screenshot_once(url: str, path: pathlib.Path, *, size, wait_ms: int, timeou
 
     exe = require_chromium()
     path = pathlib.Path(path)
-    profile = path.parent / f".chromium-profile-{path.stem}"
+    path.unlink(missing_ok=True)  # never read a previous attempt's picture
+    profile = pathlib.Path(tempfile.mkdtemp(prefix=f".chromium-profile-{path.stem}-", dir=path.parent))
     cmd = [exe, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
            "--enable-unsafe-swiftshader", "--hide-scrollbars", "--no-first-run", f"--user-data-dir={profile}",
            f"--window-size={size[0]},{size[1]}", f"--virtual-time-budget={wait_ms}", f"--screenshot={path}", url]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)
+    finally:
+        shutil.rmtree(profile, ignore_errors=True)
     if not path.exists():
         raise RuntimeError(f"chromium wrote no screenshot (exit {proc.returncode}): {proc.stderr[-2000:]}")
-    shutil.rmtree(profile, ignore_errors=True)
     return np.asarray(Image.open(path).convert("RGB"))

@@ -33,12 +33,17 @@ CPUs; default all).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pathlib
+import signal
+import threading
 
 from .generate import Job, progress_bar, record_jobs
 
 DEFAULT_MAX_RETRIES = 3
+#: Seconds between the driver's checks for Ctrl-C while it waits on Ray.
+INTERRUPT_POLL_S = 0.25
 
 
 def _import_ray():
@@ -73,6 +78,31 @@ def _worker_device(device: str) -> tuple[str, float]:
     if device in ("cuda", "cuda:0"):
         return "cuda", 1.0
     raise ValueError(f"with --ray, --device must be 'cpu' or 'cuda' (Ray assigns each worker one GPU), got {device!r}")
+
+
+@contextlib.contextmanager
+def _ctrl_c_as_flag():
+    """While the driver waits on Ray, the first Ctrl-C (SIGINT) only sets the yielded event; the loop
+    sees it between ``ray.wait`` polls, cancels and shuts down itself, and raises ``KeyboardInterrupt``
+    from its own code. A ``KeyboardInterrupt`` raised inside Ray's C++ calls can fail one of Ray's
+    internal checks and end the process with exit code 1 and a stack trace instead of a clean stop.
+    A second Ctrl-C interrupts at once. Off the main thread (no signal handler allowed) the event
+    never fires and Ctrl-C behaves as Python's default."""
+    flag = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+
+    def on_sigint(signum, frame):
+        if flag.is_set():
+            raise KeyboardInterrupt
+        flag.set()
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _start_ray(ray, address: str | None, workers: int | None) -> bool:
@@ -127,22 +157,13 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
     queue, pending = list(reversed(todo)), []
     limit = workers or len(todo)  # Ray's own pattern to bound pending tasks: ray.wait
     try:
-        while queue or pending:
-            while queue and len(pending) < limit:
-                pending.append(task.remote(str(out.resolve()), queue.pop(), policy_spec, max_steps, task_device,
-                                           record_frames, compression))
-            done, pending = ray.wait(pending, num_returns=1)
-            try:
-                name, success = ray.get(done[0])
-            except ray.exceptions.RayTaskError as exc:  # the task's own exception, without Ray's wrapper
-                raise (exc.cause if isinstance(exc.cause, Exception) else exc) from exc
-            except ray.exceptions.RayError as exc:  # worker or node lost more than max_retries times
-                raise RuntimeError(f"a Ray task failed after {max_retries} retries: {exc}") from exc
-            if on_episode is not None and success is not None:  # None: the file was there already
-                on_episode(by_name[name], bool(success))
+        with _ctrl_c_as_flag() as interrupted:
+            _drain(ray, task, queue, pending, limit, interrupted, on_episode, by_name, max_retries,
+                   (str(out.resolve()), policy_spec, max_steps, task_device, record_frames, compression))
     except BaseException:
-        for ref in pending:
-            ray.cancel(ref, force=True)
+        if not started:  # a Ray started here stops below with its workers; a cluster's keep running
+            for ref in pending:
+                ray.cancel(ref, force=True)
         raise
     finally:
         if bar is not None:
@@ -150,3 +171,27 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
         if started:
             ray.shutdown()
     return [out / j.name for j in jobs]
+
+
+def _drain(ray, task, queue: list[Job], pending: list, limit: int, interrupted: threading.Event, on_episode,
+           by_name: dict[str, Job], max_retries: int, task_args: tuple) -> None:
+    """Keep at most ``limit`` tasks pending until ``queue`` and ``pending`` are empty (``pending`` is
+    updated in place, so the caller can cancel what is left); raise ``KeyboardInterrupt`` when
+    ``interrupted`` is set."""
+    out, policy_spec, max_steps, task_device, record_frames, compression = task_args
+    while queue or pending:
+        while queue and len(pending) < limit:
+            pending.append(task.remote(out, queue.pop(), policy_spec, max_steps, task_device, record_frames,
+                                       compression))
+        done, pending[:] = ray.wait(pending, num_returns=1, timeout=INTERRUPT_POLL_S)
+        if interrupted.is_set():  # tasks in ``done`` have published their files
+            raise KeyboardInterrupt
+        for ref in done:
+            try:
+                name, success = ray.get(ref)
+            except ray.exceptions.RayTaskError as exc:  # the task's own exception, without Ray's wrapper
+                raise (exc.cause if isinstance(exc.cause, Exception) else exc) from exc
+            except ray.exceptions.RayError as exc:  # worker or node lost more than max_retries times
+                raise RuntimeError(f"a Ray task failed after {max_retries} retries: {exc}") from exc
+            if on_episode is not None and success is not None:  # None: the file was there already
+                on_episode(by_name[name], bool(success))
