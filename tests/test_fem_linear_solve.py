@@ -4,6 +4,8 @@ and the CPU graphs of the recorded launches (bit-identical to launching one by o
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import warp as wp
@@ -89,7 +91,7 @@ def test_coarse_matrix_is_the_galerkin_product(fixed):
     s, n, d = solver.scratch, model.num_nodes, model.device
     size = s.coarse_size
     assert size == 24
-    run = solver._substep_launches(DT, state, state, control)
+    run, _ = solver._substep_launches(DT, state, state, control)
     s.newton_active.fill_(1)
     s.coarse_matrix.zero_()
     s.coarse_rhs.zero_()
@@ -123,30 +125,71 @@ def test_coarse_matrix_is_the_galerkin_product(fixed):
     np.testing.assert_allclose(got, expected, rtol=2e-3, atol=2e-3 * np.abs(expected).max())
 
 
-def held_rope_steps(graphs: bool, steps: int = 6):
+def held_rope_steps(mode: str, steps: int = 6, config: SolverConfig = SolverConfig(substeps=2), patient=None):
+    """A falling rope that lands, stepped with ``mode``: "step" (each ``advance`` one captured
+    graph), "phases" (each phase one CPU graph) or "launches" (every launch from Python)."""
     model = build_model([make_object_mesh("rope")], [Material(youngs_modulus=1e4)],
                         poses=[((0.0, 0.004, 0.0), (0.0, 0.0, 0.0, 1.0))], device="cpu")
     state, control = State.from_model(model), Control.from_model(model)
-    solver = ImplicitSolver(model, SolverConfig(substeps=2))
-    run = solver._substep_launches(DT / 2, state, state, control)   # what ``step`` below replays
-    if not graphs:
+    solver = ImplicitSolver(model, dataclasses.replace(config, graphs=mode == "step"))
+    run, graphs = solver._substep_launches(DT / config.substeps, state, state, control)  # what ``step`` replays
+    if mode == "launches":
         for phase in (run.lag, run.evaluate, run.cg, run.coarse_post, run.energy0, run.trial, run.apply,
-                      run.depth, run.outputs, *run.pads):
+                      run.outputs, *run.pads):
             for seq in phase:
                 seq.graph = None
-    reports = [solver.step(state, state, control, dt=DT) for _ in range(steps)]
+    reports = [solver.step(state, state, control, dt=DT, patient=patient) for _ in range(steps)]
+    assert (len(graphs) == 1) == (mode == "step"), graphs   # captured once, then replayed
     return state, reports
 
 
-def test_cpu_graphs_are_bit_identical_to_single_launches():
-    """The recorded phases replayed as CPU graphs give the same bits (positions, velocities,
-    iteration counts) as the same launches one by one, step after step (a falling rope that lands)."""
-    s1, r1 = held_rope_steps(True)
-    s0, r0 = held_rope_steps(False)
+@pytest.mark.parametrize("config", [SolverConfig(substeps=2), SolverConfig(substeps=1, check_every=0)],
+                         ids=["check_every_4", "check_every_0"])
+def test_cpu_graphs_are_bit_identical_to_single_launches(config):
+    """The whole substep captured as one CPU graph (loops with device-side exit tests), the phases
+    replayed as CPU graphs and the same launches one by one give the same bits (positions,
+    velocities, iteration counts), step after step (a falling rope that lands), also with a
+    patient world (extra Newton iterations) and without the early-exit checks."""
+    results = {mode: held_rope_steps(mode, config=config, patient=np.ones(1, bool)) for mode in ("step", "phases", "launches")}
     cuboid = build_model([make_object_mesh("cuboid")], [Material()], device="cpu")
     state, control = State.from_model(cuboid), Control.from_model(cuboid)
-    assert any(seq.graph is not None for seq in ImplicitSolver(cuboid)._substep_launches(DT, state, state, control).cg)
-    np.testing.assert_array_equal(s1.positions.numpy(), s0.positions.numpy())
-    np.testing.assert_array_equal(s1.velocities.numpy(), s0.velocities.numpy())
-    assert [r.cg_iterations.tolist() for r in r1] == [r.cg_iterations.tolist() for r in r0]
+    run, _ = ImplicitSolver(cuboid, SolverConfig(graphs=False))._substep_launches(DT, state, state, control)
+    assert any(seq.graph is not None for seq in run.cg)
+    s1, r1 = results["step"]
+    for mode in ("phases", "launches"):
+        s0, r0 = results[mode]
+        np.testing.assert_array_equal(s1.positions.numpy(), s0.positions.numpy())
+        np.testing.assert_array_equal(s1.velocities.numpy(), s0.velocities.numpy())
+        assert [r.cg_iterations.tolist() for r in r1] == [r.cg_iterations.tolist() for r in r0]
+        assert [r.newton_iterations.tolist() for r in r1] == [r.newton_iterations.tolist() for r in r0]
     assert sum(int(r.cg_iterations[0]) for r in r1) > 0
+
+
+def _resting_rope(config: SolverConfig, steps: int):
+    model = build_model([make_object_mesh("rope")], [Material(youngs_modulus=1e4)],
+                        poses=[((0.0, 0.004, 0.0), (0.0, 0.0, 0.0, 1.0))], device="cpu")
+    state, control = State.from_model(model), Control.from_model(model)
+    solver = ImplicitSolver(model, config)
+    assert solver.graphs, "this Warp captures no CPU graphs with capture_while"
+    return solver, [solver.step(state, state, control, dt=DT) for _ in range(steps)]
+
+
+def test_device_loops_stop_early_and_take_the_extra_iterations():
+    """The loop counters the captured graph keeps: with the exit tests a rope come to rest stops
+    Newton before its cap (and CG before its last block); without them the regular loop runs all
+    its passes; a patient world that cannot meet the tolerance gets exactly ``patient_iterations``
+    extra Newton iterations per substep."""
+    cfg = SolverConfig(substeps=1, newton_iterations=6, cg_iterations=40, check_every=4)
+    solver, reports = _resting_rope(cfg, 12)
+    assert int(reports[-1].newton_iterations[0]) < 6
+    assert solver.loops.count["newton"].numpy()[0] < 6 and solver.loops.count["cg"].numpy()[0] < 10
+    solver, _ = _resting_rope(dataclasses.replace(cfg, check_every=0), 12)
+    assert solver.loops.count["newton"].numpy()[0] == 6 and solver.loops.count["cg"].numpy()[0] == 1
+    strict = dataclasses.replace(cfg, newton_iterations=3, newton_tolerance=1e-12, patient_iterations=4,
+                                 penetration_iterations=0)
+    model = build_model([make_object_mesh("rope")] * 2, [Material(youngs_modulus=1e4)] * 2, device="cpu")
+    state, control = State.from_model(model), Control.from_model(model)
+    solver = ImplicitSolver(model, strict)
+    stats = solver.step(state, state, control, dt=DT, patient=np.array([True, False]))
+    assert stats.newton_iterations.tolist() == [3 + 4, 3], stats.newton_iterations
+    assert solver.loops.count["extra"].numpy()[0] == 4

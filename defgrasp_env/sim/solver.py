@@ -6,7 +6,9 @@ Newton system by CG preconditioned by block Jacobi plus a coarse solve on the tr
 aggregates (kernels/linear_solve.py, kernels/coarse_space.py, sim/aggregates.py), a backtracking
 line search on the incremental potential (kernels/energy.py, kernels/line_search.py), all per world.
 The scratch arrays are a ``SolverScratch``; the launches of each phase of a substep are recorded by
-``solver_launches``.
+``solver_launches``; the loops' exit tests run on the device (``solver_loops``), so that a whole
+``advance`` is captured once as a graph (a CUDA graph with conditional nodes, or a Warp CPU graph)
+and replayed with one launch.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from .materials import check_range
 from .model import Model
 from .solve_report import SolveReport, SolveStats
 from .solver_launches import SubstepLaunches, record_substep_launches
+from .solver_loops import DeviceLoops
 from .solver_scratch import SolverScratch
 from .state import Control, State
 
@@ -57,9 +60,13 @@ class SolverConfig:
             is above ``newton_tolerance`` (a caller that needs the contact forces of a converged
             solve: an unconverged iterate of a stiff contact can read kN where the solution reads
             tens of N).
-        check_every: on the host, test every this many CG iterations, and after every Newton
-            iteration and line-search trial, whether all worlds are done (0 = never: run the full
-            iteration counts, with no host round trip).
+        check_every: test every this many CG iterations, and after every Newton iteration and
+            line-search trial, whether all worlds are done (0 = never: run the full iteration
+            counts). The tests run on the device (``solver_loops``): inside the captured graph of
+            a step they cost no host round trip.
+        graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
+            the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
+            CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
     """
 
     substeps: int = 2
@@ -74,6 +81,7 @@ class SolverConfig:
     penetration_bound: float = 1e-3
     penetration_iterations: int = 8
     patient_iterations: int = 60
+    graphs: bool | None = None
 
     def __post_init__(self) -> None:
         for name, low in (("substeps", 1), ("newton_iterations", 1), ("cg_iterations", 1),
@@ -87,6 +95,31 @@ class SolverConfig:
         check_range("cg_update_fraction", self.cg_update_fraction, 0.0, 1.0, low_open=False, high_open=False)
         check_range("max_node_step", self.max_node_step, 0.0, math.inf, "m")
         check_range("penetration_bound", self.penetration_bound, 0.0, math.inf, "m")
+        if self.graphs is not None and not isinstance(self.graphs, bool):
+            raise ValueError(f"graphs must be True, False or None (where the device can), got {self.graphs!r}")
+
+
+def graphs_supported(device) -> bool:
+    """Whether a whole ``advance`` (loops with device-side exit tests) can be one graph on ``device``:
+    CUDA graphs with conditional nodes (driver and toolkit >= 12.4), or Warp's CPU graphs with
+    ``capture_while`` (tried once per process)."""
+    device = wp.get_device(device)
+    if device.is_cuda:
+        return wp.is_conditional_graph_supported()
+    global _CPU_GRAPHS
+    if _CPU_GRAPHS is None:
+        flag = wp.zeros(1, dtype=wp.int32, device=device)
+        try:
+            with wp.ScopedCapture(device=device, force_module_load=False) as capture:
+                wp.capture_while(flag, lambda: flag.zero_())
+            wp.capture_launch(capture.graph)
+            _CPU_GRAPHS = True
+        except (RuntimeError, NotImplementedError, TypeError, AttributeError):
+            _CPU_GRAPHS = False
+    return _CPU_GRAPHS
+
+
+_CPU_GRAPHS: bool | None = None
 
 
 class ImplicitSolver:
@@ -94,8 +127,10 @@ class ImplicitSolver:
 
     Scratch arrays (``SolverScratch``) are made once per model and the kernel launches
     (``SubstepLaunches``) are recorded once per substep length and per (state_in, state_out,
-    control) triple they are bound to (a few are kept), so a step costs a couple of microseconds
-    of Python per launch and copies no state besides the start positions and velocities.
+    control) triple they are bound to (a few are kept), with the graph captured of them where the
+    device supports it (one launch per call; otherwise a couple of microseconds of Python per
+    launch and one host test per loop pass); a step copies no state besides the start positions
+    and velocities.
     Usage::
 
         solver = ImplicitSolver(model, SolverConfig())
@@ -109,7 +144,13 @@ class ImplicitSolver:
     def __init__(self, model: Model, config: SolverConfig = SolverConfig()):
         self.model = model
         self.config = config
+        supported = graphs_supported(model.device)
+        if config.graphs and not supported:
+            raise ValueError(f"SolverConfig(graphs=True) but device {model.device} cannot capture a step as one graph "
+                             "(CUDA needs driver and toolkit >= 12.4); use graphs=None or False")
+        self.graphs = supported if config.graphs is None else config.graphs
         self.scratch = SolverScratch.from_model(model)
+        self.loops = DeviceLoops(model, config, self.scratch)
         self._report = SolveReport(model.num_worlds, model.device)
         self._launches: dict[tuple, tuple] = {}
 
@@ -130,13 +171,29 @@ class ImplicitSolver:
         given up to ``config.patient_iterations`` extra Newton iterations per substep until they
         meet ``newton_tolerance``; every other world's result is the same, bit for bit, as without
         it (its ``converged`` flag stays False when the regular iterations did not converge, even
-        if the extra ones did)."""
+        if the extra ones did). Where the device can (``graphs``), the whole call is one graph
+        launch, captured at the first call with these states, control and ``dt``."""
         check_range("dt", dt, 0.0, math.inf, "s")
-        cfg, s = self.config, self.scratch
+        s = self.scratch
         patient_any = patient is not None and bool(np.any(patient))
         if patient_any:
             s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(self.model.num_worlds))
-        run = self._substep_launches(dt / cfg.substeps, state_in, state_out, control)
+        run, graphs = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
+        if not self.graphs:
+            self._advance(run, state_in, state_out, control, patient_any)
+        else:
+            if patient_any not in graphs:
+                with wp.ScopedCapture(device=self.model.device, force_module_load=False) as capture:
+                    self._advance(run, state_in, state_out, control, patient_any)
+                graphs[patient_any] = capture.graph
+            wp.capture_launch(graphs[patient_any])
+        if patient_any:
+            s.patient.zero_()
+
+    # -- internals ---------------------------------------------------------------------------
+    def _advance(self, run: SubstepLaunches, state_in: State, state_out: State, control: Control,
+                 patient_any: bool) -> None:
+        cfg, s = self.config, self.scratch
         if state_in is not state_out:
             wp.copy(state_out.positions, state_in.positions)
             wp.copy(state_out.velocities, state_in.velocities)
@@ -158,49 +215,35 @@ class ImplicitSolver:
             wp.copy(state_out.velocities, s.v_new)
         wp.copy(state_out.pad_positions, control.pad_target_positions)
         wp.copy(state_out.pad_orientations, control.pad_target_orientations)
-        if patient_any:
-            s.patient.zero_()
 
-    # -- internals ---------------------------------------------------------------------------
     def _newton(self, run: SubstepLaunches, patient_iterations: int = 0) -> None:
-        cfg, s = self.config, self.scratch
+        """The regular Newton iterations while a world iterates (all of them without checks), then
+        the extra ones (``DeviceLoops.extra_iterations``) if all regular ones ran."""
+        s = self.scratch
         wp.copy(s.newton_active, s.all_on)
         s.substep_newton_it.zero_()
-        regular, deep = cfg.newton_iterations, cfg.penetration_iterations
-        for it in range(regular + max(deep, patient_iterations)):
-            if it >= regular:
-                # extra iterations only in worlds still deeper than half the penetration bound ...
-                if it < regular + deep:
-                    for cmd in run.depth:
-                        cmd.launch()
-                else:
-                    s.newton_active.zero_()
-                # ... and in patient worlds not yet converged
-                if it < regular + patient_iterations:
-                    run.patient.launch()
-                if cfg.check_every and not s.newton_active.numpy().any():
-                    break
-            for cmd in run.evaluate:
-                cmd.launch()
-            self._run_cg(run)
-            for cmd in run.coarse_post:
-                cmd.launch()
-            self._line_search(run, first=it == 0)
-            for cmd in run.apply:
-                cmd.launch()
-            if cfg.check_every and it < cfg.newton_iterations - 1 and not s.newton_active.numpy().any():
-                break
+        self.loops.do_while("newton", lambda: self._newton_iteration(run, first=True),
+                            lambda: self._newton_iteration(run, first=False), s.newton_active)
+        self.loops.extra_iterations(run.depth, lambda: self._newton_iteration(run, first=False), patient_iterations)
+
+    def _newton_iteration(self, run: SubstepLaunches, first: bool) -> None:
+        for cmd in run.evaluate:
+            cmd.launch()
+        self._run_cg(run)
+        for cmd in run.coarse_post:
+            cmd.launch()
+        self._line_search(run, first)
+        for cmd in run.apply:
+            cmd.launch()
 
     def _run_cg(self, run: SubstepLaunches) -> None:
         """CG in blocks of ``run.cg_block`` iterations (a world stops at its own test or at
-        ``cg_iterations``; later iterations of a block skip it), checking between blocks whether
-        all worlds have stopped."""
-        cfg, active = self.config, self.scratch.cg_active
-        for _ in range(-(-cfg.cg_iterations // run.cg_block)):
+        ``cg_iterations``; later iterations of a block skip it) while a world iterates."""
+        def block():
             for cmd in run.cg:
                 cmd.launch()
-            if cfg.check_every and not active.numpy().any():
-                break
+
+        self.loops.do_while("cg", block, block, self.scratch.cg_active)
 
     def _line_search(self, run: SubstepLaunches, first: bool) -> None:
         """Per world, halve the Newton step until the incremental potential does not increase.
@@ -214,11 +257,12 @@ class ImplicitSolver:
             for cmd in run.energy0:
                 cmd.launch()
         run.begin_search.launch()
-        for _ in range(cfg.line_search_steps + 1):
+
+        def trial():
             for cmd in run.trial:
                 cmd.launch()
-            if cfg.check_every and not self.scratch.searching.numpy().any():
-                break
+
+        self.loops.do_while("search", trial, trial, self.scratch.searching)
 
     def _evaluate_outputs(self, run: SubstepLaunches, state_out: State) -> None:
         """Forces, stresses and pad loads at the returned positions, and the final residual
@@ -230,9 +274,10 @@ class ImplicitSolver:
             cmd.launch()
         s.rz.zero_()
 
-    def _substep_launches(self, h: float, state_in: State, state_out: State, control: Control) -> SubstepLaunches:
+    def _substep_launches(self, h: float, state_in: State, state_out: State, control: Control) -> tuple:
         """Recorded launches for substeps of length ``h`` (s) from ``state_in`` into ``state_out``
-        under ``control`` (the arrays they are bound to); the least recently used set is dropped."""
+        under ``control`` (the arrays they are bound to), and the graphs captured of them (by
+        ``patient_any``); the least recently used set is dropped."""
         key = (h, id(state_in), id(state_out), id(control))
         entry = self._launches.pop(key, None)
         if entry is None or entry[0] is not state_in or entry[1] is not state_out or entry[2] is not control:
@@ -240,8 +285,8 @@ class ImplicitSolver:
             entry = (state_in, state_out, control,
                      record_substep_launches(self.model, self.config, self.scratch, state_out, control, h,
                                              start_pads=(state_in.pad_positions, state_in.pad_orientations),
-                                             step_start=step_start))
+                                             step_start=step_start, phase_graphs=not self.graphs), {})
         self._launches[key] = entry  # most recently used last
         while len(self._launches) > _LAUNCH_SETS:
             self._launches.pop(next(iter(self._launches)))
-        return entry[3]
+        return entry[3], entry[4]

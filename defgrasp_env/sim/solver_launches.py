@@ -4,14 +4,16 @@ A substep of length h: ``pads`` (pad poses at the substep's start and end), ``be
 initial guess), ``lag`` (contact faces, lagged friction, guess fixes, rotation seeds), then Newton
 iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coarse correction),
 ``cg`` (a block of CG iterations, repeated), ``coarse_post``, the line search (``energy0`` once,
-``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` and ``patient`` decide the extra iterations;
+``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` (the iterate's deepest contact) decides
+the extra iterations (with the loop control of ``solver_loops``);
 ``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
 after the last substep, ``outputs`` (forces, stresses, residual).
 Launches are recorded once per substep length and (state in, state out, control) set
 (``wp.launch(record_cmd=True)``; ``ImplicitSolver`` keeps the 8 sets used last). Each phase is a list
 holding one ``LaunchSequence`` of its launches: on the CPU a Warp graph (``wp.ScopedCapture``)
 replayed by Warp's C++ loop (a replay costs ~15 us of Python instead of ~15-25 us per launch), else
-the launches one by one. ``cg`` holds ``cg_block`` CG iterations (``SolverConfig.check_every``, or
+the launches one by one (also where the solver captures the whole substep in one graph, which
+cannot contain other CPU graphs). ``cg`` holds ``cg_block`` CG iterations (``SolverConfig.check_every``, or
 all of ``cg_iterations`` when it is 0): CG iterations of a world that has stopped are no-ops.
 """
 
@@ -38,10 +40,10 @@ class LaunchSequence:
     Warp records CPU graphs (Warp 1.19 does), else one by one (CUDA; a Warp that cannot capture on the CPU). Both run the same
     kernels on the same arrays in the same order, so the results are bit-identical."""
 
-    def __init__(self, commands: list, device):
+    def __init__(self, commands: list, device, graph: bool = True):
         self.commands = list(commands)
         self.graph = None
-        if self.commands and wp.get_device(device).is_cpu:
+        if graph and self.commands and wp.get_device(device).is_cpu:
             try:
                 with wp.ScopedCapture(device=device) as capture:
                     for cmd in self.commands:
@@ -72,8 +74,7 @@ class SubstepLaunches:
     begin_search: object
     trial: list
     apply: list
-    depth: list
-    patient: object
+    depth: object       # the iterate's deepest contact per world (extra iterations)
     clamp: object
     end: object
     outputs: list
@@ -226,12 +227,10 @@ def _apply(c: _Context, config) -> list:
                   s.res_norm, s.cg_it, s.last_dx, s.unconverged)]
 
 
-def _depth(c: _Context, config) -> list:
+def _depth(c: _Context):
     m, s = c.model, c.scratch
-    return [c.rec(kc.deepest_contact, m.num_nodes, c.work.positions, m.node_world, s.pad_pos1, s.pad_rot1,
-                  m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth),
-            c.rec(kc.reactivate_deep_worlds, m.num_worlds, s.depth, 0.5 * config.penetration_bound,
-                  s.newton_active)]
+    return c.rec(kc.deepest_contact, m.num_nodes, c.work.positions, m.node_world, s.pad_pos1, s.pad_rot1,
+                 m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth)
 
 
 def _outputs(c: _Context) -> list:
@@ -242,17 +241,19 @@ def _outputs(c: _Context) -> list:
 
 
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
-                            h: float, start_pads: tuple, step_start: wp.array) -> SubstepLaunches:
+                            h: float, start_pads: tuple, step_start: wp.array,
+                            phase_graphs: bool = True) -> SubstepLaunches:
     """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step,
     iterating in ``work`` (the output state: positions and velocities hold the step's start when
     it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
-    ``step_start`` at the step's start, toward ``control``."""
+    ``step_start`` at the step's start, toward ``control``. ``phase_graphs``: capture each phase
+    as a CPU graph (False where the caller captures the whole substep)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start)
     s, x = scratch, work.positions
     block = config.check_every or config.cg_iterations
 
     def seq(commands: list) -> list:
-        return [LaunchSequence(commands, model.device)]
+        return [LaunchSequence(commands, model.device, phase_graphs)]
 
     return SubstepLaunches(
         pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c)),
@@ -260,9 +261,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         energy0=seq([_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)]),
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
-        trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=seq(_depth(c, config)),
-        patient=c.rec(kc.reactivate_patient_worlds, model.num_worlds, s.patient, s.last_dx, config.newton_tolerance,
-                      s.diverged, s.newton_active),
+        trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=_depth(c),
         clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, model.free_axes, s.pad_pos1, s.pad_rot1,
                     model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
                     0.9 * config.penetration_bound, x, s.clamped),

@@ -396,26 +396,6 @@ def deepest_contact(
 
 
 @wp.kernel
-def reactivate_deep_worlds(depth: wp.array(dtype=float), bound: float, newton_active: wp.array(dtype=int)):
-    """Switch Newton back on in the worlds whose iterate is deeper than ``bound`` (m); clear depth."""
-    w = wp.tid()
-    active = 0
-    if depth[w] > bound:
-        active = 1
-    newton_active[w] = active
-    depth[w] = 0.0
-
-
-@wp.kernel
-def reactivate_patient_worlds(patient: wp.array(dtype=int), last_dx: wp.array(dtype=float), tol: float,
-                              diverged: wp.array(dtype=int), newton_active: wp.array(dtype=int)):
-    """Switch Newton back on in the ``patient`` worlds whose last update (m) is still above ``tol``."""
-    w = wp.tid()
-    if patient[w] != 0 and last_dx[w] > tol and diverged[w] == 0:
-        newton_active[w] = 1
-
-
-@wp.kernel
 def clamp_depth(
     node_world: wp.array(dtype=int),
     free: wp.array(dtype=wp.vec3),
