@@ -20,6 +20,7 @@ benchmarks/RESULTS.md unless ``--no-append``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import os
 import pathlib
@@ -35,14 +36,22 @@ import numpy as np  # noqa: E402
 import warp as wp  # noqa: E402
 
 import defgrasp_env  # noqa: E402,F401
+from defgrasp_env.envs.config import PickupConfig  # noqa: E402
 from defgrasp_env.policies import ScriptedPickupExpert  # noqa: E402
+from defgrasp_env.sim import SolverConfig  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
 
 
-def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int) -> dict:
+def solver_with_graphs(graphs: str) -> SolverConfig:
+    """The env's default solver settings with ``graphs`` ("auto", "on", "off")."""
+    return dataclasses.replace(PickupConfig().solver, graphs={"auto": None, "on": True, "off": False}[graphs])
+
+
+def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
+             graphs: str = "auto") -> dict:
     """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table."""
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
-                       device=device, object=obj, youngs_modulus=modulus)
+                       device=device, object=obj, youngs_modulus=modulus, solver=solver_with_graphs(graphs))
     obs, _ = env.reset(seed=0)
     rng = np.random.default_rng(0)
     expert = ScriptedPickupExpert.from_env(env) if policy == "expert" else None
@@ -63,16 +72,16 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
     substeps = env.unwrapped.scene.substeps
     env.close()
     t = np.array(times)
-    return {"W": worlds, "policy": policy, "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)),
+    return {"W": worlds, "policy": policy, "graphs": graphs, "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "substeps": substeps, "depth_mm": 1e3 * depth, "wrist_N": wrist, "successes": successes}
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| W | actions | object | E (Pa) | substeps | median ms | p95 ms | world-steps/s | deepest mm | "
-             "max wrist N | episodes won |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| W | actions | step graphs | object | E (Pa) | substeps | median ms | p95 ms | world-steps/s | "
+             "deepest mm | max wrist N | episodes won |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['W']} | {r['policy']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
+        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
                      f"{r['median_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
                      f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['successes'] if r['policy'] == 'expert' else '-'} |")
     return "\n".join(lines)
@@ -87,14 +96,18 @@ def main(argv=None) -> int:
     ap.add_argument("--youngs-modulus", type=float, default=1e5)
     ap.add_argument("--warmup", type=int, default=10)
     ap.add_argument("--steps", type=int, default=15)
+    ap.add_argument("--graphs", choices=["auto", "on", "off", "both"], default="auto",
+                    help="capture each solver step as one graph (SolverConfig.graphs); both: a row each, side by side")
     ap.add_argument("--no-append", action="store_true")
     args = ap.parse_args(argv)
     if min(args.worlds) < 1 or args.steps < 1 or args.warmup < 0:
         ap.error(f"--worlds and --steps must be >= 1 and --warmup >= 0, got {args.worlds}, {args.steps}, {args.warmup}")
     rows = []
     for w in args.worlds:
-        rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus, args.warmup, args.steps))
-        print(table(rows[-1:]).splitlines()[-1], flush=True)
+        for graphs in (["off", "on"] if args.graphs == "both" else [args.graphs]):
+            rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus, args.warmup,
+                                 args.steps, graphs))
+            print(table(rows[-1:]).splitlines()[-1], flush=True)
     report = table(rows)
     print(report)
     if not args.no_append:

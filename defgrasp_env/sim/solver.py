@@ -14,6 +14,7 @@ and replayed with one launch.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -179,14 +180,23 @@ class ImplicitSolver:
         if patient_any:
             s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(self.model.num_worlds))
         run, graphs = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
-        if not self.graphs:
-            self._advance(run, state_in, state_out, control, patient_any)
-        else:
-            if patient_any not in graphs:
+        if self.graphs and patient_any not in graphs:
+            try:
                 with wp.ScopedCapture(device=self.model.device, force_module_load=False) as capture:
                     self._advance(run, state_in, state_out, control, patient_any)
                 graphs[patient_any] = capture.graph
+            except RuntimeError as exc:
+                if self.config.graphs:
+                    raise
+                warnings.warn(f"capturing a solver step as a graph failed on {self.model.device} ({exc}); "
+                              "stepping without graphs from now on", RuntimeWarning, stacklevel=2)
+                self.graphs = False
+                self._launches.clear()
+                run, graphs = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
+        if self.graphs:
             wp.capture_launch(graphs[patient_any])
+        else:
+            self._advance(run, state_in, state_out, control, patient_any)
         if patient_any:
             s.patient.zero_()
 
