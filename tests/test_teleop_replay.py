@@ -111,17 +111,19 @@ def test_replay_realtime_timing():
     rp.connect()
     start = time.monotonic()
     seen = {}
-    while time.monotonic() - start < 5 * dt + 0.1:
+    while (len(seen) < 5 or time.monotonic() - start < 5 * dt + 0.1) and time.monotonic() - start < 5 * dt + 2.0:
         s = rp.read()
         if s.valid or not rp.finished:
             idx = next(i for i, x in enumerate(ts) if np.array_equal(x.pose, s.pose))
             seen.setdefault(idx, (time.monotonic() - start, s.timestamp_s))
         time.sleep(0.002)
     assert sorted(seen) == [0, 1, 2, 3, 4]
+    # released on the recorded schedule: never before its time (5 ms: clock reads around connect()),
+    # and late by at most what a loaded 2-core box delays this polling loop (0.1 s)
     for i, (t_first_seen, stamp) in seen.items():
-        assert t_first_seen == pytest.approx(i * dt, abs=0.03)  # released on the recorded schedule
+        assert i * dt - 0.005 <= t_first_seen <= i * dt + 0.1, (i, t_first_seen)
         assert stamp - seen[0][1] == pytest.approx(i * dt, abs=1e-9)  # rebased, intervals exact
-    assert seen[0][1] == pytest.approx(start, abs=0.03)  # timestamps on the host clock
+    assert seen[0][1] == pytest.approx(start, abs=0.1)  # timestamps on the host clock
     assert rp.finished and not rp.read().valid
 
 
