@@ -43,6 +43,31 @@ def test_aggregates_are_equal_slices_along_a_rope_whatever_its_pose():
     slices_along(turned, bisect_nodes(turned, 8), q @ along)
 
 
+def test_a_models_aggregates_do_not_depend_on_its_pose():
+    """The solver's aggregates (``Model.node_aggregate``) are cut in the object frame: a rope
+    built at two poses (here float rounding of the posed nodes moves ties at the cuts) gets the same
+    aggregates, and so do two worlds of one model and the env's cached-model assembly."""
+    from defgrasp_env.envs.world_models import assemble_model
+    from defgrasp_env.sim.model import ContactParams
+
+    rope = make_object_mesh("rope")
+    poses = [((0.0, 0.01, 0.0), (0.0, 0.0, 0.0, 1.0)),
+             ((0.013, 0.01, -0.02), (0.0, float(np.sin(0.61)), 0.0, float(np.cos(0.61))))]
+    posed = bisect_nodes(np.asarray(rope.nodes) @ _rotation_y(1.22).T)
+    reference = bisect_nodes(np.asarray(rope.nodes))
+    assert not np.array_equal(posed, reference), "the test needs a pose whose posed cut differs"
+    model = build_model([rope, rope], [Material()] * 2, poses=poses, device="cpu")
+    n = len(rope.nodes)
+    assert np.array_equal(model.node_aggregate[:n], reference) and np.array_equal(model.node_aggregate[n:], reference)
+    assembled = assemble_model([rope, rope], [Material()] * 2, poses, [], ContactParams(), "cpu")
+    assert np.array_equal(assembled.node_aggregate, model.node_aggregate)
+
+
+def _rotation_y(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
 def test_compact_objects_are_one_aggregate():
     """A sphere, a cuboid (and the torus, flat but not slender) keep one aggregate: their rigid
     translations."""

@@ -34,8 +34,9 @@ def _args(max_steps: int) -> list[str]:
 ARGS = _args(6)
 NAMES = sorted(j.name for j in plan_jobs(["cuboid"], [1e4, 1e5], 3, 0))
 # Recorder bookkeeping that depends on which episodes the same env recorded before (as in a resumed
-# serial run): the episode's index in its recorder and (in replay_json) the reset that built the scene.
-BOOKKEEPING = {"created_utc", "episode_index"}
+# serial run): the episode's index in its recorder, its world in a vector env and (in replay_json) the
+# reset that built the scene.
+BOOKKEEPING = {"created_utc", "episode_index", "world"}
 
 
 def _contents(path: pathlib.Path) -> tuple[dict, dict]:
@@ -108,6 +109,16 @@ def test_ray_retries_a_worker_killed_mid_episode(serial, local_ray, tmp_path):
     assert (local_ray / "crashed").exists(), "no worker was killed: the test did not test a retry"
     assert_same_episodes(serial, tmp_path)   # the retried episode equals the serial one
     assert validate_path(tmp_path).ok
+
+
+def test_worlds_per_task_match_serial(serial, local_ray, tmp_path):
+    """--worlds 3 on Ray: one task per (object, E) records its 3 episodes as the worlds of one
+    vector env; the files equal the serial run's (random actions: one action space per world)."""
+    assert generate_main([str(tmp_path), *ARGS, "--policy", "random", "--ray", "--workers", "2", "--worlds", "3"]) == 0
+    assert_same_episodes(serial, tmp_path)
+    assert validate_path(tmp_path).ok
+    result = replay_episode(tmp_path / NAMES[-1])  # world 2 of a task's vector env replays bit-exactly
+    assert result.bit_exact and result.num_steps == 6, result
 
 
 def test_a_failing_task_is_reported_cleanly(local_ray, tmp_path, capsys):

@@ -62,3 +62,50 @@ def test_generate_uses_the_scripted_expert_by_default(tmp_path, capsys):
     ep = load_episode(tmp_path / "cuboid_E1e5_000.h5")
     assert ep.num_steps == 4 and np.all(np.abs(ep["steps/action"]) <= 1.0)
     assert "cuboid" in capsys.readouterr().out
+
+
+def _datasets(path: pathlib.Path) -> dict:
+    import h5py
+
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda k, v: out.__setitem__(k, v[()]) if isinstance(v, h5py.Dataset) else None)
+    return out
+
+
+def test_worlds_record_the_serial_runs_data(tmp_path):
+    """``--worlds 3``: the 3 episodes of each (object, E) recorded together as the worlds of one
+    vector env hold, dataset for dataset and bit for bit, what one env recording them one after the
+    other holds (a world steps as a single env on its seed, and an episode does not depend on the
+    episodes the env recorded before it: the rope's solver aggregates are cut in the object frame),
+    with the scripted expert and with random actions (a random action space per world); a second
+    run with --worlds 2 resumes a deleted file."""
+    for policy in ("defgrasp_env.policies:ScriptedPickupExpert", "random"):
+        args = ["--objects", "rope,cuboid", "--moduli", "1e4", "--episodes", "3", "--max-steps", "12",
+                "--policy", policy, "--no-progress"]
+        serial, together = tmp_path / f"serial-{policy[-6:]}", tmp_path / f"worlds-{policy[-6:]}"
+        assert generate_main([str(serial), *args]) == 0
+        assert generate_main([str(together), *args, "--worlds", "3"]) == 0
+        names = sorted(p.name for p in serial.glob("*.h5"))
+        assert names == sorted(p.name for p in together.glob("*.h5")) and len(names) == 6
+        for name in names:
+            a, b = _datasets(serial / name), _datasets(together / name)
+            assert a.keys() == b.keys(), name
+            for k in a:
+                assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k]), f"{policy} {name}: {k} differs"
+        assert validate_path(together).ok
+    (together / names[1]).unlink()
+    assert generate_main([str(together), *args, "--worlds", "2"]) == 0
+    assert np.array_equal(_datasets(together / names[1])["steps/action"], _datasets(serial / names[1])["steps/action"])
+
+
+def test_worlds_argument_errors(tmp_path, capsys):
+    import pytest
+
+    base = [str(tmp_path), "--objects", "cuboid", "--moduli", "1e4", "--max-steps", "2", "--no-progress"]
+    for bad in (["--worlds", "0"], ["--worlds", "2", "--frames"]):
+        with pytest.raises(SystemExit):
+            generate_main([*base, *bad])
+    err = capsys.readouterr().err
+    assert "--worlds" in err and "--frames records one episode at a time" in err
+    assert list(tmp_path.iterdir()) == []

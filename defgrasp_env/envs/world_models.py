@@ -29,7 +29,8 @@ def _world_template(mesh: TetMesh, material: Material, pad_half_extents: tuple, 
                     device="cpu")
     out = {name: getattr(m, name).numpy() for name in (*_NODE_FIELDS, *_TET_FIELDS)}
     out.update(tets=m.tets.numpy(), world_volume=m.world_volume.numpy(), pad_half_extents=m.pad_half_extents.numpy(),
-               gravity=m.gravity, surface=m.surfaces[0], nodes=np.asarray(mesh.nodes, dtype=np.float64))
+               gravity=m.gravity, surface=m.surfaces[0], nodes=np.asarray(mesh.nodes, dtype=np.float64),
+               node_aggregate=m.node_aggregate)
     return out
 
 
@@ -56,6 +57,7 @@ def assemble_model(meshes: Sequence[TetMesh], materials: Sequence[Material], pos
     return Model(
         device=str(wp.get_device(device)), num_worlds=len(parts), pads_per_world=len(parts[0]["pad_half_extents"]),
         node_start=node_start, tet_start=tet_start, surfaces=[p["surface"] for p in parts],
+        node_aggregate=cat([p["node_aggregate"] for p in parts]),
         rest_positions=arr(cat(rest).astype(np.float32), wp.vec3),
         tets=arr(cat([p["tets"] + s for p, s in zip(parts, node_start[:-1])]).astype(np.int32), wp.vec4i),
         tet_world=arr(np.repeat(world, tet_counts).astype(np.int32), wp.int32),

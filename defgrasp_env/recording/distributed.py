@@ -1,11 +1,13 @@
 """``defgrasp-generate --ray``: the same episodes as a serial run, recorded by the workers of a Ray cluster.
 
-One Ray task per episode file. Each task runs :func:`generate.record_jobs` for its one job in a Ray
-worker process (its own env; one CPU, or one GPU when ``device`` is CUDA), so every file is written
-by the same code, with the same seed, as in a serial run: every dataset of every file is
-bit-identical on the CPU; only the recorder's bookkeeping differs: each task records in a fresh env
-(``episode_index`` 0, no ``scene_origin`` in the replay data), where a serial run records each
-(object, E) in one env, as a resumed serial run differs from an uninterrupted one.
+One Ray task per episode file, or (``--worlds N``) per group of up to N episodes of one (object, E).
+Each task runs :func:`generate.record_jobs` for its jobs in a Ray worker process (its own env, a
+single env or a native vector env with a world per episode; one CPU, or one GPU when ``device`` is
+CUDA), so every file is written by the same code, with the same seed, as in a serial run: every
+dataset of every file is bit-identical on the CPU (a world of a vector env steps as a single env on
+its seed, and an episode does not depend on what the env recorded before); only the recorder's
+bookkeeping differs: each task records in a fresh env (``episode_index``, ``world``, no
+``scene_origin`` in the replay data).
 Ray schedules the tasks on the cluster's resources and retries a task whose worker process or node
 died (``max_retries``); a task whose file exists already (a resumed run, or a retry after its file
 was published) returns at once. Files appear atomically (``atomic.py``): a worker killed at any
@@ -54,20 +56,27 @@ def _import_ray():
     return ray
 
 
-def record_one(out: str, job: Job, policy_spec: str, max_steps: int | None, device: str,
-               record_frames: bool, compression: str | None) -> tuple[str, bool | None]:
-    """Body of one Ray task: record ``job`` into ``out`` unless its file exists; return
-    (file name, success), success None when the file was there already."""
+def record_group(out: str, jobs: list[Job], policy_spec: str, max_steps: int | None, device: str,
+                 record_frames: bool, compression: str | None) -> list[tuple[str, bool | None]]:
+    """Body of one Ray task: record the ``jobs`` (of one (object, E)) whose files are missing into
+    ``out``, together in one vector env when there are several (``generate.record_jobs``); return
+    (file name, success) per job, success None when its file was there already."""
     from .cli import default_caches
 
     default_caches()
-    path = pathlib.Path(out) / job.name
-    if path.exists():
-        return job.name, None
-    result: list[bool] = []
-    record_jobs(path.parent, [job], policy_spec, max_steps, device, record_frames, compression,
-                on_episode=lambda _job, success: result.append(success))
-    return job.name, result[0]
+    todo = [j for j in jobs if not (pathlib.Path(out) / j.name).exists()]
+    result: dict[str, bool] = {}
+    record_jobs(pathlib.Path(out), todo, policy_spec, max_steps, device, record_frames, compression,
+                on_episode=lambda job, success: result.__setitem__(job.name, success), worlds=max(len(todo), 1))
+    return [(j.name, result.get(j.name)) for j in jobs]
+
+
+def job_groups(jobs: list[Job], worlds: int) -> list[list[Job]]:
+    """``jobs`` in groups of at most ``worlds`` of the same (object, E), in order (one Ray task each)."""
+    groups: dict[tuple[str, float], list[Job]] = {}
+    for j in jobs:
+        groups.setdefault((j.object, j.youngs_modulus), []).append(j)
+    return [g[k:k + worlds] for g in groups.values() for k in range(0, len(g), worlds)]
 
 
 def _worker_device(device: str) -> tuple[str, float]:
@@ -124,10 +133,12 @@ def _start_ray(ray, address: str | None, workers: int | None) -> bool:
 def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
                  device: str = "cpu", record_frames: bool = False, compression: str | None = None,
                  progress: bool = True, *, address: str | None = None, workers: int | None = None,
-                 max_retries: int = DEFAULT_MAX_RETRIES) -> list[pathlib.Path]:
+                 max_retries: int = DEFAULT_MAX_RETRIES, worlds: int = 1) -> list[pathlib.Path]:
     """Record every job whose file is missing on a Ray cluster; return the files of all jobs.
 
     Args:
+        worlds: episodes of one (object, E) per task, recorded together in a vector env of that
+            many worlds (1: one episode per task, in a single env).
         address: Ray cluster address (``auto``, ``HOST:6379``, ``ray://HOST:10001``); None starts a
             local Ray with ``workers`` CPUs (all CPUs when None).
         workers: at most this many episodes at once (None: as many as the cluster's CPUs or GPUs allow).
@@ -140,6 +151,8 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
 
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    if isinstance(worlds, bool) or not isinstance(worlds, int) or worlds < 1:
+        raise ValueError(f"worlds must be an integer >= 1, got {worlds!r}")
     if max_retries < 0:
         raise ValueError(f"max_retries must be >= 0, got {max_retries}")
     task_device, gpus = _worker_device(device)
@@ -150,12 +163,12 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
     if not todo:
         return [out / j.name for j in jobs]
     started = _start_ray(ray, address, workers)
-    task = ray.remote(record_one).options(num_cpus=1, num_gpus=gpus, max_retries=max_retries,
+    task = ray.remote(record_group).options(num_cpus=1, num_gpus=gpus, max_retries=max_retries,
                                           retry_exceptions=False)
     bar, on_episode = progress_bar(len(jobs), len(jobs) - len(todo), progress)
     by_name = {j.name: j for j in todo}
-    queue, pending = list(reversed(todo)), []
-    limit = workers or len(todo)  # Ray's own pattern to bound pending tasks: ray.wait
+    queue, pending = list(reversed(job_groups(todo, worlds))), []
+    limit = workers or len(queue)  # Ray's own pattern to bound pending tasks: ray.wait
     try:
         with _ctrl_c_as_flag() as interrupted:
             _drain(ray, task, queue, pending, limit, interrupted, on_episode, by_name, max_retries,
@@ -173,7 +186,7 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
     return [out / j.name for j in jobs]
 
 
-def _drain(ray, task, queue: list[Job], pending: list, limit: int, interrupted: threading.Event, on_episode,
+def _drain(ray, task, queue: list[list[Job]], pending: list, limit: int, interrupted: threading.Event, on_episode,
            by_name: dict[str, Job], max_retries: int, task_args: tuple) -> None:
     """Keep at most ``limit`` tasks pending until ``queue`` and ``pending`` are empty (``pending`` is
     updated in place, so the caller can cancel what is left); raise ``KeyboardInterrupt`` when
@@ -188,10 +201,11 @@ def _drain(ray, task, queue: list[Job], pending: list, limit: int, interrupted: 
             raise KeyboardInterrupt
         for ref in done:
             try:
-                name, success = ray.get(ref)
+                results = ray.get(ref)
             except ray.exceptions.RayTaskError as exc:  # the task's own exception, without Ray's wrapper
                 raise (exc.cause if isinstance(exc.cause, Exception) else exc) from exc
             except ray.exceptions.RayError as exc:  # worker or node lost more than max_retries times
                 raise RuntimeError(f"a Ray task failed after {max_retries} retries: {exc}") from exc
-            if on_episode is not None and success is not None:  # None: the file was there already
-                on_episode(by_name[name], bool(success))
+            for name, success in results:
+                if on_episode is not None and success is not None:  # None: the file was there already
+                    on_episode(by_name[name], bool(success))

@@ -1,16 +1,19 @@
 """``defgrasp-generate``: record N episodes per (object, E) with a policy (default: the scripted expert).
 
-    defgrasp-generate OUT --objects cuboid,torus --moduli 1e4,1e5 --episodes 3 [--seed 0]
+    defgrasp-generate OUT --objects cuboid,torus --moduli 1e4,1e5 --episodes 3 [--seed 0] [--worlds 3]
 
 Files are named ``<object>_E<E>_<rep>.h5``; a file that exists is complete (files appear
 atomically), so a run interrupted at any moment resumes where it stopped when started again with
 the same arguments. Each episode's reset seed derives from ``--seed`` and its file name only, so a
-resumed run records exactly what an uninterrupted one would.
+resumed run records exactly what an uninterrupted one would. ``--worlds N`` records up to N episodes
+of an (object, E) together, as the worlds of one native vector env (each world steps as a single
+env on its seed; on the CPU the files hold the same data as one-by-one recording's, bit for bit).
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import importlib
 import inspect
 import pathlib
@@ -50,16 +53,28 @@ def plan_jobs(objects: list[str], moduli: list[float], episodes: int, seed: int)
 
 
 class RandomPolicy:
-    """Uniform random actions from the action space (seeded per episode); for smoke tests."""
+    """Uniform random actions from the action space (seeded per episode); for smoke tests. On a
+    vector env, one action space per world, seeded with that world's seed (``reset(seed=[...])``),
+    so world w draws what a single env seeded like it draws."""
 
     def __init__(self, env):
         self.space = env.action_space
+        self.single = getattr(env, "single_action_space", None)
+        self.spaces: list = []
 
-    def reset(self, seed: int | None = None) -> None:
-        self.space.seed(seed)
+    def reset(self, seed: int | list[int] | None = None) -> None:
+        if self.single is None:
+            self.space.seed(seed)
+            return
+        seeds = list(seed) if isinstance(seed, (list, tuple)) else [seed] * self.space.shape[0]
+        self.spaces = [copy.deepcopy(self.single) for _ in seeds]
+        for space, s in zip(self.spaces, seeds):
+            space.seed(s)
 
     def __call__(self, obs):
-        return self.space.sample()
+        if self.single is None:
+            return self.space.sample()
+        return np.stack([space.sample() for space in self.spaces])
 
 
 def load_policy(spec: str, env) -> Callable:
@@ -85,7 +100,7 @@ def load_policy(spec: str, env) -> Callable:
     return obj
 
 
-def _reset_policy(policy, seed: int) -> None:
+def _reset_policy(policy, seed: int | list[int]) -> None:
     reset = getattr(policy, "reset", None)
     if callable(reset):
         params = inspect.signature(reset).parameters
@@ -94,15 +109,15 @@ def _reset_policy(policy, seed: int) -> None:
 
 def record_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
                 device: str = "cpu", record_frames: bool = False, compression: str | None = None,
-                on_episode: Callable[[Job, bool], None] | None = None) -> None:
-    """Record ``jobs`` into ``out`` (one env per (object, E), the recorder named by the job);
-    ``on_episode(job, success)`` after each. The one place where the recorder is driven: the serial
-    run and each Ray task (``distributed.py``) call it."""
-    import gymnasium as gym
-
-    from .. import ENV_ID
-    from .recorder import HDF5Recorder
-
+                on_episode: Callable[[Job, bool], None] | None = None, worlds: int = 1) -> None:
+    """Record ``jobs`` into ``out`` (the recorder named by the job); ``on_episode(job, success)``
+    after each. The one place where the recorder is driven: the serial run and each Ray task
+    (``distributed.py``) call it. ``worlds`` 1: one env per (object, E), its episodes one after
+    the other; > 1: the episodes of an (object, E) in native vector envs of up to ``worlds`` worlds,
+    recorded together (each world's episode as a single env on its seed records it; the policy
+    must take a batch of observations, as the scripted expert and 'random' do)."""
+    if isinstance(worlds, bool) or not isinstance(worlds, int) or worlds < 1:
+        raise ValueError(f"worlds must be an integer >= 1, got {worlds!r}")
     groups: dict[tuple[str, float], list[Job]] = {}
     for j in jobs:
         groups.setdefault((j.object, j.youngs_modulus), []).append(j)
@@ -112,22 +127,73 @@ def record_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps:
             kwargs["max_episode_steps"] = max_steps
         if record_frames:
             kwargs["render_mode"] = "rgb_array"
-        env = HDF5Recorder(gym.make(ENV_ID, **kwargs), out, record_frames=record_frames,
-                           compression=compression, save_unfinished=False)
-        policy = load_policy(policy_spec, env)
-        try:
-            for job in group:
-                env.set_next_name(job.name)
-                _reset_policy(policy, job.seed)
-                obs, _ = env.reset(seed=job.seed)
-                done = False
-                while not done:
-                    obs, _, terminated, truncated, _ = env.step(policy(obs))
-                    done = terminated or truncated
+        if worlds == 1:
+            _record_one_by_one(out, group, kwargs, policy_spec, record_frames, compression, on_episode)
+        else:
+            for k in range(0, len(group), worlds):
+                _record_together(out, group[k:k + worlds], kwargs, policy_spec, record_frames, compression,
+                                 on_episode)
+
+
+def _record_one_by_one(out, group: list[Job], kwargs: dict, policy_spec: str, record_frames: bool,
+                       compression: str | None, on_episode) -> None:
+    """The ``group``'s episodes one after the other in one single env made with ``kwargs``."""
+    import gymnasium as gym
+
+    from .. import ENV_ID
+    from .recorder import HDF5Recorder
+
+    env = HDF5Recorder(gym.make(ENV_ID, **kwargs), out, record_frames=record_frames, compression=compression,
+                       save_unfinished=False)
+    policy = load_policy(policy_spec, env)
+    try:
+        for job in group:
+            env.set_next_name(job.name)
+            _reset_policy(policy, job.seed)
+            obs, _ = env.reset(seed=job.seed)
+            done = False
+            while not done:
+                obs, _, terminated, truncated, _ = env.step(policy(obs))
+                done = terminated or truncated
+            if on_episode is not None:
+                on_episode(job, bool(terminated))
+    finally:
+        env.close()
+
+
+def _record_together(out, group: list[Job], kwargs: dict, policy_spec: str, record_frames: bool,
+                     compression: str | None, on_episode) -> None:
+    """The ``group``'s episodes at once, world w of a native vector env (made with ``kwargs``,
+    autoreset off) reset with job w's seed; a batched policy (a ``reset(seed)`` gets the worlds'
+    seeds as a list)."""
+    import gymnasium as gym
+    import numpy as np
+    from gymnasium.vector import AutoresetMode
+
+    from .. import ENV_ID
+    from .vector_recorder import VectorHDF5Recorder
+
+    if record_frames:
+        raise ValueError("--frames records one episode at a time: use --worlds 1")
+    env = VectorHDF5Recorder(gym.make_vec(ENV_ID, num_envs=len(group), vectorization_mode="vector_entry_point",
+                                          autoreset_mode=AutoresetMode.DISABLED, **kwargs),
+                             out, compression=compression, save_unfinished=False)
+    policy = load_policy(policy_spec, env)
+    try:
+        for w, job in enumerate(group):
+            env.set_next_name(job.name, w)
+        seeds = [job.seed for job in group]
+        _reset_policy(policy, seeds)
+        obs, _ = env.reset(seed=seeds)
+        done = np.zeros(len(group), bool)
+        while not done.all():
+            obs, _, terminated, truncated, _ = env.step(policy(obs))
+            for w in np.flatnonzero(~done & (terminated | truncated)):
+                done[w] = True
                 if on_episode is not None:
-                    on_episode(job, bool(terminated))
-        finally:
-            env.close()
+                    on_episode(group[w], bool(terminated[w]))
+    finally:
+        env.close()
 
 
 def progress_bar(total: int, finished: int, enabled: bool):
@@ -147,8 +213,9 @@ def progress_bar(total: int, finished: int, enabled: bool):
 
 def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
              device: str = "cpu", record_frames: bool = False, compression: str | None = None,
-             progress: bool = True) -> list[pathlib.Path]:
-    """Record every job whose file is missing, one after the other; return the files of all jobs."""
+             progress: bool = True, worlds: int = 1) -> list[pathlib.Path]:
+    """Record every job whose file is missing (``worlds`` episodes of an (object, E) at once, see
+    ``record_jobs``); return the files of all jobs."""
     from .atomic import check_writable_directory, remove_stale_temps
 
     check_writable_directory(out)
@@ -156,7 +223,7 @@ def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: in
     todo = [j for j in jobs if not (out / j.name).exists()]
     bar, on_episode = progress_bar(len(jobs), len(jobs) - len(todo), progress)
     try:
-        record_jobs(out, todo, policy_spec, max_steps, device, record_frames, compression, on_episode)
+        record_jobs(out, todo, policy_spec, max_steps, device, record_frames, compression, on_episode, worlds)
     finally:
         if bar is not None:
             bar.close()
@@ -211,12 +278,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="record on a Ray cluster: 'auto' (the one `ray start` made), an address, or no "
                         "value for a local Ray on this machine (needs defgrasp[ray])")
+    p.add_argument("--worlds", type=int, default=1,
+                   help="episodes of one (object, E) recorded together in a native vector env of this many "
+                        "worlds (per process; with --ray per worker); the policy must take batched observations")
     p.add_argument("--workers", type=int, default=None,
                    help="with --ray: episodes recorded at once (default: one per CPU, or per GPU with --device cuda)")
     args = p.parse_args(argv)
     default_caches()
-    if args.episodes < 1 or (args.max_steps is not None and args.max_steps < 1):
-        p.error("--episodes and --max-steps must be >= 1")
+    if args.episodes < 1 or args.worlds < 1 or (args.max_steps is not None and args.max_steps < 1):
+        p.error(f"--episodes, --worlds and --max-steps must be >= 1, got {args.episodes}, {args.worlds}, "
+                f"{args.max_steps}")
+    if args.worlds > 1 and args.frames:
+        p.error("--frames records one episode at a time: use --worlds 1")
     if args.workers is not None and (args.workers < 1 or args.ray is None):
         p.error(f"--workers needs --ray and must be >= 1, got {args.workers}")
     jobs = plan_jobs([o for o in args.objects.split(",") if o], args.moduli, args.episodes, args.seed)
@@ -228,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         record = partial(run_jobs_ray, address=None if args.ray == "local" else args.ray, workers=args.workers)
     try:
         paths = record(args.out, jobs, args.policy, args.max_steps, args.device, args.frames,
-                       args.compression, progress=not args.no_progress)
+                       args.compression, progress=not args.no_progress, worlds=args.worlds)
     except KeyboardInterrupt:
         print("\ninterrupted: finished episodes are kept; run the same command again to resume", file=sys.stderr)
         return 130

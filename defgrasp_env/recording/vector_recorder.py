@@ -89,6 +89,14 @@ class VectorHDF5Recorder(VectorWrapper):
     def paths(self) -> list[pathlib.Path]:
         return self.writer.paths
 
+    def set_next_name(self, name: str, world: int) -> None:
+        """Use file name ``name`` (in ``directory``) for world ``world``'s next saved episode
+        instead of the template."""
+        n = self.env.unwrapped.num_envs
+        if isinstance(world, bool) or not isinstance(world, (int, np.integer)) or not 0 <= world < n:
+            raise ValueError(f"world must be an int in [0, {n - 1}], got {world!r}")
+        self.writer.set_next_name(name, int(world))
+
     # -- gym API -----------------------------------------------------------------------------
     def reset(self, *, seed=None, options: dict | None = None):
         obs, info = self.env.reset(seed=seed, options=options)

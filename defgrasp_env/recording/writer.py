@@ -72,17 +72,17 @@ class EpisodeWriter:
         self.name_template = name_template
         self.paths: list[pathlib.Path] = []
         self.episode_index = 0
-        self._next_name: str | None = None
+        self._next_name: dict[int, str] = {}  # world -> file name of its next saved episode
         self._open: dict[int, _Open] = {}
         self._versions = to_json(library_versions(), "versions")
 
-    def set_next_name(self, name: str) -> None:
-        """Use file name ``name`` (in ``directory``) for the next saved episode instead of the template."""
+    def set_next_name(self, name: str, w: int = 0) -> None:
+        """Use file name ``name`` (in ``directory``) for world ``w``'s next saved episode instead of
+        the template."""
         if not name.endswith(SUFFIX) or os.sep in name or name.startswith("."):
             raise ValueError(f"episode file name must be a plain name ending in {SUFFIX!r}, got {name!r}")
-        self._next_name = name
+        self._next_name[w] = name
 
-    # -- one world's episode ---------------------------------------------------------------
     def start(self, w: int, object_record: dict, obs0: dict, replay: dict, object_name: str) -> None:
         """Open world ``w``'s next episode: its ``object/`` group, first observation, replay data
         (``ReplaySpec.to_json_dict()`` plus ``max_episode_steps``) and object name. An episode of
@@ -118,9 +118,9 @@ class EpisodeWriter:
             self._open.pop(w, None)
             return None
         episode = self._open[w]
-        path = self._next_path()
+        path = self._next_path(w)
         write_episode(path, *self._contents(episode, w, reason), self.compression)
-        self._next_name = None  # used: a failed write keeps it for the next save
+        self._next_name.pop(w, None)  # used: a failed write keeps it for the next save
         del self._open[w]
         self.paths.append(path)
         self.episode_index += 1
@@ -133,9 +133,9 @@ class EpisodeWriter:
         return steps
 
     # -- internals ---------------------------------------------------------------------------
-    def _next_path(self) -> pathlib.Path:
-        if self._next_name is not None:
-            return self.directory / self._next_name
+    def _next_path(self, w: int) -> pathlib.Path:
+        if w in self._next_name:
+            return self.directory / self._next_name[w]
         while (path := self.directory / self.name_template.format(index=self.episode_index)).exists():
             self.episode_index += 1
         return path

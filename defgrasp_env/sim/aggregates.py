@@ -9,8 +9,9 @@ nodes at the median along the principal axis of each piece, as long as the piece
 aggregate (its rigid translations; measured on the expert's episodes at E = 1e4 and 1e7: cutting
 the sphere into 8 pieces cost 14-23 % more CG iterations, the torus 7-8 % fewer; cutting the rope
 into 8 slices saved 11-37 %).
-The cuts follow the principal axes, not the coordinate axes, so a turned object is cut the same
-way (up to nodes tied at a cut).
+The cuts follow the principal axes of the object-frame nodes (``build_model``), so an object is cut
+the same way whatever its pose (cutting posed nodes split nodes tied at a cut by float rounding of
+the pose, so an episode depended on the pose of the reset that built the scene).
 """
 
 from __future__ import annotations
@@ -53,12 +54,3 @@ def bisect_nodes(x: np.ndarray, pieces: int = AGGREGATES, elongation: float = EL
         index[g] = k
     return index
 
-
-def node_aggregates(rest_positions: np.ndarray, node_start: np.ndarray, pieces: int = AGGREGATES) -> np.ndarray:
-    """World-local aggregate index [N] int32 of every node of a model (``rest_positions`` [N, 3] m,
-    ``node_start`` [W+1]: world ``w`` owns nodes ``node_start[w]:node_start[w+1]``)."""
-    index = np.empty(len(rest_positions), dtype=np.int32)
-    for w in range(len(node_start) - 1):
-        sl = slice(int(node_start[w]), int(node_start[w + 1]))
-        index[sl] = bisect_nodes(rest_positions[sl], pieces)
-    return index

@@ -15,6 +15,7 @@ import numpy as np
 import warp as wp
 
 from ..transforms import quat_normalize, quat_to_matrix
+from .aggregates import bisect_nodes
 from .materials import Material, check_range
 
 
@@ -72,6 +73,8 @@ class Model:
     node_start: np.ndarray        # [W+1] int64 host: first node of each world
     tet_start: np.ndarray         # [W+1] int64 host: first tet of each world
     surfaces: list[np.ndarray]    # W x [S_w,3] int32 host: boundary triangles, world-local node ids
+    node_aggregate: np.ndarray    # [N] int32 host: world-local coarse aggregate of each node (``aggregates.py``,
+                                  # cut in the object frame: the same for every pose)
     rest_positions: wp.array      # [N] vec3, m: node positions at the initial pose
     tets: wp.array                # [T] vec4i: global node indices, positively oriented
     tet_rest_inv: wp.array        # [T] mat33: inverse of the rest edge matrix D_m (object frame), 1/m
@@ -148,7 +151,7 @@ def build_model(
     device = str(wp.get_device(device))
 
     positions, tets, rest_inv, volumes, mus, lams, tet_world = [], [], [], [], [], [], []
-    masses, node_world, free, world_volume, node_stiffness = [], [], [], [], []
+    masses, node_world, free, world_volume, node_stiffness, aggregates = [], [], [], [], [], []
     node_start, tet_start = [0], [0]
     for w, (mesh, material, (pos, quat)) in enumerate(zip(meshes, materials, poses)):
         nodes = np.asarray(mesh.nodes, dtype=np.float64)
@@ -168,6 +171,7 @@ def build_model(
         mu, lam = material.lame
         m = lumped_masses(t, vol, material.density, len(x))
         positions.append(x)
+        aggregates.append(bisect_nodes(nodes))
         tets.append(t + node_start[-1])
         rest_inv.append(np.linalg.inv(dm))
         volumes.append(vol)
@@ -205,6 +209,7 @@ def build_model(
         node_start=np.asarray(node_start, dtype=np.int64),
         tet_start=np.asarray(tet_start, dtype=np.int64),
         surfaces=[np.asarray(mesh.surface, dtype=np.int32) for mesh in meshes],
+        node_aggregate=cat(aggregates).astype(np.int32),
         rest_positions=arr(cat(positions).astype(np.float32), wp.vec3),
         tets=arr(cat(tets).astype(np.int32), wp.vec4i),
         tet_rest_inv=arr(cat(rest_inv).astype(np.float32), wp.mat33),

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from .aggregates import node_aggregates
 from .model import Model
 
 
@@ -105,7 +104,7 @@ class SolverScratch:
         def per_world(dtype):
             return wp.zeros(w, dtype=dtype, device=d)
 
-        aggregate = node_aggregates(model.rest_positions.numpy(), model.node_start)
+        aggregate = model.node_aggregate
         size = 3 * (int(aggregate.max()) + 1)
 
         def coarse(dtype, ndim):
