@@ -38,11 +38,18 @@ def screenshot(url: str, path: pathlib.Path, *, size=(900, 650), wait_ms: int = 
     still be fading in when the virtual-time budget ends, or its WebGL context can fail to start and
     leave a white page); up to ``attempts`` shots, each in a fresh browser profile with a longer budget
     (at most 3x ``wait_ms``), and the last one is returned whatever it shows (the test's own checks
-    then decide)."""
+    then decide); a browser that crashed or hung counts as an attempt."""
+    img, error = None, None
     for k in range(attempts):
-        img = _screenshot_once(url, path, size=size, wait_ms=wait_ms * min(k + 1, 3), timeout_s=timeout_s)
+        try:
+            img = _screenshot_once(url, path, size=size, wait_ms=wait_ms * min(k + 1, 3), timeout_s=timeout_s)
+        except (RuntimeError, subprocess.TimeoutExpired) as exc:  # a browser that crashed or hung: try again
+            error = exc
+            continue
         if ready is None or ready(img):
             break
+    if img is None:
+        raise RuntimeError(f"no screenshot of {url} in {attempts} attempts") from error
     return img
 
 

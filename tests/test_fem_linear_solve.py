@@ -156,7 +156,7 @@ def held_rope_steps(mode: str, steps: int = 6, config: SolverConfig = SolverConf
     model = build_model([make_object_mesh("rope")], [Material(youngs_modulus=1e4)],
                         poses=[((0.0, 0.004, 0.0), (0.0, 0.0, 0.0, 1.0))], device="cpu")
     state, control = State.from_model(model), Control.from_model(model)
-    solver = ImplicitSolver(model, dataclasses.replace(config, graphs=mode == "step"))
+    solver = ImplicitSolver(model, dataclasses.replace(config, graphs={"step": True, "fallback": None}.get(mode, False)))
     run, graphs = solver._substep_launches(DT / config.substeps, state, state, control)  # what ``step`` replays
     if mode == "launches":
         for phase in (run.lag, run.evaluate, run.cg, run.coarse_post, run.energy0, run.trial, run.apply,
@@ -164,7 +164,7 @@ def held_rope_steps(mode: str, steps: int = 6, config: SolverConfig = SolverConf
             for seq in phase:
                 seq.graph = None
     reports = [solver.step(state, state, control, dt=DT, patient=patient) for _ in range(steps)]
-    assert (len(graphs) == 1) == (mode == "step"), graphs   # captured once, then replayed
+    assert (len(graphs) == 1) == solver.graphs, graphs   # captured once, then replayed
     return state, reports
 
 
@@ -196,7 +196,11 @@ def _resting_rope(config: SolverConfig, steps: int):
     state, control = State.from_model(model), Control.from_model(model)
     solver = ImplicitSolver(model, config)
     assert solver.graphs, "this Warp captures no CPU graphs with capture_while"
-    return solver, [solver.step(state, state, control, dt=DT) for _ in range(steps)]
+    reports, cg_blocks = [], []
+    for _ in range(steps):
+        reports.append(solver.step(state, state, control, dt=DT))
+        cg_blocks.append(int(solver.loops.count["cg"].numpy()[0]))   # in the step's last Newton iteration
+    return solver, reports, cg_blocks
 
 
 def test_device_loops_stop_early_and_take_the_extra_iterations():
@@ -205,11 +209,12 @@ def test_device_loops_stop_early_and_take_the_extra_iterations():
     its passes; a patient world that cannot meet the tolerance gets exactly ``patient_iterations``
     extra Newton iterations per substep."""
     cfg = SolverConfig(substeps=1, newton_iterations=6, cg_iterations=40, check_every=4)
-    solver, reports = _resting_rope(cfg, 12)
+    solver, reports, cg_blocks = _resting_rope(cfg, 12)
     assert int(reports[-1].newton_iterations[0]) < 6
-    assert solver.loops.count["newton"].numpy()[0] < 6 and solver.loops.count["cg"].numpy()[0] < 10
-    solver, _ = _resting_rope(dataclasses.replace(cfg, check_every=0), 12)
-    assert solver.loops.count["newton"].numpy()[0] == 6 and solver.loops.count["cg"].numpy()[0] == 1
+    assert solver.loops.count["newton"].numpy()[0] < 6 and min(cg_blocks) < 10, cg_blocks
+    assert solver.loops.count["extra"].numpy()[0] == 0   # an early stop skips the extra iterations
+    solver, _, cg_blocks = _resting_rope(dataclasses.replace(cfg, check_every=0), 12)
+    assert solver.loops.count["newton"].numpy()[0] == 6 and set(cg_blocks) == {1}
     strict = dataclasses.replace(cfg, newton_iterations=3, newton_tolerance=1e-12, patient_iterations=4,
                                  penetration_iterations=0)
     model = build_model([make_object_mesh("rope")] * 2, [Material(youngs_modulus=1e4)] * 2, device="cpu")
@@ -218,3 +223,48 @@ def test_device_loops_stop_early_and_take_the_extra_iterations():
     stats = solver.step(state, state, control, dt=DT, patient=np.array([True, False]))
     assert stats.newton_iterations.tolist() == [3 + 4, 3], stats.newton_iterations
     assert solver.loops.count["extra"].numpy()[0] == 4
+
+
+def test_deep_worlds_take_extra_iterations_with_and_without_exit_tests():
+    """A cuboid started 3 mm below the ground, one regular Newton iteration: the world is still
+    deeper than half the penetration bound, so it takes extra iterations (reported Newton
+    iterations > 1); with the exit tests they stop once it is shallow enough, without them the
+    loop runs its full count with the world inactive: the same bits either way."""
+    results = []
+    for check in (4, 0):
+        model = build_model([make_object_mesh("cuboid")], [Material(youngs_modulus=1e5)],
+                            poses=[((0.0, -0.003, 0.0), (0.0, 0.0, 0.0, 1.0))], device="cpu")
+        state, control = State.from_model(model), Control.from_model(model)
+        assert state.positions.numpy()[:, 1].min() < -0.002
+        solver = ImplicitSolver(model, SolverConfig(substeps=1, newton_iterations=1, penetration_iterations=6,
+                                                    check_every=check))
+        stats = solver.step(state, state, control, dt=DT)
+        results.append((state.positions.numpy(), int(stats.newton_iterations[0]), solver.loops.count["extra"].numpy()[0]))
+    (x4, it4, extra4), (x0, it0, extra0) = results
+    assert 1 < it4 == it0 <= 7 and 1 <= extra4 <= 6 and extra0 == 6, (it4, it0, extra4, extra0)
+    np.testing.assert_array_equal(x4, x0)
+
+
+def test_a_failed_capture_falls_back_to_launches(monkeypatch):
+    """If capturing a step fails, graphs=None warns once and steps without graphs (the same bits
+    as a solver made with graphs=False); graphs=True raises the capture's error."""
+    import warp as wp
+
+    class BrokenCapture:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def __enter__(self):
+            raise RuntimeError("capture not available here")
+
+        def __exit__(self, *exc):
+            return False
+
+    reference, _ = held_rope_steps("phases", steps=2)
+    monkeypatch.setattr(wp, "ScopedCapture", BrokenCapture)
+    with pytest.warns(RuntimeWarning, match="capturing a solver step as a graph failed"):
+        state, _ = held_rope_steps("fallback", steps=2)
+    np.testing.assert_array_equal(state.positions.numpy(), reference.positions.numpy())
+    with pytest.raises(RuntimeError, match="capture not available here"):
+        held_rope_steps("step", steps=1)
+

@@ -109,3 +109,22 @@ def test_worlds_argument_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--worlds" in err and "--frames records one episode at a time" in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_worlds_that_end_at_different_steps(tmp_path):
+    """The expert lifts 3 cuboids in episodes of different lengths: recorded together (--worlds 3),
+    each world's file ends where its episode ended and holds the serial run's data bit for bit
+    (a world that ended is stepped on, unrecorded, and the policy sees its final observation)."""
+    args = ["--objects", "cuboid", "--moduli", "1e6", "--episodes", "3", "--max-steps", "140", "--no-progress"]
+    assert generate_main([str(tmp_path / "serial"), *args]) == 0
+    assert generate_main([str(tmp_path / "worlds"), *args, "--worlds", "3"]) == 0
+    lengths = set()
+    for path in sorted((tmp_path / "serial").glob("*.h5")):
+        a, b = _datasets(path), _datasets(tmp_path / "worlds" / path.name)
+        assert a.keys() == b.keys()
+        for k in a:
+            assert np.array_equal(a[k], b[k]), f"{path.name}: {k} differs"
+        ep = load_episode(path)
+        assert ep.attrs["is_success"], path.name
+        lengths.add(ep.num_steps)
+    assert len(lengths) > 1, f"the episodes all took {lengths} steps: the test needs different lengths"

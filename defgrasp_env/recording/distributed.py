@@ -35,7 +35,6 @@ CPUs; default all).
 
 from __future__ import annotations
 
-import contextlib
 import os
 import pathlib
 import signal
@@ -89,29 +88,35 @@ def _worker_device(device: str) -> tuple[str, float]:
     raise ValueError(f"with --ray, --device must be 'cpu' or 'cuda' (Ray assigns each worker one GPU), got {device!r}")
 
 
-@contextlib.contextmanager
-def _ctrl_c_as_flag():
-    """While the driver waits on Ray, the first Ctrl-C (SIGINT) only sets the yielded event; the loop
-    sees it between ``ray.wait`` polls, cancels and shuts down itself, and raises ``KeyboardInterrupt``
-    from its own code. A ``KeyboardInterrupt`` raised inside Ray's C++ calls can fail one of Ray's
-    internal checks and end the process with exit code 1 and a stack trace instead of a clean stop.
-    A second Ctrl-C interrupts at once. Off the main thread (no signal handler allowed) the event
-    never fires and Ctrl-C behaves as Python's default."""
-    flag = threading.Event()
-    if threading.current_thread() is not threading.main_thread():
-        yield flag
-        return
+class _CtrlC:
+    """While the driver talks to Ray, Ctrl-C (SIGINT) only sets ``interrupted``; the driver checks it
+    between ``ray.wait`` polls and after starting Ray, and raises ``KeyboardInterrupt`` from its own
+    code, then cancels and shuts down. A ``KeyboardInterrupt`` raised inside Ray's C++ calls can fail
+    one of Ray's internal checks and end the process with exit code 1 and a stack trace instead of a
+    clean stop. A second Ctrl-C interrupts at once, except while shutting down (``stopping``).
+    Nothing is installed off the main thread (no signal handler allowed there) or where SIGINT is
+    ignored (``nohup``, a background job) or handled outside Python."""
 
-    def on_sigint(signum, frame):
-        if flag.is_set():
+    def __init__(self):
+        self.interrupted = threading.Event()
+        self.stopping = False
+        self._previous = None
+
+    def _on_sigint(self, signum, frame):
+        if self.interrupted.is_set() and not self.stopping:
             raise KeyboardInterrupt
-        flag.set()
+        self.interrupted.set()
 
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    try:
-        yield flag
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    def __enter__(self) -> _CtrlC:
+        if threading.current_thread() is threading.main_thread():
+            previous = signal.getsignal(signal.SIGINT)
+            if previous not in (signal.SIG_IGN, None):
+                self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
 
 
 def _start_ray(ray, address: str | None, workers: int | None) -> bool:
@@ -141,7 +146,8 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
             many worlds (1: one episode per task, in a single env).
         address: Ray cluster address (``auto``, ``HOST:6379``, ``ray://HOST:10001``); None starts a
             local Ray with ``workers`` CPUs (all CPUs when None).
-        workers: at most this many episodes at once (None: as many as the cluster's CPUs or GPUs allow).
+        workers: at most this many tasks at once, each one episode or a group of ``worlds`` (None: as
+            many as the cluster's CPUs or GPUs allow).
         max_retries: times Ray re-runs an episode whose worker process or node died.
     Raises:
         the first failed task's own exception (e.g. ``ValueError`` for a bad policy), or ``RuntimeError`` when a
@@ -162,27 +168,32 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
     todo = [j for j in jobs if not (out / j.name).exists()]
     if not todo:
         return [out / j.name for j in jobs]
-    started = _start_ray(ray, address, workers)
-    task = ray.remote(record_group).options(num_cpus=1, num_gpus=gpus, max_retries=max_retries,
-                                          retry_exceptions=False)
-    bar, on_episode = progress_bar(len(jobs), len(jobs) - len(todo), progress)
-    by_name = {j.name: j for j in todo}
     queue, pending = list(reversed(job_groups(todo, worlds))), []
     limit = workers or len(queue)  # Ray's own pattern to bound pending tasks: ray.wait
-    try:
-        with _ctrl_c_as_flag() as interrupted:
-            _drain(ray, task, queue, pending, limit, interrupted, on_episode, by_name, max_retries,
+    by_name = {j.name: j for j in todo}
+    bar, started = None, False
+    with _CtrlC() as ctrl_c:
+        try:
+            started = _start_ray(ray, address, workers)
+            if ctrl_c.interrupted.is_set():
+                raise KeyboardInterrupt
+            task = ray.remote(record_group).options(num_cpus=1, num_gpus=gpus, max_retries=max_retries,
+                                                  retry_exceptions=False)
+            bar, on_episode = progress_bar(len(jobs), len(jobs) - len(todo), progress)
+            _drain(ray, task, queue, pending, limit, ctrl_c.interrupted, on_episode, by_name, max_retries,
                    (str(out.resolve()), policy_spec, max_steps, task_device, record_frames, compression))
-    except BaseException:
-        if not started:  # a Ray started here stops below with its workers; a cluster's keep running
-            for ref in pending:
-                ray.cancel(ref, force=True)
-        raise
-    finally:
-        if bar is not None:
-            bar.close()
-        if started:
-            ray.shutdown()
+        except BaseException:
+            ctrl_c.stopping = True
+            if not started:  # a Ray started here stops below with its workers; a cluster's keep running
+                for ref in pending:
+                    ray.cancel(ref, force=True)
+            raise
+        finally:
+            ctrl_c.stopping = True
+            if bar is not None:
+                bar.close()
+            if started:
+                ray.shutdown()
     return [out / j.name for j in jobs]
 
 

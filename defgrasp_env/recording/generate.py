@@ -165,7 +165,8 @@ def _record_together(out, group: list[Job], kwargs: dict, policy_spec: str, reco
                      compression: str | None, on_episode) -> None:
     """The ``group``'s episodes at once, world w of a native vector env (made with ``kwargs``,
     autoreset off) reset with job w's seed; a batched policy (a ``reset(seed)`` gets the worlds'
-    seeds as a list)."""
+    seeds as a list). A world whose episode ended is stepped on with the others (lockstep), unrecorded;
+    the policy sees its final observation, not what it does after."""
     import gymnasium as gym
     import numpy as np
     from gymnasium.vector import AutoresetMode
@@ -175,21 +176,31 @@ def _record_together(out, group: list[Job], kwargs: dict, policy_spec: str, reco
 
     if record_frames:
         raise ValueError("--frames records one episode at a time: use --worlds 1")
-    env = VectorHDF5Recorder(gym.make_vec(ENV_ID, num_envs=len(group), vectorization_mode="vector_entry_point",
+    n = len(group)
+    env = VectorHDF5Recorder(gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
                                           autoreset_mode=AutoresetMode.DISABLED, **kwargs),
                              out, compression=compression, save_unfinished=False)
-    policy = load_policy(policy_spec, env)
     try:
+        policy = load_policy(policy_spec, env)
         for w, job in enumerate(group):
             env.set_next_name(job.name, w)
         seeds = [job.seed for job in group]
         _reset_policy(policy, seeds)
         obs, _ = env.reset(seed=seeds)
-        done = np.zeros(len(group), bool)
+        done = np.zeros(n, bool)
+        final = {k: np.array(v) for k, v in obs.items()}
         while not done.all():
-            obs, _, terminated, truncated, _ = env.step(policy(obs))
+            seen = {k: np.where(done.reshape((n,) + (1,) * (v.ndim - 1)), final[k], v) for k, v in obs.items()}
+            action = policy(seen)
+            if np.shape(action) != env.action_space.shape:
+                raise ValueError(f"policy {policy_spec!r} returned actions of shape {np.shape(action)} for {n} worlds; "
+                                 f"--worlds > 1 needs a policy that maps a batch of observations to actions "
+                                 f"{env.action_space.shape} (as the scripted expert does): use --worlds 1")
+            obs, _, terminated, truncated, _ = env.step(action)
             for w in np.flatnonzero(~done & (terminated | truncated)):
                 done[w] = True
+                for k, v in obs.items():
+                    final[k][w] = v[w]
                 if on_episode is not None:
                     on_episode(group[w], bool(terminated[w]))
     finally:
@@ -282,7 +293,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="episodes of one (object, E) recorded together in a native vector env of this many "
                         "worlds (per process; with --ray per worker); the policy must take batched observations")
     p.add_argument("--workers", type=int, default=None,
-                   help="with --ray: episodes recorded at once (default: one per CPU, or per GPU with --device cuda)")
+                   help="with --ray: Ray tasks at once, each an episode or (--worlds N) a group of N "
+                        "(default: one per CPU, or per GPU with --device cuda)")
     args = p.parse_args(argv)
     default_caches()
     if args.episodes < 1 or args.worlds < 1 or (args.max_steps is not None and args.max_steps < 1):

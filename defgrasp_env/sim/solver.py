@@ -147,8 +147,10 @@ class ImplicitSolver:
         self.config = config
         supported = graphs_supported(model.device)
         if config.graphs and not supported:
-            raise ValueError(f"SolverConfig(graphs=True) but device {model.device} cannot capture a step as one graph "
-                             "(CUDA needs driver and toolkit >= 12.4); use graphs=None or False")
+            need = ("a CUDA driver and toolkit >= 12.4 (conditional graph nodes)" if wp.get_device(model.device).is_cuda
+                    else "a Warp that captures CPU graphs with capture_while (1.19+)")
+            raise ValueError(f"SolverConfig(graphs=True) but device {model.device} cannot capture a step as one graph: "
+                             f"it needs {need}; use graphs=None (where the device can) or False")
         self.graphs = supported if config.graphs is None else config.graphs
         self.scratch = SolverScratch.from_model(model)
         self.loops = DeviceLoops(model, config, self.scratch)

@@ -32,7 +32,7 @@ class DeviceLoops:
         self.count = {name: wp.zeros(1, dtype=wp.int32, device=dev) for name in LOOPS}
         self.cond = {name: wp.zeros(1, dtype=wp.int32, device=dev) for name in LOOPS}
         self.running = wp.zeros(1, dtype=wp.int32, device=dev)
-        check = bool(config.check_every)
+        self.check = check = bool(config.check_every)
         w = model.num_worlds
         self._any = {id(flags): (self._rec(klc.flag_any, w, flags, self.hit) if check
                                  else self._rec(klc.set_hit, 1, self.hit))
@@ -70,13 +70,13 @@ class DeviceLoops:
         first()
         any_flag.launch()
         gate.launch()
-        if self.limit[name] > 1:
-            def again():
-                body()
-                any_flag.launch()
-                gate.launch()
 
-            wp.capture_while(self.cond[name], again)
+        def again():
+            body()
+            any_flag.launch()
+            gate.launch()
+
+        self._repeat(name, again, self.limit[name] - 1)
 
     def extra_iterations(self, depth_launch, body, patient_iterations: int) -> None:
         """Newton's extra iterations after the regular ones (all of which must have run): up to
@@ -100,4 +100,15 @@ class DeviceLoops:
 
         self._extra_begin.launch()
         choose()
-        wp.capture_while(self.cond["extra"], again)
+        self._repeat("extra", again, limit)
+
+    def _repeat(self, name: str, again, passes: int) -> None:
+        """``again()`` while ``cond[name]`` holds; without exit tests the condition only runs out
+        with the count, so ``again()`` ``passes`` times from Python (no host test of the flag:
+        outside a capture ``wp.capture_while`` would read it back on every pass)."""
+        if self.check:
+            if passes > 0:
+                wp.capture_while(self.cond[name], again)
+            return
+        for _ in range(passes):
+            again()
