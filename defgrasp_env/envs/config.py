@@ -69,10 +69,6 @@ class PickupConfig:
     to sample from per episode (e.g. the paper's (1e4, 1e5, 1e6, 1e7)); ``poisson_ratio`` and
     ``density`` (kg/m^3) likewise (a tuple is sampled per episode, after the pose; a single value
     draws nothing, so the draws of existing configurations are unchanged).
-    ``solver`` defaults to 4 substeps per control step and at most 30 CG iterations per Newton
-    iteration (``SolverConfig``'s 40 over-solve the env's Newton systems with the rigid-motion coarse
-    space: the expert's feature-point trajectories stay as close to a tight solve's; 20 read one more
-    step over the grip force limit at a stiff object's first touch; benchmarks/RESULTS.md).
     """
 
     object: str | tuple[str, ...] = "cuboid"
@@ -96,7 +92,7 @@ class PickupConfig:
     obs_type: str = "state"
     action_mode: str = "delta"
     gripper: GripperConfig = field(default_factory=GripperConfig)
-    solver: SolverConfig = field(default_factory=lambda: SolverConfig(substeps=4, cg_iterations=30))
+    solver: SolverConfig = field(default_factory=lambda: SolverConfig(substeps=4))
     camera: Camera = field(default_factory=Camera)
     device: str = "cpu"
 

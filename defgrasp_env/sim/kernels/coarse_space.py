@@ -25,7 +25,7 @@ Newton iteration.
 
 import warp as wp
 
-from .elastic import deformation_gradient, pick_vertex, row, stress_differential
+from .elastic import pick_vertex, row, stress_differential
 
 #: Coarse unknowns per aggregate: 3 translations, 3 rotations.
 AGGREGATE_DOFS = 6
@@ -140,7 +140,7 @@ def coarse_assemble_tets(
     product (``stress_differential``) with dF = sum over the tet's nodes v in aggregate a of
     (T column)_v (x) b_v, its node forces projected on the rows T_u^T. A tet inside one aggregate with
     all axes free: the three rotation columns into the rotation block only (its translation
-    columns and rows are zero, exactly), the torques of dF = skew(e_k) F."""
+    columns and rows are zero, exactly)."""
     t = wp.tid()
     w = tet_world[t]
     if world_active[w] == 0:
@@ -159,20 +159,8 @@ def coarse_assemble_tets(
     v0 = rest_volume[t]
     a0 = node_aggregate[idx[0]]
     all_free = free[idx[0]] + free[idx[1]] + free[idx[2]] + free[idx[3]]
-    if (a0 == node_aggregate[idx[1]] and a0 == node_aggregate[idx[2]] and a0 == node_aggregate[idx[3]]
-            and all_free[0] + all_free[1] + all_free[2] == 12.0):
-        # inside one aggregate, all axes free: rotation column k has dF = skew(e_k) F (sum_v b_v = 0),
-        # and the torque rows sum_u d_u x (dP b_u) are the axial vector of F dP^T
-        fg = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], dm_inv)
-        for k in range(3):
-            e = wp.vec3(0.0)
-            e[k] = 1.0
-            dpr = stress_differential(wp.skew(e) * fg, cof, r, twist, mu, lam, v0)
-            g = fg * wp.transpose(dpr)
-            torque = wp.vec3(g[1, 2] - g[2, 1], g[2, 0] - g[0, 2], g[0, 1] - g[1, 0])
-            for j in range(3):
-                wp.atomic_add(matrix, w, 6 * a0 + 3 + j, 6 * a0 + 3 + k, wp.float64(torque[j]))
-        return
+    inside = (a0 == node_aggregate[idx[1]] and a0 == node_aggregate[idx[2]] and a0 == node_aggregate[idx[3]]
+              and all_free[0] + all_free[1] + all_free[2] == 12.0)
     for v in range(4):
         av = node_aggregate[idx[v]]
         first = int(1)
@@ -180,7 +168,10 @@ def coarse_assemble_tets(
             if node_aggregate[idx[u]] == av:
                 first = 0
         if first == 1:
-            for k in range(6):
+            k_start = int(0)
+            if inside:
+                k_start = 3
+            for k in range(k_start, 6):
                 df = wp.mat33(0.0)
                 for u in range(4):
                     if node_aggregate[idx[u]] == av:
@@ -192,7 +183,8 @@ def coarse_assemble_tets(
                     f = wp.cw_mul(free[idx[u]], dp * pick_vertex(b0, b1, b2, b3, u))
                     m = wp.cross(lever(x, origin, w, au, idx[u]), f)
                     for j in range(3):
-                        wp.atomic_add(matrix, w, 6 * au + j, 6 * av + k, wp.float64(f[j]))
+                        if not inside:
+                            wp.atomic_add(matrix, w, 6 * au + j, 6 * av + k, wp.float64(f[j]))
                         wp.atomic_add(matrix, w, 6 * au + 3 + j, 6 * av + k, wp.float64(m[j]))
 
 
