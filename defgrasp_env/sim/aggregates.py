@@ -9,8 +9,6 @@ nodes at the median along the principal axis of each piece, as long as the piece
 aggregate (its rigid translations; measured on the expert's episodes at E = 1e4 and 1e7: cutting
 the sphere into 8 pieces cost 14-23 % more CG iterations, the torus 7-8 % fewer; cutting the rope
 into 8 slices saved 11-37 %).
-Each aggregate has an origin node (``aggregate_origins``: the node nearest its rest centroid), the
-point about which the coarse space's rotations of that aggregate turn.
 The cuts follow the principal axes, not the coordinate axes, so a turned object is cut the same
 way (up to nodes tied at a cut).
 """
@@ -64,22 +62,3 @@ def node_aggregates(rest_positions: np.ndarray, node_start: np.ndarray, pieces: 
         sl = slice(int(node_start[w]), int(node_start[w + 1]))
         index[sl] = bisect_nodes(rest_positions[sl], pieces)
     return index
-
-
-def aggregate_origins(rest_positions: np.ndarray, node_start: np.ndarray, index: np.ndarray,
-                      pieces: int) -> np.ndarray:
-    """[W, pieces] int32: the global index of the origin node of every aggregate of every world, the
-    node of the aggregate nearest its rest centroid (``rest_positions`` [N, 3] m, ``node_start`` [W+1],
-    ``index`` [N] the world-local aggregates of ``node_aggregates``); an empty aggregate gets its
-    world's first node (no node refers to it)."""
-    x = np.asarray(rest_positions, dtype=np.float64)
-    origins = np.empty((len(node_start) - 1, pieces), dtype=np.int32)
-    for w in range(len(node_start) - 1):
-        start, stop = int(node_start[w]), int(node_start[w + 1])
-        origins[w] = start
-        for a in range(pieces):
-            nodes = start + np.flatnonzero(index[start:stop] == a)
-            if len(nodes):
-                centre = x[nodes].mean(axis=0)
-                origins[w, a] = nodes[np.argmin(np.linalg.norm(x[nodes] - centre, axis=1))]
-    return origins

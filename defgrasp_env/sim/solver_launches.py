@@ -129,18 +129,17 @@ def _begin_solve(c: _Context, active):
 def _coarse_before(c: _Context, active) -> list:
     """Coarse solve before CG: assemble and invert T^T A T, start CG from dx = T (T^T A T)^-1 T^T r
     with the residual and CG vectors that follow (kernels/coarse_space.py)."""
-    m, s, n, x = c.model, c.scratch, c.model.num_nodes, c.work.positions
+    m, s, n = c.model, c.scratch, c.model.num_nodes
     return [
         c.rec(kcs.coarse_assemble_nodes, n, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
-              s.node_aggregate, active, x, s.aggregate_origin, 1.0 / (c.h * c.h), s.residual, s.coarse_matrix,
-              s.coarse_rhs),
-        c.rec(kcs.coarse_assemble_tets, m.num_tets, x, s.aggregate_origin, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
+              s.node_aggregate, active, 1.0 / (c.h * c.h), s.residual, s.coarse_matrix, s.coarse_rhs),
+        c.rec(kcs.coarse_assemble_tets, m.num_tets, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
               m.tet_lambda, s.cofactor, s.tet_r, s.tet_twist, m.tet_world, active, m.free_axes, s.node_aggregate,
               s.coarse_matrix),
         c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_size, s.coarse_matrix, s.coarse_lower_inv,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),
-        c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, x, s.aggregate_origin, active,
-              s.coarse_coef, s.dx, s.coarse_guess),
+        c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx,
+              s.coarse_guess),
         c.rec(ke.hessian_product_tets, m.num_tets, s.coarse_guess, m.tets, m.tet_rest_inv, m.tet_rest_volume,
               m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
         c.rec(klin.cg_node_product, n, s.coarse_guess, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
@@ -151,13 +150,11 @@ def _coarse_before(c: _Context, active) -> list:
 
 def _coarse_after(c: _Context, active) -> list:
     """Coarse correction after CG: dx += T (T^T A T)^-1 T^T r with CG's final residual r."""
-    m, s, n, x = c.model, c.scratch, c.model.num_nodes, c.work.positions
-    return [c.rec(kcs.coarse_reduce, n, s.residual, m.node_world, s.node_aggregate, x, s.aggregate_origin, active,
-                  s.coarse_rhs),
+    m, s, n = c.model, c.scratch, c.model.num_nodes
+    return [c.rec(kcs.coarse_reduce, n, s.residual, m.node_world, s.node_aggregate, active, s.coarse_rhs),
             c.rec(kcs.coarse_solve, m.num_worlds, active, s.coarse_size, s.coarse_inverse, s.coarse_rhs,
                   s.coarse_coef),
-            c.rec(kcs.coarse_correct, n, m.free_axes, m.node_world, s.node_aggregate, x, s.aggregate_origin, active,
-                  s.coarse_coef, s.dx)]
+            c.rec(kcs.coarse_correct, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx)]
 
 
 def _pads(c: _Context) -> list:
@@ -201,14 +198,14 @@ def _cg(c: _Context, config) -> list:
               m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
         c.rec(klin.cg_node_product, n, s.p, m.node_mass, s.contact_hessian, m.free_axes, m.node_world, active,
               1.0 / (c.h * c.h), s.ap, s.p_ap),
-        c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate,
-              c.work.positions, s.aggregate_origin, active, s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs),
+        c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate, active,
+              s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs),
         c.rec(klin.cg_end_iteration, m.num_worlds, s.rz0, config.cg_tolerance ** 2,
               config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.coarse_size,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it, s.cg_total,
               active, s.cg_update),
-        c.rec(klin.cg_update_direction, n, m.free_axes, m.node_world, s.node_aggregate, c.work.positions,
-              s.aggregate_origin, active, s.coarse_coef, s.cg_beta, s.z, s.p, s.ap)]
+        c.rec(klin.cg_update_direction, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef,
+              s.cg_beta, s.z, s.p, s.ap)]
 
 
 def _trial(c: _Context, config) -> list:

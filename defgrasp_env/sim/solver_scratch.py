@@ -9,8 +9,7 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from .aggregates import aggregate_origins, node_aggregates
-from .kernels.coarse_space import AGGREGATE_DOFS
+from .aggregates import node_aggregates
 from .model import Model
 
 
@@ -20,7 +19,7 @@ class SolverScratch:
 
     Newton's iterate is the work state's ``positions``; each Newton iteration solves
     ``A dx = r`` (A = M/h^2 + contact Hessian + elastic Hessian) by CG preconditioned by block
-    Jacobi plus a coarse solve on the rigid motions of node aggregates (``kernels/coarse_space.py``),
+    Jacobi plus a coarse solve on the translations of node aggregates (``kernels/coarse_space.py``),
     then line-searches along ``dx``.
     """
 
@@ -77,11 +76,10 @@ class SolverScratch:
     searching: wp.array         # int: world still line-searching
     energy0: wp.array           # float64: incremental potential of the accepted iterate
     energy_trial: wp.array      # float64: that of the trial
-    # coarse space: rigid motions (translations, rotations) of K node aggregates per world (C = 6K
-    # unknowns, sim/aggregates.py; K: the most aggregates of any world)
+    # coarse space: translations of K node aggregates per world (C = 3K unknowns, sim/aggregates.py;
+    # K: the most aggregates of any world)
     coarse_size: int            # host: C
     node_aggregate: wp.array    # [N] int: world-local aggregate of each node
-    aggregate_origin: wp.array  # [W, K] int: global index of each aggregate's origin node (rotation centre)
     coarse_matrix: wp.array     # [W, C, C] float64: T^T A T (assembled, then its Cholesky factor)
     coarse_lower_inv: wp.array  # [W, C, C] float64: inverse of the Cholesky factor
     coarse_inverse: wp.array    # [W, C, C] float64: (T^T A T)^-1 of the current Newton iteration
@@ -108,9 +106,7 @@ class SolverScratch:
             return wp.zeros(w, dtype=dtype, device=d)
 
         aggregate = node_aggregates(model.rest_positions.numpy(), model.node_start)
-        pieces = int(aggregate.max()) + 1
-        size = AGGREGATE_DOFS * pieces
-        origin = aggregate_origins(model.rest_positions.numpy(), model.node_start, aggregate, pieces)
+        size = 3 * (int(aggregate.max()) + 1)
 
         def coarse(dtype, ndim):
             return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)
@@ -128,7 +124,6 @@ class SolverScratch:
             **{k: per_world(float) for k in floats}, **{k: per_world(int) for k in ints},
             energy0=per_world(wp.float64), energy_trial=per_world(wp.float64),
             coarse_size=size, node_aggregate=wp.array(aggregate, dtype=int, device=d),
-            aggregate_origin=wp.array(origin, dtype=int, device=d),
             coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
             coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
             coarse_guess=vec(),

@@ -1,21 +1,14 @@
-"""Coarse space of the per-world linear solves: rigid motions (translations and infinitesimal
-rotations) of node aggregates.
+"""Coarse space of the per-world linear solves: piecewise-constant translations of node aggregates.
 
 Block-Jacobi CG barely moves the smooth, long-wavelength modes of a Newton system A dx = r: the
-rigid translations of a stiff object (their stiffness m/h^2 is ~1e5 times below the elastic one),
-the bending of a slender one (a rope: CG needs ~ its length in elements of iterations to carry a
-correction from end to end) and the swinging of the free parts of a held one (the hanging ends of a
-gripped rope: its slowest modes were 99 % rigid motions of its aggregates, against 12-97 % for the
-translations alone). Every world's nodes are split into at most K aggregates
-(``sim/aggregates.py``); T [3N x 6K] holds the rigid motions of each aggregate: for a node i of
-aggregate a, columns (a, k) = e_k (translations) and (a, 3 + k) = e_k x d_i (rotations about the
-aggregate's origin node o_a, d_i = x_i - x_{o_a} at the current Newton iterate), masked by the free
-axes. Per Newton iteration the coarse matrix E = T^T A T (6K x 6K, float64) is assembled from the
-node terms (mass/h^2 + contact blocks) and the tets: a tet inside one aggregate with all axes free
-adds only to the rotation block (a uniform translation does not strain it, exactly), through the
-three products with dF = sum_v (e_k x d_v) (x) b_v; a tet that straddles aggregates (or has a
-prescribed axis) adds the products of all the columns of its aggregates. E is Cholesky-factored and
-inverted per world.
+rigid translations of a stiff object (their stiffness m/h^2 is ~1e5 times below the elastic one)
+and the bending of a slender one (a rope: CG needs ~ its length in elements of iterations to carry
+a correction from end to end). Every world's nodes are split into at most K aggregates (``sim/aggregates.py``);
+T [3N x 3K] holds the translations of each aggregate, column (a, k) = e_k on the nodes of aggregate
+a, masked by the free axes. Per Newton iteration the coarse matrix E = T^T A T (3K x 3K, float64)
+is assembled from the node terms (mass/h^2 + contact blocks) and the tets that straddle two or more
+aggregates (a uniform translation does not strain a tet, so tets inside one aggregate add nothing,
+exactly, when all their axes are free), Cholesky-factored and inverted per world.
 It is used (a) before CG: dx0 = T E^-1 T^T r, residual r - A dx0, (b) inside CG: the two-level
 additive preconditioner z = P r + T E^-1 T^T r (P block Jacobi; SPD, so CG stays CG), and (c) after
 CG: dx += T E^-1 T^T r (the best A-norm correction in the coarse space).
@@ -27,31 +20,18 @@ import warp as wp
 
 from .elastic import pick_vertex, row, stress_differential
 
-#: Coarse unknowns per aggregate: 3 translations, 3 rotations.
-AGGREGATE_DOFS = 6
+
+@wp.func
+def aggregate_part(coef: wp.array2d(dtype=float), w: int, a: int, free: wp.vec3):
+    """(T c)_i for a node of aggregate ``a`` of world ``w`` with free axes ``free``."""
+    return wp.cw_mul(free, wp.vec3(coef[w, 3 * a], coef[w, 3 * a + 1], coef[w, 3 * a + 2]))
 
 
 @wp.func
-def lever(x: wp.array(dtype=wp.vec3), origin: wp.array2d(dtype=int), w: int, a: int, i: int):
-    """d_i = x_i - x_o (m): node i relative to the origin node of its aggregate ``a`` of world ``w``."""
-    return x[i] - x[origin[w, a]]
-
-
-@wp.func
-def aggregate_part(coef: wp.array2d(dtype=float), w: int, a: int, free: wp.vec3, d: wp.vec3):
-    """(T c)_i = free * (t_a + theta_a x d_i) for a node of aggregate ``a`` of world ``w``."""
-    t = wp.vec3(coef[w, 6 * a], coef[w, 6 * a + 1], coef[w, 6 * a + 2])
-    theta = wp.vec3(coef[w, 6 * a + 3], coef[w, 6 * a + 4], coef[w, 6 * a + 5])
-    return wp.cw_mul(free, t + wp.cross(theta, d))
-
-
-@wp.func
-def add_rhs(rhs: wp.array2d(dtype=float), w: int, a: int, v: wp.vec3, d: wp.vec3):
-    """rhs_a += T_i^T v for a node of aggregate ``a`` (``v`` masked by the free axes): v and d x v."""
-    m = wp.cross(d, v)
-    for k in range(3):
-        wp.atomic_add(rhs, w, 6 * a + k, v[k])
-        wp.atomic_add(rhs, w, 6 * a + 3 + k, m[k])
+def add_rhs(rhs: wp.array2d(dtype=float), w: int, a: int, v: wp.vec3):
+    wp.atomic_add(rhs, w, 3 * a, v[0])
+    wp.atomic_add(rhs, w, 3 * a + 1, v[1])
+    wp.atomic_add(rhs, w, 3 * a + 2, v[2])
 
 
 @wp.func
@@ -70,17 +50,6 @@ def coarse_coefficients(w: int, size: int, inverse: wp.array3d(dtype=wp.float64)
     return float(g_c)
 
 
-@wp.func
-def coarse_column(k: int, free: wp.vec3, d: wp.vec3):
-    """Column k of T on a node (0-2: translation e_k, 3-5: rotation e_(k-3) x d), masked."""
-    e = wp.vec3(0.0)
-    if k < 3:
-        e[k] = 1.0
-        return wp.cw_mul(free, e)
-    e[k - 3] = 1.0
-    return wp.cw_mul(free, wp.cross(e, d))
-
-
 @wp.kernel
 def coarse_assemble_nodes(
     mass: wp.array(dtype=float),
@@ -89,39 +58,27 @@ def coarse_assemble_nodes(
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
-    x: wp.array(dtype=wp.vec3),
-    origin: wp.array2d(dtype=int),
     inv_dt2: float,
     r: wp.array(dtype=wp.vec3),
     matrix: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
 ):
-    """E += T_i^T (M/h^2 + contact blocks) T_i and rhs += T_i^T r (r already masked); with
-    T_i = [I | S], S = -skew(d_i) (rotation columns e_k x d_i), the block B masked on both sides."""
+    """E += T^T (M/h^2 + contact blocks) T and rhs += T^T r (r already masked)."""
     i = wp.tid()
     w = node_world[i]
     if world_active[w] == 0:
         return
     a = node_aggregate[i]
-    d = lever(x, origin, w, a, i)
     fr = wp.diag(free[i])
     block = fr * (mass[i] * inv_dt2 * wp.identity(n=3, dtype=float) + contact_hessian[i]) * fr
-    skew_s = -wp.skew(d)
-    bs = block * skew_s
-    ss = wp.transpose(skew_s) * bs
     for j in range(3):
         for k in range(3):
-            wp.atomic_add(matrix, w, 6 * a + j, 6 * a + k, wp.float64(block[j, k]))
-            wp.atomic_add(matrix, w, 6 * a + j, 6 * a + 3 + k, wp.float64(bs[j, k]))
-            wp.atomic_add(matrix, w, 6 * a + 3 + k, 6 * a + j, wp.float64(bs[j, k]))
-            wp.atomic_add(matrix, w, 6 * a + 3 + j, 6 * a + 3 + k, wp.float64(ss[j, k]))
-    add_rhs(rhs, w, a, r[i], d)
+            wp.atomic_add(matrix, w, 3 * a + j, 3 * a + k, wp.float64(block[j, k]))
+    add_rhs(rhs, w, a, r[i])
 
 
 @wp.kernel
 def coarse_assemble_tets(
-    x: wp.array(dtype=wp.vec3),
-    origin: wp.array2d(dtype=int),
     tets: wp.array(dtype=wp.vec4i),
     rest_inv: wp.array(dtype=wp.mat33),
     rest_volume: wp.array(dtype=float),
@@ -136,16 +93,19 @@ def coarse_assemble_tets(
     node_aggregate: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
 ):
-    """E += T^T K_t T: per coarse column (a, k) of the aggregates of the tet's nodes, the Hessian
-    product (``stress_differential``) with dF = sum over the tet's nodes v in aggregate a of
-    (T column)_v (x) b_v, its node forces projected on the rows T_u^T. A tet inside one aggregate with
-    all axes free: the three rotation columns into the rotation block only (its translation
-    columns and rows are zero, exactly)."""
+    """E += T^T K_t T for the tets t with nodes in two or more aggregates (or a prescribed axis):
+    the tet's 12 unit-vector Hessian products (``stress_differential``), summed into the blocks of
+    the aggregates of their nodes."""
     t = wp.tid()
     w = tet_world[t]
     if world_active[w] == 0:
         return
     idx = tets[t]
+    a0 = node_aggregate[idx[0]]
+    all_free = free[idx[0]] + free[idx[1]] + free[idx[2]] + free[idx[3]]
+    if (a0 == node_aggregate[idx[1]] and a0 == node_aggregate[idx[2]] and a0 == node_aggregate[idx[3]]
+            and all_free[0] + all_free[1] + all_free[2] == 12.0):
+        return
     dm_inv = rest_inv[t]
     b1 = row(dm_inv, 0)
     b2 = row(dm_inv, 1)
@@ -157,35 +117,21 @@ def coarse_assemble_tets(
     mu = tet_mu[t]
     lam = tet_lambda[t]
     v0 = rest_volume[t]
-    a0 = node_aggregate[idx[0]]
-    all_free = free[idx[0]] + free[idx[1]] + free[idx[2]] + free[idx[3]]
-    inside = (a0 == node_aggregate[idx[1]] and a0 == node_aggregate[idx[2]] and a0 == node_aggregate[idx[3]]
-              and all_free[0] + all_free[1] + all_free[2] == 12.0)
     for v in range(4):
+        bv = pick_vertex(b0, b1, b2, b3, v)
+        fv = free[idx[v]]
         av = node_aggregate[idx[v]]
-        first = int(1)
-        for u in range(v):
-            if node_aggregate[idx[u]] == av:
-                first = 0
-        if first == 1:
-            k_start = int(0)
-            if inside:
-                k_start = 3
-            for k in range(k_start, 6):
-                df = wp.mat33(0.0)
+        for j in range(3):
+            if fv[j] != 0.0:
+                e = wp.vec3(0.0)
+                e[j] = 1.0
+                dp = stress_differential(wp.outer(e, bv), cof, r, twist, mu, lam, v0)
                 for u in range(4):
-                    if node_aggregate[idx[u]] == av:
-                        col = coarse_column(k, free[idx[u]], lever(x, origin, w, av, idx[u]))
-                        df += wp.outer(col, pick_vertex(b0, b1, b2, b3, u))
-                dp = stress_differential(df, cof, r, twist, mu, lam, v0)
-                for u in range(4):
+                    bu = pick_vertex(b0, b1, b2, b3, u)
+                    col = wp.cw_mul(free[idx[u]], dp * bu)
                     au = node_aggregate[idx[u]]
-                    f = wp.cw_mul(free[idx[u]], dp * pick_vertex(b0, b1, b2, b3, u))
-                    m = wp.cross(lever(x, origin, w, au, idx[u]), f)
-                    for j in range(3):
-                        if not inside:
-                            wp.atomic_add(matrix, w, 6 * au + j, 6 * av + k, wp.float64(f[j]))
-                        wp.atomic_add(matrix, w, 6 * au + 3 + j, 6 * av + k, wp.float64(m[j]))
+                    for k in range(3):
+                        wp.atomic_add(matrix, w, 3 * au + k, 3 * av + j, wp.float64(col[k]))
 
 
 @wp.kernel
@@ -253,8 +199,6 @@ def coarse_guess(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
-    x: wp.array(dtype=wp.vec3),
-    origin: wp.array2d(dtype=int),
     world_active: wp.array(dtype=int),
     coef: wp.array2d(dtype=float),
     dx: wp.array(dtype=wp.vec3),
@@ -265,8 +209,7 @@ def coarse_guess(
     w = node_world[i]
     if world_active[w] == 0:
         return
-    a = node_aggregate[i]
-    d = aggregate_part(coef, w, a, free[i], lever(x, origin, w, a, i))
+    d = aggregate_part(coef, w, node_aggregate[i], free[i])
     dx[i] = dx[i] + d
     guess[i] = d
 
@@ -304,8 +247,6 @@ def coarse_reduce(
     r: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
-    x: wp.array(dtype=wp.vec3),
-    origin: wp.array2d(dtype=int),
     world_active: wp.array(dtype=int),
     rhs: wp.array2d(dtype=float),
 ):
@@ -314,8 +255,7 @@ def coarse_reduce(
     w = node_world[i]
     if world_active[w] == 0:
         return
-    a = node_aggregate[i]
-    add_rhs(rhs, w, a, r[i], lever(x, origin, w, a, i))
+    add_rhs(rhs, w, node_aggregate[i], r[i])
 
 
 @wp.kernel
@@ -338,8 +278,6 @@ def coarse_correct(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
-    x: wp.array(dtype=wp.vec3),
-    origin: wp.array2d(dtype=int),
     world_active: wp.array(dtype=int),
     coef: wp.array2d(dtype=float),
     dx: wp.array(dtype=wp.vec3),
@@ -349,5 +287,4 @@ def coarse_correct(
     w = node_world[i]
     if world_active[w] == 0:
         return
-    a = node_aggregate[i]
-    dx[i] = dx[i] + aggregate_part(coef, w, a, free[i], lever(x, origin, w, a, i))
+    dx[i] = dx[i] + aggregate_part(coef, w, node_aggregate[i], free[i])

@@ -1,5 +1,5 @@
 """Per-world linear solves of the Newton systems: conjugate gradients preconditioned by block
-Jacobi plus a coarse solve on the rigid motions of node aggregates (two-level additive,
+Jacobi plus a coarse solve on the translations of node aggregates (two-level additive,
 ``coarse_space.py``).
 
 Every world runs its own CG (its own alpha, beta and stopping test) inside one set of flat arrays,
@@ -11,7 +11,7 @@ One CG iteration is five launches: ``hessian_product_tets`` (elastic.py), ``cg_n
 
 import warp as wp
 
-from .coarse_space import add_rhs, aggregate_part, coarse_coefficients, lever
+from .coarse_space import add_rhs, aggregate_part, coarse_coefficients
 
 
 @wp.func
@@ -102,8 +102,6 @@ def cg_update_solution(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
-    x: wp.array(dtype=wp.vec3),
-    origin: wp.array2d(dtype=int),
     cg_active: wp.array(dtype=int),
     rz: wp.array(dtype=float),
     p_ap: wp.array(dtype=float),
@@ -131,8 +129,7 @@ def cg_update_solution(
     zi = wp.cw_mul(precond[i] * ri, free[i])
     z[i] = zi
     wp.atomic_add(rz_new, w, wp.dot(ri, zi))
-    a = node_aggregate[i]
-    add_rhs(coarse_rhs, w, a, ri, lever(x, origin, w, a, i))
+    add_rhs(coarse_rhs, w, node_aggregate[i], ri)
 
 
 @wp.kernel
@@ -184,8 +181,6 @@ def cg_update_direction(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
-    x: wp.array(dtype=wp.vec3),
-    origin: wp.array2d(dtype=int),
     cg_active: wp.array(dtype=int),
     coarse_coef: wp.array2d(dtype=float),
     beta: wp.array(dtype=float),
@@ -198,8 +193,7 @@ def cg_update_direction(
     w = node_world[i]
     if cg_active[w] == 0:
         return
-    a = node_aggregate[i]
-    zi = z[i] + aggregate_part(coarse_coef, w, a, free[i], lever(x, origin, w, a, i))
+    zi = z[i] + aggregate_part(coarse_coef, w, node_aggregate[i], free[i])
     z[i] = zi
     p[i] = zi + beta[w] * p[i]
     ap[i] = wp.vec3(0.0)
