@@ -241,7 +241,8 @@ def _depth(c: _Context, config) -> list:
     return [c.rec(kc.deepest_contact, m.num_nodes, c.work.positions, m.node_world, s.pad_pos1, s.pad_rot1,
                   m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth),
             *([c.rec(kec.deepest_edge_contact, s.edge_normal.shape[0], c.work.positions, s.edge_nodes, s.edge_world,
-                     s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, s.edge_normal, s.depth)]
+                     s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, s.edge_normal,
+                     m.contact.stiffening_depth, s.depth)]
               if s.edge_normal.shape[0] else []),
             c.rec(kc.reactivate_deep_worlds, m.num_worlds, s.depth, 0.5 * config.penetration_bound,
                   s.newton_active)]

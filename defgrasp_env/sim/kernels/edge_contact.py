@@ -13,9 +13,15 @@ n_j p_j(t) (j: the face's axis, n_j = +-1), is linear, so within the face's late
 node's own contact) or where AB crosses a lateral plane p_k = +-h_k inside the segment, a point of
 the box edge where the face meets the side k. Those crossing points (at most two: where AB enters
 and where it leaves the extent) are the contacts added here, with the node penalty's energy of
-their depth g (``penalty_energy``, stiffness the mean of the two nodes'). A crossing point that
-reaches an end of AB hands its depth over to that node's contact at the same depth (no jump in the
-energy where the node and the edge meet the same face, as on a flat face pressed by a pad).
+their depth beyond a free skin: penalty_energy(g - g0) with g0 the penalty's knee depth (0.25 mm;
+stiffness the mean of the two nodes'). The skin keeps a flat face pressed by a pad as it was with
+node contact alone: where a pad's face presses an object by less than g0, the uncompressed rim
+around it (proud of the face by the compression) does not load the face's border; without it,
+the rim's crossing points made a cogging force with the period of the node spacing that lifted a
+block held between two pads by 2 mm (tests/test_fem_contact.py, Coulomb hold). A crossing point
+only counts where face j is the nearest face of the point besides the side k it lies on (the
+faces of the third axis, and the face across the box along k): deeper than those, the point is
+in the middle of another face (a node's contact there), not at this box edge.
 
 Gradient (exact): with t* = (+-h_k - a_k) / u_k (u = b - a) and the slope r = u_j / u_k,
 dg/da = -(1 - t*) v and dg/db = -t* v with v = n - n_j r e_k; so the force on the nodes is
@@ -34,7 +40,13 @@ pad p of its world (index e*P + p), lagged at the substep start.
 
 import warp as wp
 
-from .contact import contact_face, penalty_energy, penalty_force, penalty_stiffness
+from .contact import axis_normal, contact_face, penalty_energy, penalty_force, penalty_stiffness
+
+
+#: Smallest sine of the angle between a surface edge and the lateral plane it crosses for the
+#: crossing to count: bounds the slope |u_j / u_k| in the gradient (<= 1 / 0.3); an edge that
+#: grazes the plane is met by its nodes or by the face of the plane.
+CROSSING_SIN = 0.3
 
 
 @wp.func
@@ -60,7 +72,9 @@ def edge_crossing(a: wp.vec3, b: wp.vec3, half: wp.vec3, n: wp.vec3, side: int):
     face with outward normal ``n`` (a box axis) through a lateral plane p_k = +-h_k strictly inside
     the segment: its depth behind the face (m, > 0 inside), its parameter t on AB and
     v = n - n_j (u_j / u_k) e_k (the depth's gradient is -(1 - t) v on A, -t v on B), and whether
-    there is such a crossing (0 where the extent starts or ends at a node of AB, or AB misses it)."""
+    there is such a crossing (0 where the extent starts or ends at a node of AB, or AB misses it);
+    last, the depth (m, >= 0) behind the face of the interval's other end when that end is a node of
+    AB inside the extent (B for side 0, A for side 1), else 0."""
     j = int(0)
     for q in range(3):
         if n[q] != 0.0:
@@ -95,16 +109,29 @@ def edge_crossing(a: wp.vec3, b: wp.vec3, half: wp.vec3, n: wp.vec3, side: int):
         t = t_out
         k = k_out
     depth = float(0.0)
+    rest = float(0.0)
     v = wp.vec3(0.0)
     valid = int(1)
     if misses == 1 or t_in >= t_out or k < 0:
+        valid = 0
+    elif wp.abs(u[k]) < CROSSING_SIN * wp.length(u):  # grazing the plane: ill-defined crossing
         valid = 0
     else:
         p = a + t * u
         depth = half[j] - n[j] * p[j]
         v = wp.vec3(n[0], n[1], n[2])
         v[k] = -n[j] * u[j] / u[k]
-    return depth, t, v, valid
+        # a box edge contact only where face j is the nearest face of p besides the side k it lies
+        # on (the third axis' faces, the face opposite p across the box along k): deeper than
+        # those, p is inside a face of another box edge, met there
+        l = 3 - j - k
+        if half[l] - wp.abs(p[l]) < depth or 2.0 * half[k] < depth:
+            valid = 0
+        if side == 0 and k_out < 0:
+            rest = wp.max(half[j] - n[j] * b[j], 0.0)
+        if side == 1 and k_in < 0:
+            rest = wp.max(half[j] - n[j] * a[j], 0.0)
+    return depth, t, v, valid, rest
 
 
 @wp.kernel
@@ -131,10 +158,21 @@ def lag_edge_contacts(
     half = pad_half[pad]
     a = wp.quat_rotate_inv(pad_rot0[pad], x_start[ends[0]] - pad_pos0[pad])
     b = wp.quat_rotate_inv(pad_rot0[pad], x_start[ends[1]] - pad_pos0[pad])
-    t = nearest_to_centre(a, b, half)
-    ga = wp.quat_rotate_inv(pad_rot1[pad], x_guess[ends[0]] - pad_pos1[pad])
-    gb = wp.quat_rotate_inv(pad_rot1[pad], x_guess[ends[1]] - pad_pos1[pad])
-    edge_normal[tid] = contact_face(wp.lerp(a, b, t), wp.lerp(ga, gb, t), half)
+    best = float(1.0e30)
+    face = wp.vec3(0.0)
+    for f in range(6):
+        n = axis_normal(f // 2, float(2 * (f % 2) - 1))
+        for side in range(2):
+            depth, t, v, valid, rest = edge_crossing(a, b, half, n, side)
+            if valid != 0 and depth < best:
+                best = depth
+                face = n
+    if best == 1.0e30:  # no crossing at the start: the face the pad's motion brings it to
+        t = nearest_to_centre(a, b, half)
+        ga = wp.quat_rotate_inv(pad_rot1[pad], x_guess[ends[0]] - pad_pos1[pad])
+        gb = wp.quat_rotate_inv(pad_rot1[pad], x_guess[ends[1]] - pad_pos1[pad])
+        face = contact_face(wp.lerp(a, b, t), wp.lerp(ga, gb, t), half)
+    edge_normal[tid] = face
 
 
 @wp.kernel
@@ -176,25 +214,36 @@ def evaluate_edges(
     b = wp.quat_rotate_inv(rot, x[ends[1]] - pad_pos1[pad])
     n = edge_normal[tid]
     k = 0.5 * (stiffness[ends[0]] + stiffness[ends[1]])
+    nw = wp.quat_rotate(rot, n)
     for side in range(2):
-        depth, t, v, valid = edge_crossing(a, b, pad_half[pad], n, side)
-        if valid != 0 and depth > 0.0:
-            f = penalty_force(k, depth, knee)
-            s = penalty_stiffness(k, depth, knee)
+        depth, t, v, valid, rest = edge_crossing(a, b, pad_half[pad], n, side)
+        if valid != 0 and depth - rest > knee:
+            f = penalty_force(k, depth - rest - knee, knee)
+            s = penalty_stiffness(k, depth - rest - knee, knee)
             vw = wp.quat_rotate(rot, v)
-            h = s * wp.outer(vw, vw)
-            wp.atomic_add(residual, ends[0], (1.0 - t) * f * vw)
-            wp.atomic_add(residual, ends[1], t * f * vw)
-            wp.atomic_add(contact_force, ends[0], (1.0 - t) * f * vw)
-            wp.atomic_add(contact_force, ends[1], t * f * vw)
-            wp.atomic_add(diag_block, ends[0], (1.0 - t) * h)
-            wp.atomic_add(diag_block, ends[1], t * h)
-            wp.atomic_add(contact_hessian, ends[0], (1.0 - t) * h)
-            wp.atomic_add(contact_hessian, ends[1], t * h)
+            ga = (1.0 - t) * vw
+            gb = t * vw
+            ha = (1.0 - t) * s * wp.outer(vw, vw)
+            hb = t * s * wp.outer(vw, vw)
+            if rest > 0.0:  # the other end's own depth is subtracted: its gradient n joins in
+                if side == 0:
+                    gb = gb - nw
+                else:
+                    ga = ga - nw
+                ha = 2.0 * s * wp.outer(ga, ga)
+                hb = 2.0 * s * wp.outer(gb, gb)
+            wp.atomic_add(residual, ends[0], f * ga)
+            wp.atomic_add(residual, ends[1], f * gb)
+            wp.atomic_add(contact_force, ends[0], f * ga)
+            wp.atomic_add(contact_force, ends[1], f * gb)
+            wp.atomic_add(diag_block, ends[0], ha)
+            wp.atomic_add(diag_block, ends[1], hb)
+            wp.atomic_add(contact_hessian, ends[0], ha)
+            wp.atomic_add(contact_hessian, ends[1], hb)
             if record_pads != 0:
-                wp.atomic_max(penetration, w, depth)
-                wp.atomic_add(pad_normal_force, pad, f)
-                wp.atomic_add(pad_force, pad, -f * vw)
+                wp.atomic_max(penetration, w, depth - rest)
+                wp.atomic_add(pad_normal_force, pad, f * wp.dot(ga + gb, nw))
+                wp.atomic_add(pad_force, pad, -f * (ga + gb))
 
 
 @wp.kernel
@@ -225,9 +274,9 @@ def edge_energy(
     b = wp.quat_rotate_inv(rot, x[ends[1]] - pad_pos1[pad])
     k = 0.5 * (stiffness[ends[0]] + stiffness[ends[1]])
     for side in range(2):
-        depth, t, v, valid = edge_crossing(a, b, pad_half[pad], edge_normal[tid], side)
-        if valid != 0 and depth > 0.0:
-            wp.atomic_add(energy, w, wp.float64(penalty_energy(k, depth, knee)))
+        depth, t, v, valid, rest = edge_crossing(a, b, pad_half[pad], edge_normal[tid], side)
+        if valid != 0 and depth - rest > knee:
+            wp.atomic_add(energy, w, wp.float64(penalty_energy(k, depth - rest - knee, knee)))
 
 
 @wp.kernel
@@ -240,10 +289,11 @@ def deepest_edge_contact(
     pad_half: wp.array(dtype=wp.vec3),
     pads_per_world: int,
     edge_normal: wp.array(dtype=wp.vec3),
+    knee: float,
     depth_out: wp.array(dtype=float),
 ):
-    """Deepest edge contact (m) per world of the iterate x (the edge part of
-    ``contact.deepest_contact``: worlds still deeper than the bound get extra Newton iterations)."""
+    """Deepest edge contact (m, beyond the free ``knee``) per world of the iterate x (the edge part
+    of ``contact.deepest_contact``: worlds still deeper than the bound get extra Newton iterations)."""
     tid = wp.tid()
     e = tid // pads_per_world
     w = edge_world[e]
@@ -253,6 +303,6 @@ def deepest_edge_contact(
     a = wp.quat_rotate_inv(rot, x[ends[0]] - pad_pos1[pad])
     b = wp.quat_rotate_inv(rot, x[ends[1]] - pad_pos1[pad])
     for side in range(2):
-        depth, t, v, valid = edge_crossing(a, b, pad_half[pad], edge_normal[tid], side)
-        if valid != 0 and depth > 0.0:
-            wp.atomic_max(depth_out, w, depth)
+        depth, t, v, valid, rest = edge_crossing(a, b, pad_half[pad], edge_normal[tid], side)
+        if valid != 0 and depth - rest > knee:
+            wp.atomic_max(depth_out, w, depth - rest - knee)
