@@ -58,8 +58,9 @@ def test_pad_edge_pressed_between_surface_nodes_does_not_sink_in(size, resolutio
     """A pad box with one edge pointing down, placed half way between two node rows of a stiff
     cuboid's top face, is driven 3.5 mm below the face at 0.2 m/s and held. The surface under
     the edge must push back: no surface point deeper than 1 mm in the pad (node-vs-box contact
-    alone: the edge sinks ~2.5 mm deep, every node outside the box), and the pad feels a force
-    that holds it up (node-vs-box alone: ~0 N)."""
+    alone, main before edge contact: 2.12 and 1.92 mm deep in the two cases) and the pad feels a
+    force that holds it up. The first case is the geometry of the contact fuzz's cuboid; the
+    second (another size, row spacing, modulus and edge direction) was not used to tune anything."""
     mesh = make_object_mesh("cuboid", resolution=resolution, size=size)
     rows = np.unique(np.round(mesh.nodes[:, 0], 6) if corner[0] == 0 else np.round(mesh.nodes[:, 2], 6))
     top = float(mesh.nodes[:, 1].max())

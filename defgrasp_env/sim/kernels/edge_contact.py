@@ -12,26 +12,29 @@ n_j p_j(t) (j: the face's axis, n_j = +-1), is linear, so within the face's late
 (|p_k| < h_k for the two other axes) it is largest at an end of that interval: at a node (the
 node's own contact) or where AB crosses a lateral plane p_k = +-h_k inside the segment, a point of
 the box edge where the face meets the side k. Those crossing points (at most two: where AB enters
-and where it leaves the extent) are the contacts added here, with the node penalty's energy of
-their depth beyond a free skin: penalty_energy(g - g0) with g0 the penalty's knee depth (0.25 mm;
-stiffness the mean of the two nodes'). The skin keeps a flat face pressed by a pad as it was with
-node contact alone: where a pad's face presses an object by less than g0, the uncompressed rim
-around it (proud of the face by the compression) does not load the face's border; without it,
-the rim's crossing points made a cogging force with the period of the node spacing that lifted a
-block held between two pads by 2 mm (tests/test_fem_contact.py, Coulomb hold). A crossing point
-only counts where face j is the nearest face of the point besides the side k it lies on (the
-faces of the third axis, and the face across the box along k): deeper than those, the point is
-in the middle of another face (a node's contact there), not at this box edge.
+and where it leaves the extent) are the contacts added here. Their depth g counts less the depth
+of the interval's other end where that is a node of AB inside the extent (that node carries its
+own contact: a crossing only adds what lies deeper than it), and less a free skin of 2 penalty
+knees (0.5 mm, half the penetration bound): penalty_energy(g - g_node - g0), stiffness the mean of
+the two nodes'. Without the subtraction and the skin, the uncompressed rim around a pad pressed
+0.2 mm into a 1e5 Pa block loaded the pad's border and made a cogging force with the period of
+the node spacing that lifted the held block 2 mm (tests/test_fem_contact.py, Coulomb hold), and
+a 0.25 mm skin still raised the wrist force of a cuboid swept at 1.5 m/s from 94 to 144 N
+(tests/test_actuator_force_bounds.py, held-out cuboid E = 3e6). A crossing point only counts
+where face j is the nearest face of the point besides the side k it lies on (the faces of the
+third axis, and the face across the box along k): deeper than those, the point is in the middle
+of another face (a node's contact there), not at this box edge; and only where AB crosses the
+plane at >= 17 degrees (``CROSSING_SIN``), since the gradient holds AB's slope.
 
 Gradient (exact): with t* = (+-h_k - a_k) / u_k (u = b - a) and the slope r = u_j / u_k,
-dg/da = -(1 - t*) v and dg/db = -t* v with v = n - n_j r e_k; so the force on the nodes is
-f (1 - t*) v and f t* v, f = ``penalty_force(g)``: its component along the face normal is f (the
-pad's normal force) and v is the common normal of AB and the box edge (frictionless). The
-Gauss-Newton Hessian s (grad g)(grad g)^T couples A and B; the solver's Newton systems hold
-per-node contact blocks, so it is replaced by its block-diagonal majorant s (1 - t*) v v^T on A and
-s t* v v^T on B (Cauchy-Schwarz: ((1-t) x + t y)^2 <= (1-t) x^2 + t y^2), which keeps the Newton
-direction a descent direction of the line search's energy. Frictionless: the faces' friction acts
-on the nodes.
+dg/da = -(1 - t*) v and dg/db = -t* v with v = n - n_j r e_k, and the subtracted node's depth has
+gradient -n on that node; the force is f times minus the gradient of the counted depth,
+f = ``penalty_force``. v is the common normal of AB and the box edge (frictionless). The
+Gauss-Newton Hessian s (grad)(grad)^T couples A and B; the solver's Newton systems hold per-node
+contact blocks, so it is replaced by a block-diagonal majorant: s (1 - t*) v v^T on A and s t* v v^T
+on B (Cauchy-Schwarz, ((1-t) x + t y)^2 <= (1-t) x^2 + t y^2), or 2 s g_A g_A^T and 2 s g_B g_B^T
+when a node's depth is subtracted; the Newton direction stays a descent direction of the line
+search's energy. Frictionless: the faces' friction acts on the nodes.
 
 Arrays: ``edge_nodes`` [E] vec2i global node ids of the surface edges, ``edge_world`` [E],
 ``edge_normal`` [E*P] vec3: the contact face (outward normal, box frame) of surface edge e with
@@ -47,6 +50,8 @@ from .contact import axis_normal, contact_face, penalty_energy, penalty_force, p
 #: crossing to count: bounds the slope |u_j / u_k| in the gradient (<= 1 / 0.3); an edge that
 #: grazes the plane is met by its nodes or by the face of the plane.
 CROSSING_SIN = 0.3
+#: Free skin of a crossing point's depth, in penalty knees (2 x 0.25 mm: half the 1 mm penetration bound).
+SKIN_KNEES = 2.0
 
 
 @wp.func
@@ -217,9 +222,9 @@ def evaluate_edges(
     nw = wp.quat_rotate(rot, n)
     for side in range(2):
         depth, t, v, valid, rest = edge_crossing(a, b, pad_half[pad], n, side)
-        if valid != 0 and depth - rest > knee:
-            f = penalty_force(k, depth - rest - knee, knee)
-            s = penalty_stiffness(k, depth - rest - knee, knee)
+        if valid != 0 and depth - rest > SKIN_KNEES * knee:
+            f = penalty_force(k, depth - rest - SKIN_KNEES * knee, knee)
+            s = penalty_stiffness(k, depth - rest - SKIN_KNEES * knee, knee)
             vw = wp.quat_rotate(rot, v)
             ga = (1.0 - t) * vw
             gb = t * vw
@@ -275,8 +280,8 @@ def edge_energy(
     k = 0.5 * (stiffness[ends[0]] + stiffness[ends[1]])
     for side in range(2):
         depth, t, v, valid, rest = edge_crossing(a, b, pad_half[pad], edge_normal[tid], side)
-        if valid != 0 and depth - rest > knee:
-            wp.atomic_add(energy, w, wp.float64(penalty_energy(k, depth - rest - knee, knee)))
+        if valid != 0 and depth - rest > SKIN_KNEES * knee:
+            wp.atomic_add(energy, w, wp.float64(penalty_energy(k, depth - rest - SKIN_KNEES * knee, knee)))
 
 
 @wp.kernel
@@ -304,5 +309,5 @@ def deepest_edge_contact(
     b = wp.quat_rotate_inv(rot, x[ends[1]] - pad_pos1[pad])
     for side in range(2):
         depth, t, v, valid, rest = edge_crossing(a, b, pad_half[pad], edge_normal[tid], side)
-        if valid != 0 and depth - rest > knee:
-            wp.atomic_max(depth_out, w, depth - rest - knee)
+        if valid != 0 and depth - rest > SKIN_KNEES * knee:
+            wp.atomic_max(depth_out, w, depth - rest - SKIN_KNEES * knee)
