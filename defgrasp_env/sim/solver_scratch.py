@@ -87,7 +87,8 @@ class SolverScratch:
     coarse_rhs: wp.array        # [W, C] float: T^T r
     coarse_coef: wp.array       # [W, C] float: (T^T A T)^-1 T^T r
     coarse_guess: wp.array      # [N] vec3, m: T coef of the coarse initial guess
-    # edge contact with the pads (kernels/edge_contact.py): E surface edges
+    # edge contact with the pads (kernels/edge_contact.py): E surface edges (0 unless
+    # ContactParams.edge_contact)
     edge_nodes: wp.array        # [E] vec2i: global node ids of the objects' surface edges
     edge_world: wp.array        # [E] int: world of each surface edge
     edge_normal: wp.array       # [E*P] vec3: contact face (outward normal, pad frame) of each surface edge and pad
@@ -112,7 +113,7 @@ class SolverScratch:
 
         aggregate = node_aggregates(model.rest_positions.numpy(), model.node_start)
         size = 3 * (int(aggregate.max()) + 1)
-        edges, edge_world = surface_edges(model)
+        edges, edge_world = surface_edges(model) if model.contact.edge_contact else surface_edges(None)
 
         def coarse(dtype, ndim):
             return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)
