@@ -96,8 +96,9 @@ def crossed_box(a: np.ndarray, b: np.ndarray, half: np.ndarray) -> np.ndarray:
 
 class SubstepMonitor:
     """Checks every solve of the scene's solver (each physics substep, the wrist limiter's
-    re-solves included) against the pad boxes and the ground, from the solver's own input and
-    output states (pad poses at the start and end of the substep):
+    re-solves included: every ``ImplicitSolver.advance``, which ``step`` calls too) against the pad
+    boxes and the ground, from the solver's own input and output states (pad poses at the start
+    and end of the substep):
 
     * depth: deepest node (m) inside a pad box (nearest-face depth) or below y = 0 at the end;
     * crossed: nodes that went through a pad in the substep (``crossed_box``: from beyond one face
@@ -112,17 +113,17 @@ class SubstepMonitor:
         self.substeps, self.tip, self.wrist = 0, 0.0, 0.0
         self._pending, self._start = None, None
         solver = scene.solver
-        step = solver.step
+        advance = solver.advance
         half = PAD_BOX_HALF_EXTENTS
 
-        def checked_step(state_in, state_out, control, dt, *args):
+        def checked_advance(state_in, state_out, control, dt, *args):
             x0 = state_in.positions.numpy().copy()
             if self._start is None or not np.array_equal(x0, self._start):
                 self.commit()
             self._start = x0
             c0 = state_in.pad_positions.numpy().astype(np.float64).copy()
             q0 = state_in.pad_orientations.numpy().astype(np.float64).copy()
-            report = step(state_in, state_out, control, dt, *args)
+            advance(state_in, state_out, control, dt, *args)
             x1 = state_out.positions.numpy()
             c1 = control.pad_target_positions.numpy().astype(np.float64)
             q1 = control.pad_target_orientations.numpy().astype(np.float64)
@@ -130,10 +131,10 @@ class SubstepMonitor:
             depth = max(float(np.min(half - np.abs(l1), axis=2).max()), float(-x1[:, 1].min()))
             tip = float(state_out.pad_normal_force.numpy().max())
             wrist = float(np.linalg.norm(state_out.pad_force.numpy().reshape(-1, 2, 3).sum(axis=1), axis=-1).max())
-            self._pending = (depth, int(crossed_box(l0, l1, half).sum()), int(report.penetrated.any()), tip, wrist)
-            return report
+            clamped = int(solver.scratch.clamped.numpy().any())  # this solve's SolveStats.penetrated
+            self._pending = (depth, int(crossed_box(l0, l1, half).sum()), clamped, tip, wrist)
 
-        solver.step = checked_step
+        solver.advance = checked_advance
 
     def commit(self) -> None:
         if self._pending is not None:

@@ -27,11 +27,6 @@ from defgrasp_env.sim.meshing import OBJECT_SHAPES  # noqa: E402
 from defgrasp_env.wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLERANCE, tip_force_bound  # noqa: E402
 
 STEPS = 5
-#: Cells where a pad edge slides between the nodes of the object in the sweep and the pad ends up
-#: embedded in it: the material clamps the pad from both faces (cuboid E = 1e7: 13 kN summed
-#: normal force on the pad, ~600 N net, every node < 1 mm deep in its contact face, so the depth
-#: checks pass). Node-vs-box contact (README, known gaps), not an actuator force.
-PAD_EMBEDDED = {("cuboid", 1e7)}
 
 
 @pytest.mark.slow
@@ -44,8 +39,6 @@ def test_adversarial_actions(name, e):
     assert r["unflagged"] == 0
     assert r["deepest"] < 1e-3, r["deepest"]
     grip = GripperConfig().grip_force_limit
-    within = (r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"]
-              and r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"])
-    if not within and (name, e) in PAD_EMBEDDED:
-        pytest.xfail(f"known gap, pad embedded in the object: {r}")
-    assert within, r
+    assert r["substeps"] > 0, r  # the monitor saw the solves
+    assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
+    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r

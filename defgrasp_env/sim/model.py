@@ -42,6 +42,10 @@ class ContactParams:
             width of the friction law: an object held with a margin creeps at most at this speed).
         modulus_scale: penalty stiffness of a node per Young's modulus and node size (dimensionless).
         stiffening_depth: depth (m) beyond which the penalty force grows cubically.
+        edge_contact: also penalise where the object's surface edges cross the border of a pad face
+            (``sim/kernels/edge_contact.py``), so a pad edge cannot sink in between surface nodes.
+            Off by default: it holds a pad edge out of a coarse stiff mesh, but in the contact fuzz
+            it made the Newton solves of a swept stiff cuboid fail to converge (README, known gaps).
     """
 
     stiffness: float = 1e6
@@ -50,8 +54,11 @@ class ContactParams:
     stick_velocity: float = 1e-4
     modulus_scale: float = 100.0
     stiffening_depth: float = 2.5e-4
+    edge_contact: bool = False
 
     def __post_init__(self) -> None:
+        if not isinstance(self.edge_contact, bool):
+            raise TypeError(f"edge_contact must be a bool, got {self.edge_contact!r}")
         check_range("contact stiffness", self.stiffness, 0.0, math.inf, "N/m")
         check_range("ground_friction", self.ground_friction, 0.0, math.inf, low_open=False)
         check_range("pad_friction", self.pad_friction, 0.0, math.inf, low_open=False)

@@ -25,6 +25,7 @@ import warp as wp
 
 from .kernels import coarse_space as kcs
 from .kernels import contact as kc
+from .kernels import edge_contact as kec
 from .kernels import elastic as ke
 from .kernels import energy as kenergy
 from .kernels import line_search as kls
@@ -74,7 +75,7 @@ class SubstepLaunches:
     begin_search: object
     trial: list
     apply: list
-    depth: object       # the iterate's deepest contact per world (extra iterations)
+    depth: list         # launches: the iterate's deepest contact per world (extra iterations)
     clamp: object
     end: object
     outputs: list
@@ -96,18 +97,25 @@ class _Context:
         return wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device, record_cmd=True)
 
 
-def _nodes(c: _Context, x, active, record_pads, energy=None):
-    """Inertia, gravity and contact terms of every node at ``x`` (or their energy)."""
+def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
+    """Inertia, gravity and contact terms of every node at ``x`` (or their energy): the node
+    terms, then the pad edge contacts (``kernels/edge_contact.py``) added onto them."""
     m, s, work, ctl = c.model, c.scratch, c.work, c.control
     common = (m.node_mass, m.node_world, active, ctl.external_force, m.gravity, c.h, *s.pads, m.pad_half_extents,
               m.pads_per_world, s.lag_normal_force, s.lag_normal, m.node_contact_stiffness,
               m.contact.stiffening_depth, m.contact.ground_friction, m.contact.pad_friction,
               m.contact.stick_velocity)
+    pairs = s.edge_normal.shape[0]
+    edges = (x, s.edge_nodes, s.edge_world, active, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world,
+             s.edge_normal, m.node_contact_stiffness, m.contact.stiffening_depth)
     if energy is not None:
-        return c.rec(kenergy.node_energy, m.num_nodes, x, s.x_start, work.velocities, *common, energy)
-    return c.rec(kc.evaluate_nodes, m.num_nodes, x, s.x_start, work.velocities, *common, record_pads, s.residual,
-                 s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force, work.pad_normal_force,
-                 work.pad_force, s.penetration)
+        return [c.rec(kenergy.node_energy, m.num_nodes, x, s.x_start, work.velocities, *common, energy),
+                *([c.rec(kec.edge_energy, pairs, *edges, energy)] if pairs else [])]
+    return [c.rec(kc.evaluate_nodes, m.num_nodes, x, s.x_start, work.velocities, *common, record_pads, s.residual,
+                  s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force, work.pad_normal_force,
+                  work.pad_force, s.penetration),
+            *([c.rec(kec.evaluate_edges, pairs, *edges, record_pads, s.residual, s.diag_block, s.contact_hessian,
+                     work.contact_force, work.pad_normal_force, work.pad_force, s.penetration)] if pairs else [])]
 
 
 def _tets(c: _Context, x, active, energy=None):
@@ -179,6 +187,8 @@ def _lag(c: _Context) -> list:
     return [c.rec(kc.lag_contacts, m.num_nodes, s.x_start, x, m.node_world, *s.pads, m.pad_half_extents,
                   m.pads_per_world, m.node_contact_stiffness, m.contact.stiffening_depth, s.lag_normal_force,
                   s.lag_normal),
+            *([c.rec(kec.lag_edge_contacts, s.edge_normal.shape[0], s.x_start, x, s.edge_nodes, s.edge_world, *s.pads,
+                     m.pad_half_extents, m.pads_per_world, s.edge_normal)] if s.edge_normal.shape[0] else []),
             c.rec(kc.keep_pad_depth, m.num_nodes, s.x_start, m.node_world, m.free_axes, *s.pads, m.pad_half_extents,
                   m.pads_per_world, s.lag_normal_force, s.lag_normal, x),
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
@@ -186,7 +196,7 @@ def _lag(c: _Context) -> list:
 
 def _evaluate(c: _Context) -> list:
     s, x = c.scratch, c.work.positions
-    return [_nodes(c, x, s.newton_active, 0), _tets(c, x, s.newton_active), _begin_solve(c, s.newton_active),
+    return [*_nodes(c, x, s.newton_active, 0), _tets(c, x, s.newton_active), _begin_solve(c, s.newton_active),
             *_coarse_before(c, s.newton_active),
             c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.rz, s.rz0, s.cg_active)]
 
@@ -212,7 +222,7 @@ def _cg(c: _Context, config) -> list:
 def _trial(c: _Context, config) -> list:
     m, s = c.model, c.scratch
     return [c.rec(kls.trial_positions, m.num_nodes, c.work.positions, s.dx, m.node_world, s.step_length, s.x_trial),
-            _nodes(c, s.x_trial, s.searching, 0, s.energy_trial),
+            *_nodes(c, s.x_trial, s.searching, 0, s.energy_trial),
             _tets(c, s.x_trial, s.searching, s.energy_trial),
             c.rec(kls.end_line_search_trial, m.num_worlds, s.energy0, 1e-6, 0.5 ** config.line_search_steps,
                   s.energy_trial, s.step_length, s.searching)]
@@ -229,13 +239,17 @@ def _apply(c: _Context, config) -> list:
 
 def _depth(c: _Context):
     m, s = c.model, c.scratch
-    return c.rec(kc.deepest_contact, m.num_nodes, c.work.positions, m.node_world, s.pad_pos1, s.pad_rot1,
-                 m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth)
+    return [c.rec(kc.deepest_contact, m.num_nodes, c.work.positions, m.node_world, s.pad_pos1, s.pad_rot1,
+                  m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth),
+            *([c.rec(kec.deepest_edge_contact, s.edge_normal.shape[0], c.work.positions, s.edge_nodes, s.edge_world,
+                     s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, s.edge_normal,
+                     m.contact.stiffening_depth, s.depth)]
+              if s.edge_normal.shape[0] else [])]
 
 
 def _outputs(c: _Context) -> list:
     m, s, work, x = c.model, c.scratch, c.work, c.work.positions
-    return [_nodes(c, x, s.all_on, 1), _tets(c, x, s.all_on), _begin_solve(c, s.all_on),
+    return [*_nodes(c, x, s.all_on, 1), _tets(c, x, s.all_on), _begin_solve(c, s.all_on),
             c.rec(ksub.mean_stress, m.num_tets, work.von_mises, m.tet_rest_volume, m.tet_world, m.world_volume,
                   work.mean_von_mises)]
 
@@ -258,7 +272,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     return SubstepLaunches(
         pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c)),
         cg=seq(_cg(c, config) * block), coarse_post=seq(_coarse_after(c, s.newton_active)),
-        energy0=seq([_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)]),
+        energy0=seq([*_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)]),
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
         trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=_depth(c),

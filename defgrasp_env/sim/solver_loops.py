@@ -78,17 +78,19 @@ class DeviceLoops:
 
         self._repeat(name, again, self.limit[name] - 1)
 
-    def extra_iterations(self, depth_launch, body, patient_iterations: int) -> None:
+    def extra_iterations(self, depth_launches: list, body, patient_iterations: int) -> None:
         """Newton's extra iterations after the regular ones (all of which must have run): up to
         ``penetration_iterations`` in worlds deeper than half the penetration bound, up to
         ``patient_iterations`` (0 or the config's) in patient worlds not yet converged; stops when
-        no world takes one. ``depth_launch``: the recorded ``deepest_contact`` of the iterate."""
+        no world takes one. ``depth_launches``: the recorded launches of the iterate's deepest
+        contact per world (``deepest_contact``, and edges')."""
         limit, worlds, gate = self._extra[patient_iterations]
         if limit == 0:
             return
 
         def choose():
-            depth_launch.launch()
+            for cmd in depth_launches:
+                cmd.launch()
             worlds.launch()
             self._any_active.launch()
             gate.launch()

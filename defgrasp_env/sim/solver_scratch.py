@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import warp as wp
 
 from .model import Model
+from .surface_edges import surface_edges
 
 
 @dataclass
@@ -85,6 +86,11 @@ class SolverScratch:
     coarse_rhs: wp.array        # [W, C] float: T^T r
     coarse_coef: wp.array       # [W, C] float: (T^T A T)^-1 T^T r
     coarse_guess: wp.array      # [N] vec3, m: T coef of the coarse initial guess
+    # edge contact with the pads (kernels/edge_contact.py): E surface edges (0 unless
+    # ContactParams.edge_contact)
+    edge_nodes: wp.array        # [E] vec2i: global node ids of the objects' surface edges
+    edge_world: wp.array        # [E] int: world of each surface edge
+    edge_normal: wp.array       # [E*P] vec3: contact face (outward normal, pad frame) of each surface edge and pad
 
     @classmethod
     def from_model(cls, model: Model) -> "SolverScratch":
@@ -106,6 +112,7 @@ class SolverScratch:
 
         aggregate = model.node_aggregate
         size = 3 * (int(aggregate.max()) + 1)
+        edges, edge_world = surface_edges(model) if model.contact.edge_contact else surface_edges(None)
 
         def coarse(dtype, ndim):
             return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)
@@ -126,6 +133,8 @@ class SolverScratch:
             coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
             coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
             coarse_guess=vec(),
+            edge_nodes=wp.array(edges, dtype=wp.vec2i, device=d), edge_world=wp.array(edge_world, dtype=int, device=d),
+            edge_normal=vec(len(edges) * model.pads_per_world),
         )
         scratch.all_on.fill_(1)
         scratch.step_length.fill_(1.0)  # begin_line_search resets it; with no line search it stays 1
