@@ -217,6 +217,17 @@ def test_teleop_app_3d_view_in_chromium(chromium, tmp_path):
                                 config=SessionConfig(num_episodes=1, reset_time_s=600.0, seed=meta["seed"],
                                                      fixed_seed=True, realtime=True),
                                 say=lambda m: None, status=lambda line: None, handle_sigint=False)
+    # the operator's episode (5 s paced) waits at its 12th step until the page has been shot: on a
+    # loaded box the screenshot can take longer than the whole episode
+    shot_taken, steps_taken, step = threading.Event(), [0], env.step
+
+    def step_after_the_shot(action):
+        steps_taken[0] += 1
+        if steps_taken[0] == 12:
+            shot_taken.wait(timeout=600)
+        return step(action)
+
+    env.step = step_after_the_shot
     errors = []
     worker = threading.Thread(target=lambda: errors.append(None) if session.run() else None, daemon=True)
     try:
@@ -225,6 +236,8 @@ def test_teleop_app_3d_view_in_chromium(chromium, tmp_path):
         while session.report.steps < 10 and time.monotonic() - t0 < 120:
             time.sleep(0.1)
         working = screenshot(view.url, ART / "teleop_recording.png", ready=drawn)
+        assert session.control.phase.value != "review", "the episode ended before the page was shot"
+        shot_taken.set()
         while session.control.phase.value != "review" and time.monotonic() - t0 < 600:
             time.sleep(0.2)
         assert session.control.phase.value == "review"
@@ -234,6 +247,7 @@ def test_teleop_app_3d_view_in_chromium(chromium, tmp_path):
 
         review = screenshot(view.url, ART / "teleop_review.png", ready=changed)
     finally:
+        shot_taken.set()
         session.request_stop()
         worker.join(timeout=60)
     assert not worker.is_alive() and errors == [None]
