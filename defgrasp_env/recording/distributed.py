@@ -40,7 +40,7 @@ import pathlib
 import signal
 import threading
 
-from .generate import Job, progress_bar, record_jobs
+from .generate import Job, job_groups, progress_bar, record_jobs
 
 DEFAULT_MAX_RETRIES = 3
 #: Seconds between the driver's checks for Ctrl-C while it waits on Ray.
@@ -68,14 +68,6 @@ def record_group(out: str, jobs: list[Job], policy_spec: str, max_steps: int | N
     record_jobs(pathlib.Path(out), todo, policy_spec, max_steps, device, record_frames, compression,
                 on_episode=lambda job, success: result.__setitem__(job.name, success), worlds=max(len(todo), 1))
     return [(j.name, result.get(j.name)) for j in jobs]
-
-
-def job_groups(jobs: list[Job], worlds: int) -> list[list[Job]]:
-    """``jobs`` in groups of at most ``worlds`` of the same (object, E), in order (one Ray task each)."""
-    groups: dict[tuple[str, float], list[Job]] = {}
-    for j in jobs:
-        groups.setdefault((j.object, j.youngs_modulus), []).append(j)
-    return [g[k:k + worlds] for g in groups.values() for k in range(0, len(g), worlds)]
 
 
 def _worker_device(device: str) -> tuple[str, float]:

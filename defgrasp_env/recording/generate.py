@@ -118,21 +118,24 @@ def record_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps:
     must take a batch of observations, as the scripted expert and 'random' do)."""
     if isinstance(worlds, bool) or not isinstance(worlds, int) or worlds < 1:
         raise ValueError(f"worlds must be an integer >= 1, got {worlds!r}")
-    groups: dict[tuple[str, float], list[Job]] = {}
-    for j in jobs:
-        groups.setdefault((j.object, j.youngs_modulus), []).append(j)
-    for (obj, e), group in groups.items():
-        kwargs = {"object": obj, "youngs_modulus": e, "device": device}
+    for group in job_groups(jobs, None if worlds == 1 else worlds):
+        kwargs = {"object": group[0].object, "youngs_modulus": group[0].youngs_modulus, "device": device}
         if max_steps is not None:
             kwargs["max_episode_steps"] = max_steps
         if record_frames:
             kwargs["render_mode"] = "rgb_array"
-        if worlds == 1:
-            _record_one_by_one(out, group, kwargs, policy_spec, record_frames, compression, on_episode)
-        else:
-            for k in range(0, len(group), worlds):
-                _record_together(out, group[k:k + worlds], kwargs, policy_spec, record_frames, compression,
-                                 on_episode)
+        record = _record_one_by_one if worlds == 1 else _record_together
+        record(out, group, kwargs, policy_spec, record_frames, compression, on_episode)
+
+
+def job_groups(jobs: list[Job], size: int | None = None) -> list[list[Job]]:
+    """``jobs`` grouped by (object, E), in order, each group cut into pieces of at most ``size``
+    (None: whole): the episodes one env records (and, on Ray, one task)."""
+    groups: dict[tuple[str, float], list[Job]] = {}
+    for j in jobs:
+        groups.setdefault((j.object, j.youngs_modulus), []).append(j)
+    step = size or max(len(jobs), 1)
+    return [g[k:k + step] for g in groups.values() for k in range(0, len(g), step)]
 
 
 def _record_one_by_one(out, group: list[Job], kwargs: dict, policy_spec: str, record_frames: bool,

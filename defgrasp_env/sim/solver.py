@@ -235,7 +235,7 @@ class ImplicitSolver:
         wp.copy(s.newton_active, s.all_on)
         s.substep_newton_it.zero_()
         self.loops.do_while("newton", lambda: self._newton_iteration(run, first=True),
-                            lambda: self._newton_iteration(run, first=False), s.newton_active)
+                            lambda: self._newton_iteration(run, first=False))
         self.loops.extra_iterations(run.depth, lambda: self._newton_iteration(run, first=False), patient_iterations)
 
     def _newton_iteration(self, run: SubstepLaunches, first: bool) -> None:
@@ -255,7 +255,7 @@ class ImplicitSolver:
             for cmd in run.cg:
                 cmd.launch()
 
-        self.loops.do_while("cg", block, block, self.scratch.cg_active)
+        self.loops.do_while("cg", block, block)
 
     def _line_search(self, run: SubstepLaunches, first: bool) -> None:
         """Per world, halve the Newton step until the incremental potential does not increase.
@@ -274,7 +274,7 @@ class ImplicitSolver:
             for cmd in run.trial:
                 cmd.launch()
 
-        self.loops.do_while("search", trial, trial, self.scratch.searching)
+        self.loops.do_while("search", trial, trial)
 
     def _evaluate_outputs(self, run: SubstepLaunches, state_out: State) -> None:
         """Forces, stresses and pad loads at the returned positions, and the final residual

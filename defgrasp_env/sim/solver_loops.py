@@ -34,9 +34,10 @@ class DeviceLoops:
         self.running = wp.zeros(1, dtype=wp.int32, device=dev)
         self.check = check = bool(config.check_every)
         w = model.num_worlds
-        self._any = {id(flags): (self._rec(klc.flag_any, w, flags, self.hit) if check
-                                 else self._rec(klc.set_hit, 1, self.hit))
-                     for flags in (scratch.newton_active, scratch.cg_active, scratch.searching)}
+        # the per-world flags each loop iterates while any is set
+        flags = {"newton": scratch.newton_active, "cg": scratch.cg_active, "search": scratch.searching}
+        self._any = {name: (self._rec(klc.flag_any, w, f, self.hit) if check else self._rec(klc.set_hit, 1, self.hit))
+                     for name, f in flags.items()}
         cg_blocks = -(-config.cg_iterations // (config.check_every or config.cg_iterations))
         limits = {"newton": config.newton_iterations, "cg": cg_blocks, "search": config.line_search_steps + 1}
         self.limit = dict(limits)
@@ -56,16 +57,17 @@ class DeviceLoops:
                           scratch.patient, scratch.last_dx, config.newton_tolerance, scratch.diverged,
                           scratch.newton_active),
                 self._rec(klc.extra_gate, 1, self.hit, self.count["extra"], limit, self.running, self.cond["extra"]))
-        self._any_active = self._any[id(scratch.newton_active)]
+        self._any_active = self._any["newton"]
 
     def _rec(self, kernel, dim, *inputs):
         return wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.device, record_cmd=True)
 
-    def do_while(self, name: str, first, body, flags: wp.array) -> None:
-        """``first()``, then ``body()`` while any of ``flags`` (one of the scratch's newton_active,
-        cg_active, searching) is set after the last pass and fewer than ``limit[name]`` passes ran."""
+    def do_while(self, name: str, first, body) -> None:
+        """``first()``, then ``body()`` while a world still iterates loop ``name`` ("newton",
+        "cg", "search": the scratch's newton_active, cg_active, searching) after the last pass and
+        fewer than ``limit[name]`` passes ran."""
         start, gate = self._gate[name]
-        any_flag = self._any[id(flags)]
+        any_flag = self._any[name]
         start.launch()
         first()
         any_flag.launch()
