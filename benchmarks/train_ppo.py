@@ -5,10 +5,16 @@ batched FEM simulation, on the CPU or a CUDA device) drive SB3's PPO through
 ``defgrasp_env.rl.SB3VectorEnv``, with ``VecMonitor`` (episode returns, ``is_success``) and
 ``VecNormalize`` (running observation / reward normalisation). The env's dense reward is used as
 is (reach + grasp + lift + success; see ``DeformablePickupEnv``). After every PPO rollout the
-script records the env steps so far, wall time and the success rate and mean return of the
-episodes that ended in that rollout (the stochastic training policy); at the end it prints the
-learning curve as a table and writes ``curve.csv`` and ``curve.png`` (success vs env steps and vs
-wall time) to ``--out``, and the model to ``--out/ppo.zip``.
+script records the env steps so far, wall time, the success rate and mean return of the
+episodes that ended in that rollout (the stochastic training policy) and the fraction of its
+world-steps with the object grasped; at the end it prints the learning curve as a table and writes
+``curve.csv`` and ``curve.png`` (success and grasp vs env steps and vs wall time) to ``--out``, and
+the model to ``--out/ppo.zip``.
+
+``--actions position-jaw`` (``defgrasp_env.rl.held_orientation``) lets the policy move the wrist
+and the jaw but not turn the wrist (4 actions instead of 7). The PPO settings default to those
+ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
+8 epochs of 32 minibatches per rollout, 3 x 256 networks, initial log std -0.5, target KL 0.1).
 
     python benchmarks/train_ppo.py --num-envs 16 --timesteps 200000 --object cuboid --youngs-modulus 1e6
     python benchmarks/train_ppo.py --num-envs 256 --device cuda:0 --timesteps 5000000   # at scale
@@ -40,10 +46,13 @@ class LearningCurve(BaseCallback):
         self.rows: list[dict] = []
         self._success: list[bool] = []
         self._returns: list[float] = []
+        self._grasped: list[float] = []
         self._t0 = time.perf_counter()
 
     def _on_step(self) -> bool:
-        for done, info in zip(self.locals["dones"], self.locals["infos"]):
+        infos = self.locals["infos"]
+        self._grasped.append(float(np.mean([bool(info.get("grasped", False)) for info in infos])))
+        for done, info in zip(self.locals["dones"], infos):
             if done:
                 self._success.append(bool(info.get("is_success", False)))
                 self._returns.append(float(info.get("episode", {}).get("r", np.nan)))
@@ -53,20 +62,36 @@ class LearningCurve(BaseCallback):
         n = len(self._success)
         self.rows.append({"env_steps": self.num_timesteps, "wall_s": round(time.perf_counter() - self._t0, 1),
                           "episodes": n, "success_rate": float(np.mean(self._success)) if n else float("nan"),
-                          "mean_return": float(np.nanmean(self._returns)) if n else float("nan")})
+                          "mean_return": float(np.nanmean(self._returns)) if n else float("nan"),
+                          "grasped_fraction": float(np.mean(self._grasped)) if self._grasped else float("nan")})
         r = self.rows[-1]
         print(f"steps {r['env_steps']:>9d}  wall {r['wall_s']:>8.1f} s  episodes {n:>4d}  "
-              f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}", flush=True)
-        self._success, self._returns = [], []
+              f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}",
+              flush=True)
+        self._success, self._returns, self._grasped = [], [], []
 
 
-def make_vec_env(num_envs: int, seed: int, **env_kwargs):
-    """The SB3 view of the native vector env, with episode statistics and running normalisation."""
+def _held_orientation(venv):
+    from defgrasp_env.rl.held_orientation import HeldOrientationActions
+
+    return HeldOrientationActions(venv)
+
+
+#: ``--actions``: what the policy controls (the wrapper applied to the SB3 view of the env).
+ACTION_SETS = {"full": lambda venv: venv, "position-jaw": _held_orientation}
+
+
+def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float = 0.99, **env_kwargs):
+    """The SB3 view of the native vector env (``actions``: a key of ``ACTION_SETS``), with episode
+    statistics and running normalisation of observations and rewards (discount ``gamma``)."""
     import gymnasium as gym
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from defgrasp_env import PickupConfig
     from defgrasp_env.rl.sb3_vec_env import SB3VectorEnv
+
+    if actions not in ACTION_SETS:
+        raise ValueError(f"actions must be one of {sorted(ACTION_SETS)}, got {actions!r}")
 
     # gym.make_vec passes the registered 300-step limit on: derive it from the options instead
     steps = PickupConfig(**env_kwargs).max_episode_steps
@@ -74,19 +99,23 @@ def make_vec_env(num_envs: int, seed: int, **env_kwargs):
                        max_episode_steps=steps, **env_kwargs)
     venv = SB3VectorEnv(env)
     venv.seed(seed)
-    return VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), clip_obs=10.0)
+    venv = ACTION_SETS[actions](venv)
+    return VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), clip_obs=10.0, gamma=gamma)
 
 
-def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 64, batch_size: int = 256,
-          torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), **env_kwargs):
+def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
+          torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
+          gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
-    returns (model, LearningCurve)."""
+    returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
+    ``n_epochs`` passes of ``minibatches`` minibatches."""
     from stable_baselines3 import PPO
 
-    venv = make_vec_env(num_envs, seed, **env_kwargs)
-    model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=min(batch_size, n_steps * num_envs),
-                n_epochs=5, learning_rate=3e-4, gamma=0.99, gae_lambda=0.95, clip_range=0.2,
-                policy_kwargs=dict(net_arch=[256, 256], log_std_init=-0.5), seed=seed,
+    venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, **env_kwargs)
+    model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=max(n_steps * num_envs // minibatches, 1),
+                n_epochs=n_epochs, learning_rate=3e-4, gamma=gamma, gae_lambda=gae_lambda, clip_range=0.2,
+                target_kl=0.1, max_grad_norm=0.5, vf_coef=0.5, ent_coef=0.0,
+                policy_kwargs=dict(net_arch=[256, 256, 256], log_std_init=-0.5), seed=seed,
                 device=torch_device, verbose=verbose)
     curve = LearningCurve(max_seconds)
     model.learn(timesteps, callback=curve)
@@ -107,11 +136,13 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
     steps = [r["env_steps"] for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for ax, x, label in ((axes[0], steps, "env steps"), (axes[1], [r["wall_s"] / 60 for r in rows], "wall time (min)")):
-        ax.plot(x, [r["success_rate"] for r in rows], "o-", label="success rate")
+        ax.plot(x, [r["success_rate"] for r in rows], "o-", ms=3, label="success rate (episodes ended)")
+        ax.plot(x, [r["grasped_fraction"] for r in rows], "s-", ms=3, label="grasped fraction (world-steps)")
         ax.set_xlabel(label)
         ax.set_ylim(-0.02, 1.02)
-        ax.set_ylabel("success rate (episodes ended in the rollout)")
+        ax.set_ylabel("fraction, per PPO rollout")
         ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(out / "curve.png", dpi=110)
@@ -121,7 +152,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--num-envs", type=int, default=16)
     ap.add_argument("--timesteps", type=int, default=100_000, help="env steps (all worlds together)")
-    ap.add_argument("--n-steps", type=int, default=64, help="PPO rollout length per world")
+    ap.add_argument("--n-steps", type=int, default=16, help="PPO rollout length per world")
+    ap.add_argument("--actions", choices=sorted(ACTION_SETS), default="full",
+                    help="what the policy controls: all 7 delta actions, or wrist position and jaw")
+    ap.add_argument("--gamma", type=float, default=0.8)
     ap.add_argument("--object", default="cuboid")
     ap.add_argument("--youngs-modulus", type=float, default=1e6)
     ap.add_argument("--episode-seconds", type=float, default=15.0)
@@ -133,19 +167,22 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
-                         max_seconds=60.0 * args.minutes,
+                         max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma,
                          object=args.object, youngs_modulus=args.youngs_modulus,
                          episode_seconds=args.episode_seconds, device=args.device)
     wall = time.perf_counter() - t0
     out = pathlib.Path(args.out)
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {args.youngs_modulus:g} Pa, "
-             f"{args.num_envs} worlds on {args.device}; {model.num_timesteps} env steps in {wall / 60:.1f} min")
+             f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "
+             f"in {wall / 60:.1f} min")
     save_curve(curve.rows, out, title)
     model.save(out / "ppo.zip")
     print(title)
-    print("| env steps | wall (s) | episodes ended | success rate | mean return |\n|---|---|---|---|---|")
+    print("| env steps | wall (s) | episodes ended | success rate | mean return | grasped fraction |\n"
+          "|---|---|---|---|---|---|")
     for r in curve.rows:
-        print(f"| {r['env_steps']} | {r['wall_s']} | {r['episodes']} | {r['success_rate']:.2f} | {r['mean_return']:.1f} |")
+        print(f"| {r['env_steps']} | {r['wall_s']} | {r['episodes']} | {r['success_rate']:.2f} | "
+              f"{r['mean_return']:.1f} | {r['grasped_fraction']:.3f} |")
     print(f"env steps/s: {model.num_timesteps / wall:.1f}; curve: {out / 'curve.png'}")
     return 0
 

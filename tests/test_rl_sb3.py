@@ -42,6 +42,34 @@ def test_protocol_matches_the_native_env_and_auto_resets():
     np.testing.assert_array_equal(obs["agent_pos"], ref_obs["agent_pos"])
 
 
+def test_held_orientation_actions_step_the_env_with_zero_rotation():
+    """4-D actions through ``HeldOrientationActions`` give the bits of the native env stepped with the
+    same linear velocity and jaw and zero angular velocity; the wrist's orientation never changes."""
+    from defgrasp_env.rl.held_orientation import HeldOrientationActions
+
+    venv = HeldOrientationActions(SB3VectorEnv(_vec(steps=10)))
+    ref = _vec(steps=10)
+    assert venv.action_space.shape == (4,)
+    venv.seed(2)
+    obs = venv.reset()
+    ref_obs, _ = ref.reset(seed=2)
+    quat0 = obs["agent_pos"][:, 3:7].copy()
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        a = rng.uniform(-1, 1, (2, 4)).astype(np.float32)
+        venv.step_async(a)
+        obs, reward, _, _ = venv.step_wait()
+        full = np.concatenate([a[:, :3], np.zeros((2, 3), np.float32), a[:, 3:]], axis=1)
+        ref_obs, ref_r, *_ = ref.step(full)
+        for k in ref_obs:
+            np.testing.assert_array_equal(obs[k], ref_obs[k])
+        np.testing.assert_array_equal(reward, ref_r.astype(np.float32))
+    np.testing.assert_allclose(obs["agent_pos"][:, 3:7], quat0, atol=1e-6)
+    assert not np.allclose(obs["agent_pos"][:, :3], ref.reset(seed=2)[0]["agent_pos"][:, :3])  # it moved
+    with pytest.raises(ValueError, match=r"shape \(2, 4\)"):
+        venv.step_async(np.zeros((2, 7), np.float32))
+
+
 def test_rejects_other_autoreset_modes():
     with pytest.raises(ValueError, match="SameStep"):
         SB3VectorEnv(gym.make_vec("DeformablePickup-v0", num_envs=1))
@@ -56,7 +84,7 @@ def test_ppo_trains_on_the_vector_env(tmp_path):
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
     from train_ppo import save_curve, train
 
-    model, curve = train(num_envs=2, timesteps=32, n_steps=8, batch_size=16, episode_seconds=0.3)
+    model, curve = train(num_envs=2, timesteps=32, n_steps=8, minibatches=2, episode_seconds=0.3, actions="position-jaw")
     assert model.num_timesteps == 32 and len(curve.rows) == 2
     assert sum(r["episodes"] for r in curve.rows) == 2 * (16 // 6)  # 6-step episodes, 2 worlds x 16 steps
     params = [p.detach().clone() for p in model.policy.parameters()]

@@ -14,6 +14,17 @@ REWARD_TERMS = ("reach", "grasp", "lift", "success")
 GRASP_FORCE = 0.5
 #: Deepest pad/ground penetration (m) beyond which the object counts as pierced.
 PIERCE_DEPTH = 0.005
+#: Distance scales (1/m) of the shaped reach and lift terms, ``1 - tanh(scale * distance)``: each
+#: term must still rise over the whole distance a learner covers, the reach from the start pose
+#: (~0.1-0.2 m) and the lift from the ground to the goal (0.58 m). With the earlier 10/m and 5/m the
+#: lift term was flat below 0.3 m (0.005 on the ground, rising 0.05 per m: no signal to lift).
+REACH_SCALE = 5.0
+LIFT_SCALE = 2.0
+
+
+def shaped_progress(distance: np.ndarray, scale: float) -> np.ndarray:
+    """Dense progress in (0, 1]: ``1 - tanh(scale * distance)`` (distance m, scale 1/m), 1 at 0."""
+    return 1.0 - np.tanh(scale * np.asarray(distance, np.float64))
 
 
 def _box(layout: VectorLayout) -> spaces.Box:
@@ -79,9 +90,9 @@ class PickupTask:
         self.held = np.where(at_goal, self.held + 1, 0)
         self.elapsed += 1
         success = self.held >= max(self.hold_steps, 1)
-        lift_progress = 1.0 - np.tanh(5.0 * goal_dist)
+        lift_progress = shaped_progress(goal_dist, LIFT_SCALE)
         terms = {
-            "reach": (1.0 - np.tanh(10.0 * reach_dist)) * 0.5,
+            "reach": shaped_progress(reach_dist, REACH_SCALE) * 0.5,
             "grasp": 0.5 * grasped,
             "lift": grasped * lift_progress * 2.0,
             "success": 10.0 * success,
