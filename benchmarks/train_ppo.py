@@ -48,6 +48,10 @@ class LearningCurve(BaseCallback):
         self._returns: list[float] = []
         self._grasped: list[float] = []
         self._t0 = time.perf_counter()
+        self._rollout_t0 = self._t0
+
+    def _on_rollout_start(self) -> None:
+        self._rollout_t0 = time.perf_counter()
 
     def _on_step(self) -> bool:
         infos = self.locals["infos"]
@@ -63,10 +67,13 @@ class LearningCurve(BaseCallback):
         self.rows.append({"env_steps": self.num_timesteps, "wall_s": round(time.perf_counter() - self._t0, 1),
                           "episodes": n, "success_rate": float(np.mean(self._success)) if n else float("nan"),
                           "mean_return": float(np.nanmean(self._returns)) if n else float("nan"),
-                          "grasped_fraction": float(np.mean(self._grasped)) if self._grasped else float("nan")})
+                          "grasped_fraction": float(np.mean(self._grasped)) if self._grasped else float("nan"),
+                          # seconds of this rollout's collection (env steps + policy forward passes)
+                          "rollout_s": round(time.perf_counter() - self._rollout_t0, 2)})
         r = self.rows[-1]
         print(f"steps {r['env_steps']:>9d}  wall {r['wall_s']:>8.1f} s  episodes {n:>4d}  "
-              f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}",
+              f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}  "
+              f"collection {r['rollout_s']:.1f} s",
               flush=True)
         self._success, self._returns, self._grasped = [], [], []
 

@@ -222,3 +222,36 @@ def test_blocked_planning_equals_one_pass(monkeypatch):
     plan = plan_grasps(feature[subset], keypoints[subset], yaw[subset])
     np.testing.assert_array_equal(plan.point, one_pass.point[subset])
     np.testing.assert_array_equal(plan.yaw, one_pass.yaw[subset])
+
+
+@pytest.mark.parametrize("name", ["cylinder", "torus"])
+def test_gripped_stiff_object_survives_jaw_errors_of_an_imitating_policy(name):
+    """Why the expert keeps ``grip_overtravel`` inside the contact gap: a policy that imitates it
+    makes mm-scale errors in the jaw command (ACT on 100 demonstrations: ~1.5 mm too open on a
+    stiff cube). With the expert's jaw command opened by 1.5 mm from the lift on, an E = 1e7 object
+    (not the cuboid the overtravel was chosen on) is still lifted, held near the 20 N grip force
+    limit; with an overtravel of 1 um (the old exact-gap hold) the same error lets it drop."""
+    from defgrasp_env.layout import gap_to_jaw_command, jaw_command_to_gap
+
+    def run(**overrides):
+        env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=1e7)
+        expert = ScriptedPickupExpert.from_env(env.unwrapped, **overrides)
+        obs, _ = env.reset(seed=4)
+        grip = []
+        for _ in range(env.spec.max_episode_steps):
+            action = expert(obs)
+            if PHASE_NAMES[expert.phase[0]] in ("lift", "retreat"):
+                jaw = action[DELTA_ACTION.slice("jaw")]
+                action[DELTA_ACTION.slice("jaw")] = gap_to_jaw_command(jaw_command_to_gap(jaw) + 0.0015)
+                grip.append(obs["agent_pos"][8:10].mean())
+            obs, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                break
+        env.close()
+        return info["is_success"], np.array(grip)
+
+    ok, grip = run()
+    assert ok
+    assert np.median(grip) == pytest.approx(20.0, rel=0.1)
+    ok_exact, _ = run(grip_overtravel=1e-6)
+    assert not ok_exact
