@@ -42,6 +42,26 @@ def test_protocol_matches_the_native_env_and_auto_resets():
     np.testing.assert_array_equal(obs["agent_pos"], ref_obs["agent_pos"])
 
 
+def test_per_world_infos_hold_every_batched_info_entry():
+    """Each world's info dict has, for every batched info array of the native env, that world's
+    entry: a Python scalar (bool, int, float: SB3 and its loggers expect plain numbers)."""
+    venv = SB3VectorEnv(_vec(n=3, steps=10))
+    ref = _vec(n=3, steps=10)
+    venv.seed(1)
+    venv.reset()
+    ref.reset(seed=1)
+    a = np.random.default_rng(0).uniform(-1, 1, (3, 7)).astype(np.float32)
+    venv.step_async(a)
+    _, _, _, infos = venv.step_wait()
+    _, _, _, _, ref_info = ref.step(a)
+    keys = [k for k, v in ref_info.items() if isinstance(v, np.ndarray) and not k.startswith("_")]
+    assert len(keys) >= 15
+    for w in range(3):
+        for k in keys:
+            assert type(infos[w][k]) in (bool, int, float), (k, type(infos[w][k]))
+            assert infos[w][k] == ref_info[k][w], k
+
+
 def test_held_orientation_actions_step_the_env_with_zero_rotation():
     """4-D actions through ``HeldOrientationActions`` give the bits of the native env stepped with the
     same linear velocity and jaw and zero angular velocity; the wrist's orientation never changes."""

@@ -99,13 +99,20 @@ class SB3VectorEnv(VecEnv):
 
     # -- internals -------------------------------------------------------------------------
     def _split_info(self, info: dict) -> list[dict]:
-        """Gymnasium's batched info (arrays [N] with ``_key`` masks) -> N per-world dicts of scalars."""
+        """Gymnasium's batched info (arrays [N] with ``_key`` masks) -> N per-world dicts: Python
+        scalars from 1-D numeric arrays, rows (arrays) or objects (e.g. a ReplaySpec) otherwise.
+        Converted array by array (``tolist``), not item by item: at N = 2048 the per-item version
+        cost ~70 ms a step, as much as the GPU env step it reported on."""
         out: list[dict] = [{} for _ in range(self.num_envs)]
         for key, value in info.items():
             if key.startswith("_") or key in ("final_obs", "final_info") or not isinstance(value, np.ndarray):
                 continue
-            mask = info.get(f"_{key}", np.ones(self.num_envs, bool))
-            for i in np.flatnonzero(mask):
-                item = value[i]  # a number, an array, or an object (e.g. a ReplaySpec) of an object array
-                out[i][key] = item.item() if isinstance(item, np.generic) else item
+            items = value.tolist() if value.ndim == 1 and value.dtype != object else list(value)
+            mask = info.get(f"_{key}")
+            if mask is None or np.all(mask):
+                for world_info, item in zip(out, items):
+                    world_info[key] = item
+            else:
+                for i in np.flatnonzero(mask):
+                    out[i][key] = items[i]
         return out
