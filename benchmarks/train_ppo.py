@@ -8,8 +8,9 @@ is (reach + grasp + lift + success; see ``DeformablePickupEnv``). After every PP
 script records the env steps so far, wall time, the success rate and mean return of the
 episodes that ended in that rollout (the stochastic training policy) and the fraction of its
 world-steps with the object grasped; at the end it prints the learning curve as a table and writes
-``curve.csv`` and ``curve.png`` (success and grasp vs env steps and vs wall time) to ``--out``, and
-the model to ``--out/ppo.zip``.
+``curve.csv`` and ``curve.png`` (success and grasp vs env steps and vs wall time) to ``--out``, the
+model to ``--out/ppo.zip`` and the observation/reward normalisation to ``--out/vecnormalize.pkl``;
+``--resume DIR`` goes on from such a folder (model, normalisation and curve continue).
 
 ``--actions position-jaw`` (``defgrasp_env.rl.held_orientation``) lets the policy move the wrist
 and the jaw but not turn the wrist (4 actions instead of 7). The PPO settings default to those
@@ -40,10 +41,11 @@ from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 class LearningCurve(BaseCallback):
     """Success rate and mean return of the episodes that ended in each rollout, vs env steps and wall time."""
 
-    def __init__(self, max_seconds: float = float("inf")):
+    def __init__(self, max_seconds: float = float("inf"), rows: list[dict] | None = None):
         super().__init__()
         self.max_seconds = max_seconds  # training stops at the first step after this wall time
-        self.rows: list[dict] = []
+        self.rows: list[dict] = list(rows or [])  # a resumed run's earlier rows; wall time goes on from them
+        self._wall0 = self.rows[-1]["wall_s"] if self.rows else 0.0
         self._success: list[bool] = []
         self._returns: list[float] = []
         self._grasped: list[float] = []
@@ -64,7 +66,7 @@ class LearningCurve(BaseCallback):
 
     def _on_rollout_end(self) -> None:
         n = len(self._success)
-        self.rows.append({"env_steps": self.num_timesteps, "wall_s": round(time.perf_counter() - self._t0, 1),
+        self.rows.append({"env_steps": self.num_timesteps, "wall_s": round(self._wall0 + time.perf_counter() - self._t0, 1),
                           "episodes": n, "success_rate": float(np.mean(self._success)) if n else float("nan"),
                           "mean_return": float(np.nanmean(self._returns)) if n else float("nan"),
                           "grasped_fraction": float(np.mean(self._grasped)) if self._grasped else float("nan"),
@@ -110,15 +112,39 @@ def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float =
     return VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), clip_obs=10.0, gamma=gamma)
 
 
+def read_curve(folder: pathlib.Path) -> list[dict]:
+    """The rows of ``folder/curve.csv`` (as ``LearningCurve`` writes them)."""
+    with open(pathlib.Path(folder) / "curve.csv", newline="") as f:
+        return [{k: (int(v) if k in ("env_steps", "episodes") else float(v)) for k, v in row.items()}
+                for row in csv.DictReader(f)]
+
+
+def save_run(model, rows: list[dict], out: pathlib.Path, title: str) -> None:
+    """Model (``ppo.zip``), normalisation (``vecnormalize.pkl``) and curve of a run, for ``--resume``."""
+    save_curve(rows, out, title)
+    model.save(out / "ppo.zip")
+    model.get_vec_normalize_env().save(str(out / "vecnormalize.pkl"))
+
+
 def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
           torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
-          gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, **env_kwargs):
+          gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, resume: pathlib.Path | None = None,
+          **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
-    ``n_epochs`` passes of ``minibatches`` minibatches."""
+    ``n_epochs`` passes of ``minibatches`` minibatches. ``resume``: a folder ``save_run`` wrote; its
+    model, normalisation statistics and curve go on (the PPO settings are the saved model's)."""
     from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
 
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, **env_kwargs)
+    if resume is not None:
+        resume = pathlib.Path(resume)
+        venv = VecNormalize.load(str(resume / "vecnormalize.pkl"), venv.venv)
+        model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
+        curve = LearningCurve(max_seconds, rows=read_curve(resume))
+        model.learn(timesteps, callback=curve, reset_num_timesteps=False)
+        return model, curve
     model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=max(n_steps * num_envs // minibatches, 1),
                 n_epochs=n_epochs, learning_rate=3e-4, gamma=gamma, gae_lambda=gae_lambda, clip_range=0.2,
                 target_kl=0.1, max_grad_norm=0.5, vf_coef=0.5, ent_coef=0.0,
@@ -171,19 +197,19 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--minutes", type=float, default=float("inf"), help="stop after this wall time (min)")
     ap.add_argument("--out", default=str(ROOT / "datasets" / "output" / "ppo"))
+    ap.add_argument("--resume", default=None, help="folder of an earlier run (ppo.zip, vecnormalize.pkl, curve.csv)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
-                         max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma,
+                         max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma, resume=args.resume,
                          object=args.object, youngs_modulus=args.youngs_modulus,
                          episode_seconds=args.episode_seconds, device=args.device)
-    wall = time.perf_counter() - t0
+    wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     out = pathlib.Path(args.out)
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {args.youngs_modulus:g} Pa, "
              f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "
              f"in {wall / 60:.1f} min")
-    save_curve(curve.rows, out, title)
-    model.save(out / "ppo.zip")
+    save_run(model, curve.rows, out, title)
     print(title)
     print("| env steps | wall (s) | episodes ended | success rate | mean return | grasped fraction |\n"
           "|---|---|---|---|---|---|")

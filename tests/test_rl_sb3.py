@@ -102,7 +102,7 @@ def test_ppo_trains_on_the_vector_env(tmp_path):
     import sys
 
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
-    from train_ppo import save_curve, train
+    from train_ppo import read_curve, save_curve, save_run, train
 
     model, curve = train(num_envs=2, timesteps=32, n_steps=8, minibatches=2, episode_seconds=0.3, actions="position-jaw")
     assert model.num_timesteps == 32 and len(curve.rows) == 2
@@ -112,3 +112,14 @@ def test_ppo_trains_on_the_vector_env(tmp_path):
     assert any(not np.allclose(a.numpy(), b.detach().numpy()) for a, b in zip(params, model.policy.parameters()))
     save_curve(curve.rows, tmp_path, "smoke")
     assert (tmp_path / "curve.png").stat().st_size > 1000 and (tmp_path / "curve.csv").is_file()
+
+    # --resume: the saved model, normalisation statistics and curve go on
+    save_run(model, curve.rows, tmp_path, "smoke")
+    count = model.get_vec_normalize_env().obs_rms["agent_pos"].count
+    weights = [p.detach().clone() for p in model.policy.parameters()]
+    resumed, curve2 = train(num_envs=2, timesteps=16, n_steps=8, episode_seconds=0.3, actions="position-jaw",
+                            resume=tmp_path)
+    assert resumed.num_timesteps == model.num_timesteps + 16
+    assert curve2.rows[:2] == read_curve(tmp_path)[:2] and len(curve2.rows) == len(read_curve(tmp_path)) + 1
+    assert resumed.get_vec_normalize_env().obs_rms["agent_pos"].count > count  # the loaded statistics went on
+    assert any(not np.allclose(a.numpy(), b.detach().cpu().numpy()) for a, b in zip(weights, resumed.policy.parameters()))
