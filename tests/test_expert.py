@@ -174,8 +174,9 @@ def test_stiff_object_is_held_at_the_grip_force_limit(name):
     force at each control step) stays within 2 % of the 20 N limit over the last 40 gripped steps
     (the object lifted and held) and exceeds it by more than 5 % in at most 1 step (the first
     touch, which the driver backs off from). Before the regulation (gripper.driver rule 4) these
-    objects were held at 95 and 32 N. (The expert alone holds the observed gap while lifting; the
-    regulation acts on closing commands only, so its force then follows the object's creep.)"""
+    objects were held at 95 and 32 N. (The expert alone commands ``grip_overtravel`` inside the
+    contact gap, a closing command too, so it is regulated to the same limit: see
+    ``test_gripped_stiff_object_survives_jaw_errors_of_an_imitating_policy``.)"""
     env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=1e7)
     limit = env.unwrapped.config.gripper.grip_force_limit
     expert = ScriptedPickupExpert.from_env(env.unwrapped)
