@@ -17,7 +17,7 @@ PIERCE_DEPTH = 0.005
 #: Distance scales (1/m) of the shaped reach and lift terms, ``1 - tanh(scale * distance)``: each
 #: term must still rise over the whole distance a learner covers, the reach from the start pose
 #: (~0.1-0.2 m) and the lift from the ground to the goal (0.58 m). With the earlier 10/m and 5/m the
-#: lift term was flat below 0.3 m (0.005 on the ground, rising 0.05 per m: no signal to lift).
+#: lift term was flat below 0.3 m (0.01 on the ground, rising ~0.2 per m over the first 10 cm).
 REACH_SCALE = 5.0
 LIFT_SCALE = 2.0
 
