@@ -9,7 +9,7 @@ times the Newton/CG work of free-space steps, so both the median and the mean ra
 
 Tip-force steadiness: over the steps where both pads read more than 0.5 N (the object is gripped),
 the largest reading divided by the median reading of that pad; a spike from an unconverged
-contact solve shows up as a ratio far above 1 (the expert squeezes to a steady ~1.5 N per pad).
+contact solve shows up as a ratio far above 1 (the expert squeezes to ~1.5 N per pad at E = 1e4, 4-9 N at 1e5, the 20 N jaw limit above).
 Prints a table and appends it, with the machine, to benchmarks/RESULTS.md.
 """
 

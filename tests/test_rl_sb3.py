@@ -120,6 +120,10 @@ def test_ppo_trains_on_the_vector_env(tmp_path):
     resumed, curve2 = train(num_envs=2, timesteps=16, n_steps=8, episode_seconds=0.3, actions="position-jaw",
                             resume=tmp_path)
     assert resumed.num_timesteps == model.num_timesteps + 16
-    assert curve2.rows[:2] == read_curve(tmp_path)[:2] and len(curve2.rows) == len(read_curve(tmp_path)) + 1
+    assert len(curve2.rows) == len(curve.rows) + 1  # the CSV round trip keeps every earlier row:
+    for saved, loaded in zip(curve.rows, curve2.rows):
+        assert saved.keys() == loaded.keys()
+        np.testing.assert_allclose([float(v) for v in loaded.values()], [float(v) for v in saved.values()],
+                                   rtol=1e-12, equal_nan=True)
     assert resumed.get_vec_normalize_env().obs_rms["agent_pos"].count > count  # the loaded statistics went on
     assert any(not np.allclose(a.numpy(), b.detach().cpu().numpy()) for a, b in zip(weights, resumed.policy.parameters()))

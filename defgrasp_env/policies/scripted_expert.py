@@ -21,7 +21,10 @@ Phases (per world, explicit state; ``reset()`` restarts them):
    last ``force_window`` steps. From then on the jaw command stays at least ``grip_overtravel``
    inside the gap at first contact, so that a stiff object (squeezed less than that at
    ``grip_force``) is held by the gripper's own force limit, as a real position-commanded 2F-85
-   holds what it closes on; a soft one is squeezed to ``grip_force`` as before.
+   holds what it closes on; an object that squeezes more than that at ``grip_force`` (E = 1e4) is
+   held as before, E = 1e5 ones at 4-9 N. The reference is the gap at first touch (a pad above
+   ``contact_force``), which can be ~3 mm wider than the object: the command then ends ~1 mm
+   inside the held gap of a stiff cube.
 3. ``LIFT``: move the tcp so that the feature point goes to the goal (speed-, acceleration- and
    braking-limited; hangs and sags are taken out through a filtered tcp-to-feature offset) and
    hold it there; the grip is re-tightened slowly while a (filtered) tip force is below
@@ -76,7 +79,9 @@ class ExpertConfig:
     # force limit (20 N by default) instead of at a gap it must match to a fraction of a mm; a
     # policy that imitates the expert (with mm-scale errors in its jaw command) keeps its grasp
     # (ACT on 100 demonstrations: 0/10 stiff cuboids and cylinders with the exact-gap commands).
-    # Soft objects squeeze more than this at grip_force and are unaffected.
+    # Objects that squeeze more than this at grip_force (E = 1e4) are unaffected; E = 1e5 ones are
+    # held at 4-9 N. First touch can be ~3 mm wider than the object (40.2 mm cube touched at 43.2 mm),
+    # so on a stiff cube the command sits only ~1 mm inside the held gap.
     grip_overtravel: float = 0.004
     lost_force: float = 0.05             # N, both forces below this for lost_steps = grasp lost
     lost_steps: int = 4
