@@ -3,16 +3,23 @@
     python benchmarks/bench_env_step.py --device cuda:0 --worlds 1 512 4096
     python benchmarks/bench_env_step.py --device cuda:0 --worlds 512 --policy expert
     python benchmarks/bench_env_step.py --device cpu --worlds 1 16 --object random --no-append
+    python benchmarks/bench_env_step.py --device cuda:0 --worlds 2048 --policy expert --noise 0.3 \
+        --youngs-modulus 1e6 --warmup 0 --steps 100
 
 Per W: ``gym.make_vec("DeformablePickup-v0", num_envs=W, vectorization_mode="vector_entry_point",
 device=..., object=..., youngs_modulus=...)`` with the env defaults otherwise (20 Hz, NEXT_STEP
 autoreset), ``reset(seed=0)``; then ``--warmup`` untimed steps and ``--steps`` timed ones, each
 bracketed by ``wp.synchronize`` on the simulation's device (the wall time a learner waits for).
 Actions: ``random`` = seeded uniform delta actions in [-1, 1]^7 (a fresh draw per step: an untrained
-policy), ``expert`` = ``ScriptedPickupExpert`` batched over the W worlds (its time included).
+policy), ``expert`` = ``ScriptedPickupExpert`` batched over the W worlds (its time included);
+``--noise STD`` adds seeded Gaussian noise of that std to the expert's actions (clipped to [-1, 1])
+and zeroes their wrist rotation: the contact-heavy steps of an RL policy learning to grasp, whose
+cost the actuator force limit's retries and the slowest world's iterations set.
 Printed per row: median and p95 ms per step, world-steps/s (W / median), the physics substeps per
 control step, the deepest solver-reported penetration (mm) and largest wrist force (N) over the timed
-steps, and for ``expert`` the successes so far. The bare FEM core's rate for comparison comes from
+steps, world-solves per world-substep (1 = no force-limit retry or patient re-solve; the scene's
+``world_solves``), Newton and CG iterations per step of the slowest world (median over steps) and of
+the mean world, and for ``expert`` the successes so far. The bare FEM core's rate for comparison comes from
 ``bench_fem.py`` (run it in the same session on the same machine). Appends a table with the machine to
 benchmarks/RESULTS.md unless ``--no-append``.
 """
@@ -37,6 +44,7 @@ import warp as wp  # noqa: E402
 
 import defgrasp_env  # noqa: E402,F401
 from defgrasp_env.envs.config import PickupConfig  # noqa: E402
+from defgrasp_env.layout import DELTA_ACTION  # noqa: E402
 from defgrasp_env.policies import ScriptedPickupExpert  # noqa: E402
 from defgrasp_env.sim import SolverConfig  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
@@ -48,7 +56,7 @@ def solver_with_graphs(graphs: str) -> SolverConfig:
 
 
 def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
-             graphs: str = "auto") -> dict:
+             graphs: str = "auto", noise: float = 0.0) -> dict:
     """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table."""
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
                        device=device, object=obj, youngs_modulus=modulus, solver=solver_with_graphs(graphs))
@@ -57,11 +65,21 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
     expert = ScriptedPickupExpert.from_env(env) if policy == "expert" else None
     if expert is not None:
         expert.reset()
-    times, depth, wrist, successes = [], 0.0, 0.0, 0
+    times, depth, wrist, successes, newton, cg = [], 0.0, 0.0, 0, [], []
+    rotation = DELTA_ACTION.slice("angular_velocity")
+    scene = env.unwrapped.scene
     for k in range(warmup + steps):
         wp.synchronize_device(device)
         t0 = time.perf_counter()
-        action = expert(obs) if expert is not None else rng.uniform(-1, 1, (worlds, 7)).astype(np.float32)
+        if expert is None:
+            action = rng.uniform(-1, 1, (worlds, 7)).astype(np.float32)
+        else:
+            action = expert(obs)
+            if noise > 0.0:
+                action = np.clip(action + rng.normal(0.0, noise, action.shape), -1.0, 1.0).astype(np.float32)
+                action[:, rotation] = 0.0
+        if k == warmup:
+            solves_before = scene.world_solves
         obs, _, terminated, _, info = env.step(action)
         wp.synchronize_device(device)
         successes += int(np.sum(terminated))
@@ -69,21 +87,30 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
             times.append(time.perf_counter() - t0)
             depth = max(depth, float(np.max(info["penetration"])))
             wrist = max(wrist, float(np.max(info["wrist_force"])))
-    substeps = env.unwrapped.scene.substeps
+            newton.append(info["newton_iterations"])
+            cg.append(info["cg_iterations"])
+    substeps = scene.substeps
+    solves = (scene.world_solves - solves_before) / (worlds * substeps * steps)
     env.close()
-    t = np.array(times)
-    return {"W": worlds, "policy": policy, "graphs": graphs, "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)),
+    t, newton, cg = np.array(times), np.array(newton), np.array(cg)
+    return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
+            "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
-            "substeps": substeps, "depth_mm": 1e3 * depth, "wrist_N": wrist, "successes": successes}
+            "substeps": substeps, "depth_mm": 1e3 * depth, "wrist_N": wrist, "successes": successes,
+            "solves": solves, "newton": (float(np.median(newton.max(axis=1))), float(newton.mean())),
+            "cg": (float(np.median(cg.max(axis=1))), float(cg.mean()))}
 
 
 def table(rows: list[dict]) -> str:
     lines = ["| W | actions | step graphs | object | E (Pa) | substeps | median ms | p95 ms | world-steps/s | "
-             "deepest mm | max wrist N | episodes won |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / mean | "
+             "CG / step, slowest / mean | episodes won |", "|---" * 15 + "|"]
     for r in rows:
+        won = r["successes"] if r["policy"].startswith("expert") else "-"
         lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
                      f"{r['median_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
-                     f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['successes'] if r['policy'] == 'expert' else '-'} |")
+                     f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['solves']:.3f} | {r['newton'][0]:.0f} / "
+                     f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} |")
     return "\n".join(lines)
 
 
@@ -98,15 +125,19 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=15)
     ap.add_argument("--graphs", choices=["auto", "on", "off", "both"], default="auto",
                     help="capture each solver step as one graph (SolverConfig.graphs); both: a row each, side by side")
+    ap.add_argument("--noise", type=float, default=0.0,
+                    help="std of Gaussian noise on the expert's actions (wrist rotation zeroed); needs --policy expert")
     ap.add_argument("--no-append", action="store_true")
     args = ap.parse_args(argv)
+    if args.noise < 0.0 or (args.noise > 0.0 and args.policy != "expert"):
+        ap.error(f"--noise must be >= 0 and needs --policy expert, got {args.noise} with --policy {args.policy}")
     if min(args.worlds) < 1 or args.steps < 1 or args.warmup < 0:
         ap.error(f"--worlds and --steps must be >= 1 and --warmup >= 0, got {args.worlds}, {args.steps}, {args.warmup}")
     rows = []
     for w in args.worlds:
         for graphs in (["off", "on"] if args.graphs == "both" else [args.graphs]):
             rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus, args.warmup,
-                                 args.steps, graphs))
+                                 args.steps, graphs, args.noise))
             print(table(rows[-1:]).splitlines()[-1], flush=True)
     report = table(rows)
     print(report)

@@ -9,13 +9,17 @@ script records the env steps so far, wall time, the success rate and mean return
 episodes that ended in that rollout (the stochastic training policy) and the fraction of its
 world-steps with the object grasped; at the end it prints the learning curve as a table and writes
 ``curve.csv`` and ``curve.png`` (success and grasp vs env steps and vs wall time) to ``--out``, the
-model to ``--out/ppo.zip`` and the observation/reward normalisation to ``--out/vecnormalize.pkl``;
-``--resume DIR`` goes on from such a folder (model, normalisation and curve continue).
+model to ``--out/ppo.zip``, the observation/reward normalisation to ``--out/vecnormalize.pkl`` and
+the run's settings to ``--out/run.json``; ``--resume DIR`` goes on from such a folder (model,
+normalisation and curve continue; the env and PPO options, ``--seed`` included, must be the run's;
+the env is seeded with ``--seed`` + the env steps so far, so the resumed run does not replay the
+earlier episodes).
 
 ``--actions position-jaw`` (``defgrasp_env.rl.held_orientation``) lets the policy move the wrist
 and the jaw but not turn the wrist (4 actions instead of 7). The PPO settings default to those
 ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
-8 epochs of 32 minibatches per rollout, 3 x 256 networks, initial log std -0.5, target KL 0.1).
+8 epochs of 32 minibatches per rollout, 3 x 256 networks, initial log std -0.5, target KL 0.1);
+fewer minibatches where a rollout is too small for 64 samples in each (small CPU runs).
 
     python benchmarks/train_ppo.py --num-envs 16 --timesteps 200000 --object cuboid --youngs-modulus 1e6
     python benchmarks/train_ppo.py --num-envs 256 --device cuda:0 --timesteps 5000000   # at scale
@@ -25,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import pathlib
 import sys
@@ -41,8 +46,11 @@ from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 class LearningCurve(BaseCallback):
     """Success rate and mean return of the episodes that ended in each rollout, vs env steps and wall time."""
 
-    def __init__(self, max_seconds: float = float("inf"), rows: list[dict] | None = None):
+    def __init__(self, settings: dict, env_seed: int, max_seconds: float = float("inf"),
+                 rows: list[dict] | None = None):
         super().__init__()
+        self.settings = dict(settings)  # the run's env and PPO options and its --seed (run.json)
+        self.env_seed = env_seed  # the seed of this session's env: --seed + the env steps of earlier sessions
         self.max_seconds = max_seconds  # training stops at the first step after this wall time
         self.rows: list[dict] = list(rows or [])  # a resumed run's earlier rows; wall time goes on from them
         self._wall0 = self.rows[-1]["wall_s"] if self.rows else 0.0
@@ -119,11 +127,29 @@ def read_curve(folder: pathlib.Path) -> list[dict]:
                 for row in csv.DictReader(f)]
 
 
-def save_run(model, rows: list[dict], out: pathlib.Path, title: str) -> None:
-    """Model (``ppo.zip``), normalisation (``vecnormalize.pkl``) and curve of a run, for ``--resume``."""
-    save_curve(rows, out, title)
+def save_run(model, curve: LearningCurve, out: pathlib.Path, title: str) -> None:
+    """Model (``ppo.zip``), normalisation (``vecnormalize.pkl``), settings (``run.json``) and curve
+    of a run, for ``--resume``."""
+    save_curve(curve.rows, out, title)
     model.save(out / "ppo.zip")
     model.get_vec_normalize_env().save(str(out / "vecnormalize.pkl"))
+    (out / "run.json").write_text(json.dumps(curve.settings, indent=1) + "\n")
+
+
+
+def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
+    """The curve rows of the run saved in ``folder`` if its settings (``run.json``) are ``settings``
+    (the simulation device may differ); else ValueError naming each difference."""
+    path = pathlib.Path(folder) / "run.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"--resume {folder}: no run.json there (the settings save_run writes)")
+    saved = json.loads(path.read_text())
+    keys = [k for k in sorted(set(saved) | set(settings)) if k != "device"]
+    differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}" for k in keys if saved.get(k) != settings.get(k)]
+    if differ:
+        raise ValueError(f"--resume {folder}: the run was trained with other options ({'; '.join(differ)}); "
+                         "pass the saved run's options")
+    return read_curve(folder)
 
 
 def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
@@ -132,25 +158,34 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
           **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
-    ``n_epochs`` passes of ``minibatches`` minibatches. ``resume``: a folder ``save_run`` wrote; its
-    model, normalisation statistics and curve go on (the PPO settings are the saved model's)."""
+    ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples).
+    ``resume``: a folder ``save_run`` wrote, with the same settings (``check_resume``); its model,
+    normalisation statistics and curve go on, the env seeded with ``seed`` + the env steps so far."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
-    venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, **env_kwargs)
+    settings = dict(num_envs=num_envs, n_steps=n_steps, actions=actions, gamma=gamma, gae_lambda=gae_lambda,
+                    n_epochs=n_epochs, seed=seed, **env_kwargs)
     if resume is not None:
         resume = pathlib.Path(resume)
+        rows = check_resume(resume, settings)
+        env_seed = seed + (rows[-1]["env_steps"] if rows else 0)
+        venv = make_vec_env(num_envs, env_seed, actions=actions, gamma=gamma, **env_kwargs)
         venv = VecNormalize.load(str(resume / "vecnormalize.pkl"), venv.venv)
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
-        curve = LearningCurve(max_seconds, rows=read_curve(resume))
+        model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
+        curve = LearningCurve(settings, env_seed, max_seconds, rows=rows)
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
-    model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=max(n_steps * num_envs // minibatches, 1),
+    venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, **env_kwargs)
+    rollout = n_steps * num_envs
+    minibatches = max(1, min(minibatches, rollout // 64))
+    model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=rollout // minibatches,
                 n_epochs=n_epochs, learning_rate=3e-4, gamma=gamma, gae_lambda=gae_lambda, clip_range=0.2,
                 target_kl=0.1, max_grad_norm=0.5, vf_coef=0.5, ent_coef=0.0,
                 policy_kwargs=dict(net_arch=[256, 256, 256], log_std_init=-0.5), seed=seed,
                 device=torch_device, verbose=verbose)
-    curve = LearningCurve(max_seconds)
+    curve = LearningCurve(settings, seed, max_seconds)
     model.learn(timesteps, callback=curve)
     return model, curve
 
@@ -209,7 +244,7 @@ def main(argv=None) -> int:
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {args.youngs_modulus:g} Pa, "
              f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "
              f"in {wall / 60:.1f} min")
-    save_run(model, curve.rows, out, title)
+    save_run(model, curve, out, title)
     print(title)
     print("| env steps | wall (s) | episodes ended | success rate | mean return | grasped fraction |\n"
           "|---|---|---|---|---|---|")

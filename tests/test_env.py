@@ -8,6 +8,7 @@ from gymnasium.vector import AutoresetMode
 
 import defgrasp_env  # noqa: F401  (registers the env)
 from defgrasp_env.envs.task import REWARD_TERMS
+from defgrasp_env.layout import AGENT_POS, ENV_STATE
 from defgrasp_env.sim.meshing import OBJECT_SHAPES
 
 ENV_ID = "DeformablePickup-v0"
@@ -136,7 +137,7 @@ def test_shaped_reward_rises_over_the_whole_reach_and_lift():
     rows = []
     for _ in range(env.spec.max_episode_steps):
         obs, _, term, trunc, info = env.step(expert(obs))
-        rows.append((obs["environment_state"][1], info["reward_reach"], info["reward_lift"], info["grasped"]))
+        rows.append((ENV_STATE.get(obs["environment_state"], "feature_position")[1], info["reward_reach"], info["reward_lift"], info["grasped"]))
         if term or trunc:
             break
     env.close()
@@ -152,12 +153,12 @@ def test_shaped_reward_rises_over_the_whole_reach_and_lift():
 def test_absolute_action_mode_moves_toward_target():
     env = gym.make(ENV_ID, action_mode="absolute")
     obs, _ = env.reset(seed=0)
-    start = obs["agent_pos"][:3].astype(float)
+    start = AGENT_POS.get(obs["agent_pos"], "wrist_position").astype(float)
     target = start + np.array([0.0, 0.0, 0.01])
     action = np.concatenate([target, [0, 0, 0, 1], [0.05]]).astype(np.float32)
     for _ in range(3):
         obs, *_ = env.step(action)
-    np.testing.assert_allclose(obs["agent_pos"][:3], target, atol=1e-4)  # 1 cm at 0.3 m/s: reached
+    np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"), target, atol=1e-4)  # 1 cm at 0.3 m/s: reached
 
 
 @pytest.mark.parametrize("kwargs, message", [

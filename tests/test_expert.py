@@ -11,7 +11,7 @@ import pytest
 
 import defgrasp_env  # noqa: F401  (registers the env)
 from defgrasp_env.gripper import GAP_MAX
-from defgrasp_env.layout import DELTA_ACTION
+from defgrasp_env.layout import AGENT_POS, DELTA_ACTION
 from defgrasp_env.policies import PHASE_NAMES, ExpertConfig, ScriptedPickupExpert, plan_grasps
 
 POLICIES = pathlib.Path(defgrasp_env.__file__).parent / "policies"
@@ -244,7 +244,7 @@ def test_gripped_stiff_object_survives_jaw_errors_of_an_imitating_policy(name):
             if PHASE_NAMES[expert.phase[0]] in ("lift", "retreat"):
                 jaw = action[DELTA_ACTION.slice("jaw")]
                 action[DELTA_ACTION.slice("jaw")] = gap_to_jaw_command(jaw_command_to_gap(jaw) + 0.0015)
-                grip.append(obs["agent_pos"][8:10].mean())
+                grip.append(AGENT_POS.get(obs["agent_pos"], "tip_normal_force").mean())
             obs, _, terminated, truncated, info = env.step(action)
             if terminated or truncated:
                 break

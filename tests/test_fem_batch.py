@@ -107,6 +107,115 @@ def test_divergence_is_reported_and_contained():
             np.testing.assert_array_equal(x[model.world_nodes(w)], reference[k][0][model.world_nodes(w)])
 
 
+STATE_ROWS = {"positions": "nodes", "velocities": "nodes", "elastic_force": "nodes", "contact_force": "nodes",
+              "von_mises": "tets", "pad_positions": "pads", "pad_orientations": "pads", "pad_normal_force": "pads",
+              "pad_force": "pads", "mean_von_mises": "world"}
+REPORT_FIELDS = ("newton_iterations", "cg_iterations", "last_update", "residual_force", "penetration", "diverged",
+                 "converged", "penetrated")
+
+
+def _rows(model, kind, w):
+    return {"nodes": model.world_nodes(w), "tets": model.world_tets(w), "pads": slice(2 * w, 2 * w + 2),
+            "world": slice(w, w + 1)}[kind]
+
+
+def _solve_some_worlds(device):
+    """Three worlds brought into contact (5 steps), then one solve of step 6 into three states: all
+    worlds (``full``); all worlds with a 2 N push on world 1 (``pushed``, the last solve of world 1);
+    worlds 0 and 2 only (``some``, filled with random values first)."""
+    worlds = (0, 1, 2)
+    model, start, control = build(worlds, device)
+    solver = ImplicitSolver(model)
+    for k in range(1, 6):
+        control.pad_target_positions.assign(np.concatenate([pad_targets(w, k) for w in worlds]))
+        solver.step(start, start, control, DT)
+    control.pad_target_positions.assign(np.concatenate([pad_targets(w, 6) for w in worlds]))
+    full, pushed, some = (State.from_model(model) for _ in range(3))
+    rng = np.random.default_rng(0)
+    for name in STATE_ROWS:
+        a = getattr(some, name)
+        a.assign(rng.normal(size=a.numpy().shape).astype(np.float32))
+    before = {name: getattr(some, name).numpy().copy() for name in STATE_ROWS}
+    report_full = solver.step(start, full, control, DT)
+    push = np.zeros((model.num_nodes, 3), np.float32)
+    push[model.world_nodes(1), 1] = -2.0 / (model.world_nodes(1).stop - model.world_nodes(1).start)
+    control.external_force.assign(push)
+    report_pushed = solver.step(start, pushed, control, DT)
+    control.external_force.zero_()
+    report_some = solver.step(start, some, control, DT, worlds=np.array([True, False, True]))
+    return model, (full, report_full), (pushed, report_pushed), (some, report_some), before
+
+
+def test_a_solve_of_some_worlds_matches_a_full_solve_and_leaves_the_others_as_they_were():
+    """``step(..., worlds=mask)`` (the actuator force limit's retries re-solve only the worlds
+    whose motion changed): the solved worlds' rows of every state array and their reports equal,
+    bit for bit, those of a solve of all worlds; the other world's rows are the values the output
+    state held before (random here) and its report is that of its last solve (one with a push)."""
+    model, (full, report_full), (_, report_pushed), (some, report_some), before = _solve_some_worlds("cpu")
+    assert report_pushed.residual_force[1] != report_full.residual_force[1]  # the reports tell the solves apart
+    for name, kind in STATE_ROWS.items():
+        got, want = getattr(some, name).numpy(), getattr(full, name).numpy()
+        for w in (0, 2):
+            np.testing.assert_array_equal(got[_rows(model, kind, w)], want[_rows(model, kind, w)], err_msg=name)
+        np.testing.assert_array_equal(got[_rows(model, kind, 1)], before[name][_rows(model, kind, 1)], err_msg=name)
+    assert np.abs(full.pad_normal_force.numpy()[:2]).max() > 0.1  # world 0 is squeezed: forces are compared
+    for field in REPORT_FIELDS:
+        got = getattr(report_some, field)
+        np.testing.assert_array_equal(got[[0, 2]], getattr(report_full, field)[[0, 2]], err_msg=field)
+        assert got[1] == getattr(report_pushed, field)[1], field
+
+
+def test_restricted_solves_in_place_replay_one_graph_with_any_mask():
+    """In place (state_in is state_out), one state and control, so one captured graph replayed with
+    each mask: the solved world's rows equal the all-worlds solve's, the others keep the start."""
+    worlds = (0, 1, 2)
+    model, start, control = build(worlds)
+    solver = ImplicitSolver(model)
+    for k in range(1, 6):
+        control.pad_target_positions.assign(np.concatenate([pad_targets(w, k) for w in worlds]))
+        solver.step(start, start, control, DT)
+    control.pad_target_positions.assign(np.concatenate([pad_targets(w, 6) for w in worlds]))
+    work = State.from_model(model)
+    work.copy_from(start)
+    solver.step(work, work, control, DT)
+    solved = {name: getattr(work, name).numpy().copy() for name in ("positions", "velocities", "pad_normal_force")}
+    kinds = {"positions": "nodes", "velocities": "nodes", "pad_normal_force": "pads"}
+    for mask in np.eye(3, dtype=bool):
+        work.copy_from(start)
+        solver.step(work, work, control, DT, worlds=mask)
+        for name, kind in kinds.items():
+            got, before = getattr(work, name).numpy(), getattr(start, name).numpy()
+            for w in worlds:
+                want = solved[name] if mask[w] else before
+                np.testing.assert_array_equal(got[_rows(model, kind, w)], want[_rows(model, kind, w)], err_msg=name)
+    assert not np.array_equal(solved["positions"], start.positions.numpy())  # the solve moved the nodes
+
+
+def test_a_solve_of_no_world_changes_nothing_and_bad_masks_are_rejected():
+    model, state, control = build((0, 1))
+    solver = ImplicitSolver(model)
+    x = state.positions.numpy().copy()
+    solver.advance(state, state, control, DT, worlds=np.zeros(2, bool))
+    assert np.array_equal(state.positions.numpy(), x)
+    for bad in (np.ones(3, bool), np.ones(2, int), np.ones((1, 2), bool)):
+        with pytest.raises(ValueError, match=r"worlds must be a \[2\] bool mask"):
+            solver.advance(state, state, control, DT, worlds=bad)
+
+
+@pytest.mark.cuda
+def test_a_solve_of_some_worlds_on_cuda_leaves_the_others_as_they_were():
+    """As the CPU test, on CUDA (one graph per solve where the driver can): the unsolved world's
+    rows keep their values bit for bit; the solved worlds match a full solve within 1e-5 m (GPU
+    atomics sum in a run-dependent order)."""
+    model, (full, _), _, (some, _), before = _solve_some_worlds("cuda:0")
+    for name, kind in STATE_ROWS.items():
+        got = getattr(some, name).numpy()
+        np.testing.assert_array_equal(got[_rows(model, kind, 1)], before[name][_rows(model, kind, 1)], err_msg=name)
+    for w in (0, 2):
+        rows = model.world_nodes(w)
+        np.testing.assert_allclose(some.positions.numpy()[rows], full.positions.numpy()[rows], atol=1e-5)
+
+
 @pytest.mark.cuda
 def test_cpu_and_cuda_agree():
     """The same squeeze on CPU and CUDA (W = 3): positions within 1e-5 m and pad forces within

@@ -10,6 +10,7 @@ import defgrasp_env  # noqa: F401
 
 pytest.importorskip("stable_baselines3")
 
+from defgrasp_env.layout import AGENT_POS  # noqa: E402
 from defgrasp_env.rl.sb3_vec_env import SB3VectorEnv  # noqa: E402
 
 
@@ -62,6 +63,28 @@ def test_per_world_infos_hold_every_batched_info_entry():
             assert infos[w][k] == ref_info[k][w], k
 
 
+def test_split_info_handles_masks_objects_and_rows():
+    """Gymnasium's batched info format, every branch: a masked entry (worlds 0 and 2 only), an
+    object array (a ReplaySpec-like entry per world), a 2-D array (a row per world, kept an array),
+    numeric 1-D arrays (Python scalars), and entries SB3 must not see (masks, final obs/info)."""
+    venv = SB3VectorEnv(_vec(n=3))
+    specs = np.empty(3, dtype=object)
+    specs[:] = [{"seed": 7}, None, {"seed": 9}]
+    info = {"is_success": np.array([True, False, True]), "_is_success": np.ones(3, bool),
+            "object": np.array(["cuboid", "", "rope"], dtype=object), "_object": np.array([True, False, True]),
+            "replay_spec": specs, "_replay_spec": np.array([True, False, True]),
+            "tip": np.arange(6.0).reshape(3, 2), "steps": np.array([1, 2, 3]),
+            "final_obs": {"agent_pos": np.zeros((3, 10))}, "_final_obs": np.zeros(3, bool), "note": "not an array"}
+    out = venv._split_info(info)
+    assert out[1] == {"is_success": False, "tip": out[1]["tip"], "steps": 2}  # masked entries absent
+    np.testing.assert_array_equal(out[1]["tip"], [2.0, 3.0])
+    assert out[0]["object"] == "cuboid" and out[2]["object"] == "rope" and "object" not in out[1]
+    assert out[0]["replay_spec"] == {"seed": 7} and out[2]["replay_spec"] is specs[2]
+    assert type(out[0]["is_success"]) is bool and type(out[2]["steps"]) is int
+    assert all(k not in w for w in out for k in ("_is_success", "final_obs", "_final_obs", "note"))
+    venv.close()
+
+
 def test_held_orientation_actions_step_the_env_with_zero_rotation():
     """4-D actions through ``HeldOrientationActions`` give the bits of the native env stepped with the
     same linear velocity and jaw and zero angular velocity; the wrist's orientation never changes."""
@@ -73,7 +96,7 @@ def test_held_orientation_actions_step_the_env_with_zero_rotation():
     venv.seed(2)
     obs = venv.reset()
     ref_obs, _ = ref.reset(seed=2)
-    quat0 = obs["agent_pos"][:, 3:7].copy()
+    quat0 = AGENT_POS.get(obs["agent_pos"], "wrist_quat").copy()
     rng = np.random.default_rng(0)
     for _ in range(4):
         a = rng.uniform(-1, 1, (2, 4)).astype(np.float32)
@@ -84,8 +107,9 @@ def test_held_orientation_actions_step_the_env_with_zero_rotation():
         for k in ref_obs:
             np.testing.assert_array_equal(obs[k], ref_obs[k])
         np.testing.assert_array_equal(reward, ref_r.astype(np.float32))
-    np.testing.assert_allclose(obs["agent_pos"][:, 3:7], quat0, atol=1e-6)
-    assert not np.allclose(obs["agent_pos"][:, :3], ref.reset(seed=2)[0]["agent_pos"][:, :3])  # it moved
+    np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_quat"), quat0, atol=1e-6)
+    assert not np.allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"),
+                           AGENT_POS.get(ref.reset(seed=2)[0]["agent_pos"], "wrist_position"))  # it moved
     with pytest.raises(ValueError, match=r"shape \(2, 4\)"):
         venv.step_async(np.zeros((2, 7), np.float32))
 
@@ -96,15 +120,16 @@ def test_rejects_other_autoreset_modes():
 
 
 @pytest.mark.slow
-def test_ppo_trains_on_the_vector_env(tmp_path):
+def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
     """Two PPO iterations through VecMonitor + VecNormalize: the policy's parameters change, the
     curve records both rollouts, and the script's PNG/CSV are written."""
     import sys
 
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
-    from train_ppo import read_curve, save_curve, save_run, train
+    from train_ppo import save_curve, save_run, train
 
-    model, curve = train(num_envs=2, timesteps=32, n_steps=8, minibatches=2, episode_seconds=0.3, actions="position-jaw")
+    model, curve = train(num_envs=2, timesteps=32, n_steps=8, minibatches=2, episode_seconds=0.3, actions="position-jaw",
+                         object="cuboid")
     assert model.num_timesteps == 32 and len(curve.rows) == 2
     assert sum(r["episodes"] for r in curve.rows) == 2 * (16 // 6)  # 6-step episodes, 2 worlds x 16 steps
     params = [p.detach().clone() for p in model.policy.parameters()]
@@ -114,12 +139,20 @@ def test_ppo_trains_on_the_vector_env(tmp_path):
     assert (tmp_path / "curve.png").stat().st_size > 1000 and (tmp_path / "curve.csv").is_file()
 
     # --resume: the saved model, normalisation statistics and curve go on
-    save_run(model, curve.rows, tmp_path, "smoke")
+    save_run(model, curve, tmp_path, "smoke")
+    with pytest.raises(ValueError, match=r"object: saved 'cuboid', given 'torus'"):
+        train(num_envs=2, timesteps=16, n_steps=8, episode_seconds=0.3, actions="position-jaw", resume=tmp_path,
+              object="torus")
+    seeds = []  # the seeds each SB3 reset of the env uses
+    reset = SB3VectorEnv.reset
+    monkeypatch.setattr(SB3VectorEnv, "reset", lambda self: (seeds.append(list(self._seeds)), reset(self))[1])
     count = model.get_vec_normalize_env().obs_rms["agent_pos"].count
     weights = [p.detach().clone() for p in model.policy.parameters()]
     resumed, curve2 = train(num_envs=2, timesteps=16, n_steps=8, episode_seconds=0.3, actions="position-jaw",
-                            resume=tmp_path)
+                            resume=tmp_path, object="cuboid")
     assert resumed.num_timesteps == model.num_timesteps + 16
+    assert seeds[0] == [curve.rows[-1]["env_steps"] + i for i in range(2)]  # --seed 0 + steps so far: new episodes
+    assert curve2.env_seed == curve.rows[-1]["env_steps"] and curve2.settings == curve.settings
     assert len(curve2.rows) == len(curve.rows) + 1  # the CSV round trip keeps every earlier row:
     for saved, loaded in zip(curve.rows, curve2.rows):
         assert saved.keys() == loaded.keys()

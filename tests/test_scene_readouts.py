@@ -12,7 +12,7 @@ import warp as wp
 import defgrasp_env  # noqa: F401 - registers DeformablePickup-v0
 from defgrasp_env.envs.readouts import SceneReadouts
 from defgrasp_env.envs.scene import keypoint_indices
-from defgrasp_env.layout import NUM_KEYPOINTS
+from defgrasp_env.layout import ENV_STATE, NUM_KEYPOINTS
 
 
 def _numpy_readouts(scene):
@@ -50,8 +50,8 @@ def test_device_readouts_equal_the_numpy_reductions_on_mixed_objects():
         np.testing.assert_array_equal(r.keypoints, keys)
         assert r.finite.tolist() == finite.tolist() == [True] * 5
         env_state = obs["environment_state"]
-        np.testing.assert_array_equal(env_state[:, :3], pos.astype(np.float32))
-        np.testing.assert_array_equal(env_state[:, 9:], keys.reshape(5, -1).astype(np.float32))
+        np.testing.assert_array_equal(ENV_STATE.get(env_state, "feature_position"), pos.astype(np.float32))
+        np.testing.assert_array_equal(ENV_STATE.get(env_state, "keypoints"), keys.reshape(5, -1).astype(np.float32))
 
 
 def test_finite_flags_only_the_world_with_a_nan():

@@ -46,6 +46,7 @@ def test_udp_operator_stream_picks_the_object(meta):
     import gymnasium as gym
 
     import defgrasp_env  # noqa: F401
+    from defgrasp_env.layout import ENV_STATE
     from teleop import HumanTeleopAgent, HumanTeleopConfig, UdpGloveReceiver, UdpTrackerReceiver
     from teleop.testing.udp_replay import StreamPlayer
     from teleop.retarget import RateLimits
@@ -60,7 +61,7 @@ def test_udp_operator_stream_picks_the_object(meta):
                           tracker_address=rt.address, glove_address=rg.address)
     obs, info = env.reset(seed=meta["seed"])
     agent.reset()
-    y0 = float(obs["environment_state"][1])
+    y0 = float(ENV_STATE.get(obs["environment_state"], "feature_position")[1])
     statuses, actions, heights, step_s = [], [], [], []
     terminated = truncated = False
     try:
@@ -74,7 +75,7 @@ def test_udp_operator_stream_picks_the_object(meta):
             step_s.append(time.perf_counter() - t0)
             statuses.append(agent.status)
             actions.append(action)
-            heights.append(float(obs["environment_state"][1]))
+            heights.append(float(ENV_STATE.get(obs["environment_state"], "feature_position")[1]))
             if terminated or truncated:
                 break
         time.sleep(0.02)

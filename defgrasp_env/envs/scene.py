@@ -142,6 +142,9 @@ class PickupScene:
                                    device=self.model.device)  # a solve's pad forces, packed for one download
         self._pad_targets = wp.zeros(len(self._pad_loads), dtype=wp.transform, device=self.model.device)
         self._solves = 0  # solves run by ``_solve_substep`` (the wrist limit's accepted solve is its last)
+        #: world-solves run since the scene was built: per solver call, the worlds it computed (all of
+        #: them in a substep's first solve, those the force limit retries or re-solves patiently after)
+        self.world_solves = 0
         self._readout: StepReadout | None = None
         world = np.arange(self.num_worlds, dtype=np.int32)
         self._world_ids = wp.array(world, dtype=wp.int32, device=self.model.device)  # [W]: row w is world w
@@ -251,9 +254,15 @@ class PickupScene:
         limits = self.config.wrist_force_limit, self.config.gripper.grip_force_limit
         for k in range(count):
             self.gripper.plan_substep(k, count, h, target_gap, active)
+            solved = None  # the fraction [W] each world's last solve of this substep moved by
 
             def solve(fraction):
-                number, tip, wrist = self._solve_substep(fraction, h)
+                # a retry re-solves only the worlds whose fraction changed: the others' last solve
+                # (in the other state, untouched since) is what a new one would give
+                nonlocal solved
+                worlds = None if solved is None else fraction != solved
+                number, tip, wrist = self._solve_substep(fraction, h, worlds=worlds)
+                solved = np.array(fraction, dtype=np.float64)
                 load = actuator_load(wrist, tip, *limits)
                 over = load > 1.0 + FORCE_TOLERANCE
                 if over.any():
@@ -261,7 +270,7 @@ class PickupScene:
                     # over the limit, the forces of a converged solve decide
                     patient = over & ~self._last_solve_converged()
                     if patient.any():
-                        number, tip, wrist = self._solve_substep(fraction, h, patient)
+                        number, tip, wrist = self._solve_substep(fraction, h, patient, worlds=patient)
                         load = actuator_load(wrist, tip, *limits)
                 return (number, tip, wrist), load
 
@@ -278,19 +287,22 @@ class PickupScene:
             self.state, self._next_state = self._home_state, self.state
         return self._report.download()
 
-    def _solve_substep(self, fraction: np.ndarray, h: float, patient: np.ndarray | None = None):
+    def _solve_substep(self, fraction: np.ndarray, h: float, patient: np.ndarray | None = None,
+                       worlds: np.ndarray | None = None):
         """One solve of the planned substep from its start (``state``, left untouched) into the
         other state, with ``fraction`` [W] of the actuators' motion (the force limit's retry,
-        ``Gripper.move``), the ``patient`` worlds [W] iterated to convergence
-        (``ImplicitSolver.advance``). Returns (the solve's number, pad normal forces [W, P] N, wrist
-        force [W] N), from one download of its pad loads; its report stays on the device."""
+        ``Gripper.move``), the ``patient`` worlds [W] iterated to convergence, of the ``worlds`` [W]
+        bool (default all; the others keep their last solve: ``ImplicitSolver.advance``). Returns
+        (the solve's number, pad normal forces [W, P] N, wrist force [W] N of each world's last
+        solve), from one download of the pad loads; the report stays on the device."""
         pos, quat = self.gripper.move(fraction)
         self._pad_targets.assign(np.concatenate([pos, quat], axis=-1).reshape(-1, 7).astype(np.float32))
         wp.launch(unpack_pad_targets, dim=len(self._pad_targets), inputs=[self._pad_targets],
                   outputs=[self._control.pad_target_positions, self._control.pad_target_orientations],
                   device=self.model.device)
         out = self._next_state
-        self.solver.advance(self.state, out, self._control, h, patient)
+        self.solver.advance(self.state, out, self._control, h, patient, worlds)
+        self.world_solves += self.num_worlds if worlds is None else int(np.count_nonzero(worlds))
         wp.launch(pack_pad_loads, dim=len(self._pad_loads), inputs=[out.pad_normal_force, out.pad_force],
                   outputs=[self._pad_loads], device=self.model.device)
         loads = self._pad_loads.numpy().reshape(self.num_worlds, -1, 4).copy()  # CPU: numpy() views

@@ -238,6 +238,11 @@ class ScriptedPickupExpert:
         action = self._act(agent, state)
         return action[0] if single else action
 
+    def _hold_gap(self, gap: np.ndarray) -> np.ndarray:
+        """Jaw gap command [n] (m) that holds a grip (CLOSE once the grip force is reached, and LIFT):
+        ``grip_overtravel`` inside the gap of first touch, never wider than the current ``gap``."""
+        return np.minimum(gap, self._contact_gap - self.config.grip_overtravel)
+
     def _act(self, agent: np.ndarray, state: np.ndarray) -> np.ndarray:
         c = self.config
         dt = c.dt
@@ -328,8 +333,7 @@ class ScriptedPickupExpert:
         squeeze = ph & touching & (f_min < c.grip_force)
         gap_cmd[squeeze] = gap[squeeze] - c.squeeze_speed * dt
         held = ph & (f_min >= c.grip_force)
-        hold_gap = np.minimum(gap, self._contact_gap - c.grip_overtravel)
-        gap_cmd[held] = hold_gap[held]
+        gap_cmd[held] = self._hold_gap(gap)[held]
         self._counter = np.where(held, self._counter + 1, np.where(ph, 0, self._counter))
         stalled = ph & touching & (shrink < 1e-5)
         self._stall = np.where(stalled, self._stall + 1, np.where(ph, 0, self._stall))
@@ -348,6 +352,7 @@ class ScriptedPickupExpert:
         speed[ph] = c.lift_speed
         weak = (ph & (f_min < c.regrip_fraction * c.grip_force)
                 & (gap > c.regrip_floor * self._contact_gap))
+        hold_gap = self._hold_gap(gap)
         gap_cmd[ph] = hold_gap[ph]
         gap_cmd[weak] = np.minimum(hold_gap, gap - 0.5 * c.squeeze_speed * dt)[weak]
         self._lost = np.where(ph & (f_max < c.lost_force), self._lost + 1, np.where(ph, 0, self._lost))

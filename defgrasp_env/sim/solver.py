@@ -26,6 +26,7 @@ from .solve_report import SolveReport, SolveStats
 from .solver_launches import SubstepLaunches, record_substep_launches
 from .solver_loops import DeviceLoops
 from .solver_scratch import SolverScratch
+from .kernels import substep as ksub
 from .state import Control, State
 
 __all__ = ["ImplicitSolver", "SolveStats", "SolverConfig"]
@@ -155,29 +156,38 @@ class ImplicitSolver:
         self.scratch = SolverScratch.from_model(model)
         self.loops = DeviceLoops(model, config, self.scratch)
         self._report = SolveReport(model.num_worlds, model.device)
+        self._solving_all = True  # scratch.solve_worlds holds all ones
         self._launches: dict[tuple, tuple] = {}
 
     # -- public --------------------------------------------------------------------------------
     def step(self, state_in: State, state_out: State, control: Control, dt: float,
-             patient: np.ndarray | None = None) -> SolveStats:
+             patient: np.ndarray | None = None, worlds: np.ndarray | None = None) -> SolveStats:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object)
-        and return the per-world report (one device-to-host copy); ``patient`` as for ``advance``."""
-        self.advance(state_in, state_out, control, dt, patient)
+        and return the per-world report (one device-to-host copy); ``patient`` and ``worlds`` as for
+        ``advance`` (the report of a world outside ``worlds`` is that of its last solve)."""
+        self.advance(state_in, state_out, control, dt, patient, worlds)
         self._report.fold(self.scratch, self.config.penetration_bound, first=True)
         return self._report.download()
 
     def advance(self, state_in: State, state_out: State, control: Control, dt: float,
-                patient: np.ndarray | None = None) -> None:
+                patient: np.ndarray | None = None, worlds: np.ndarray | None = None) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object;
-        distinct, ``state_in`` is only read). Every array of ``state_out`` is written; its report
+        distinct, ``state_in`` is only read). Every array of ``state_out`` is written (the solved worlds' rows); its report
         is left in ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool (default none): worlds
         given up to ``config.patient_iterations`` extra Newton iterations per substep until they
         meet ``newton_tolerance``; every other world's result is the same, bit for bit, as without
         it (its ``converged`` flag stays False when the regular iterations did not converge, even
-        if the extra ones did). Where the device can (``graphs``), the whole call is one graph
-        launch, captured at the first call with these states, control and ``dt``."""
+        if the extra ones did). ``worlds`` [W] bool (default all): only these worlds are solved;
+        every other world's rows of ``state_out`` and its report in ``scratch`` are left as they
+        are (the solves of different worlds are independent, so a world solved again from the same
+        input gets the same result, bit for bit on the CPU: a caller that re-solves some worlds,
+        like the actuator force limit's retries, need not redo the others). Where the device can
+        (``graphs``), the whole call is one graph launch, captured at the first call with these
+        states, control and ``dt``."""
         check_range("dt", dt, 0.0, math.inf, "s")
         s = self.scratch
+        if not self._select_worlds(worlds):
+            return
         patient_any = patient is not None and bool(np.any(patient))
         if patient_any:
             s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(self.model.num_worlds))
@@ -203,16 +213,38 @@ class ImplicitSolver:
             s.patient.zero_()
 
     # -- internals ---------------------------------------------------------------------------
+    def _select_worlds(self, worlds: np.ndarray | None) -> bool:
+        """Set ``scratch.solve_worlds`` to ``worlds`` [W] bool (None: all); False if none is set."""
+        s, w = self.scratch, self.model.num_worlds
+        if worlds is None:
+            if not self._solving_all:
+                s.solve_worlds.fill_(1)
+                self._solving_all = True
+            return True
+        worlds = np.asarray(worlds)
+        if worlds.shape != (w,) or worlds.dtype != bool:
+            raise ValueError(f"worlds must be a [{w}] bool mask of the worlds to solve, got {worlds.dtype} "
+                             f"of shape {worlds.shape}")
+        if not worlds.any():
+            return False
+        s.solve_worlds.assign(worlds.astype(np.int32))
+        self._solving_all = bool(worlds.all())
+        return True
+
+    def _launch(self, kernel, dim: int, *inputs) -> None:
+        wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device)
+
     def _advance(self, run: SubstepLaunches, state_in: State, state_out: State, control: Control,
                  patient_any: bool) -> None:
-        cfg, s = self.config, self.scratch
+        cfg, s, m = self.config, self.scratch, self.model
         if state_in is not state_out:
-            wp.copy(state_out.positions, state_in.positions)
-            wp.copy(state_out.velocities, state_in.velocities)
+            for a in ("positions", "velocities"):
+                self._launch(ksub.copy_world_rows, m.num_nodes, getattr(state_in, a), m.node_world, s.solve_worlds,
+                             getattr(state_out, a))
         else:  # the start positions are overwritten: keep them for the prescribed axes
             wp.copy(s.step_start, state_in.positions)
-        for a in (s.newton_it, s.cg_total, s.diverged, s.unconverged, s.clamped, s.penetration):
-            a.zero_()
+        self._launch(ksub.clear_solve_report, m.num_worlds, s.solve_worlds, s.newton_it, s.cg_total, s.diverged,
+                     s.unconverged, s.clamped, s.penetration)
         for k in range(cfg.substeps):
             for cmd in run.pads[k]:
                 cmd.launch()
@@ -223,16 +255,19 @@ class ImplicitSolver:
             run.clamp.launch()
             run.end.launch()
             if k == cfg.substeps - 1:
-                self._evaluate_outputs(run, state_out)
-            wp.copy(state_out.velocities, s.v_new)
-        wp.copy(state_out.pad_positions, control.pad_target_positions)
-        wp.copy(state_out.pad_orientations, control.pad_target_orientations)
+                self._evaluate_outputs(run)
+            self._launch(ksub.copy_world_rows, m.num_nodes, s.v_new, m.node_world, s.solve_worlds,
+                         state_out.velocities)
+        if m.pads_per_world:
+            self._launch(ksub.copy_pad_poses, m.num_worlds * m.pads_per_world, control.pad_target_positions,
+                         control.pad_target_orientations, m.pads_per_world, s.solve_worlds,
+                         state_out.pad_positions, state_out.pad_orientations)
 
     def _newton(self, run: SubstepLaunches, patient_iterations: int = 0) -> None:
         """The regular Newton iterations while a world iterates (all of them without checks), then
         the extra ones (``DeviceLoops.extra_iterations``) if all regular ones ran."""
         s = self.scratch
-        wp.copy(s.newton_active, s.all_on)
+        wp.copy(s.newton_active, s.solve_worlds)
         s.substep_newton_it.zero_()
         self.loops.do_while("newton", lambda: self._newton_iteration(run, first=True),
                             lambda: self._newton_iteration(run, first=False))
@@ -276,15 +311,12 @@ class ImplicitSolver:
 
         self.loops.do_while("search", trial, trial)
 
-    def _evaluate_outputs(self, run: SubstepLaunches, state_out: State) -> None:
+    def _evaluate_outputs(self, run: SubstepLaunches) -> None:
         """Forces, stresses and pad loads at the returned positions, and the final residual
         (evaluated with the last substep's start velocities, so the inertia term is included)."""
-        s = self.scratch
-        for a in (state_out.pad_normal_force, state_out.pad_force, state_out.mean_von_mises, s.res_norm):
-            a.zero_()
         for cmd in run.outputs:
             cmd.launch()
-        s.rz.zero_()
+        self.scratch.rz.zero_()
 
     def _substep_launches(self, h: float, state_in: State, state_out: State, control: Control) -> tuple:
         """Recorded launches for substeps of length ``h`` (s) from ``state_in`` into ``state_out``

@@ -178,7 +178,8 @@ def _pads(c: _Context) -> list:
 def _begin(c: _Context) -> list:
     m, s, work = c.model, c.scratch, c.work
     return [c.rec(ksub.begin_substep, m.num_nodes, work.positions, work.velocities, c.step_start,
-                  c.control.prescribed_positions, m.free_axes, (k + 1) / c.substeps, c.h, s.x_start)
+                  c.control.prescribed_positions, m.free_axes, m.node_world, s.solve_worlds, (k + 1) / c.substeps,
+                  c.h, s.x_start)
             for k in range(c.substeps)]
 
 
@@ -189,7 +190,7 @@ def _lag(c: _Context) -> list:
                   s.lag_normal),
             *([c.rec(kec.lag_edge_contacts, s.edge_normal.shape[0], s.x_start, x, s.edge_nodes, s.edge_world, *s.pads,
                      m.pad_half_extents, m.pads_per_world, s.edge_normal)] if s.edge_normal.shape[0] else []),
-            c.rec(kc.keep_pad_depth, m.num_nodes, s.x_start, m.node_world, m.free_axes, *s.pads, m.pad_half_extents,
+            c.rec(kc.keep_pad_depth, m.num_nodes, s.x_start, m.node_world, s.solve_worlds, m.free_axes, *s.pads, m.pad_half_extents,
                   m.pads_per_world, s.lag_normal_force, s.lag_normal, x),
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
 
@@ -249,9 +250,11 @@ def _depth(c: _Context):
 
 def _outputs(c: _Context) -> list:
     m, s, work, x = c.model, c.scratch, c.work, c.work.positions
-    return [*_nodes(c, x, s.all_on, 1), _tets(c, x, s.all_on), _begin_solve(c, s.all_on),
-            c.rec(ksub.mean_stress, m.num_tets, work.von_mises, m.tet_rest_volume, m.tet_world, m.world_volume,
-                  work.mean_von_mises)]
+    return [c.rec(ksub.clear_outputs, m.num_worlds, s.solve_worlds, m.pads_per_world, work.pad_normal_force,
+                  work.pad_force, work.mean_von_mises, s.res_norm),
+            *_nodes(c, x, s.solve_worlds, 1), _tets(c, x, s.solve_worlds), _begin_solve(c, s.solve_worlds),
+            c.rec(ksub.mean_stress, m.num_tets, work.von_mises, m.tet_rest_volume, m.tet_world, s.solve_worlds,
+                  m.world_volume, work.mean_von_mises)]
 
 
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
@@ -276,9 +279,10 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
         trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=_depth(c),
-        clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, model.free_axes, s.pad_pos1, s.pad_rot1,
-                    model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
+        clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, s.solve_worlds, model.free_axes, s.pad_pos1,
+                    s.pad_rot1, model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
                     0.9 * config.penetration_bound, x, s.clamped),
-        end=c.rec(ksub.end_substep, model.num_nodes, s.x_start, model.node_world, s.diverged, 1.0 / h, x, s.v_new),
+        end=c.rec(ksub.end_substep, model.num_nodes, s.x_start, model.node_world, s.solve_worlds, s.diverged, 1.0 / h,
+                  x, s.v_new),
         outputs=seq(_outputs(c)), cg_block=block,
     )

@@ -71,7 +71,7 @@ class SolverScratch:
     diverged: wp.array          # int: world blew up
     unconverged: wp.array       # int: a substep stopped at the iteration limit
     clamped: wp.array           # int: a substep's solve left a node deeper than the penetration bound
-    all_on: wp.array            # int: all ones
+    solve_worlds: wp.array      # int: world computed by the current solve (1 in all unless advance(worlds=...))
     patient: wp.array           # int: world to iterate until newton_tolerance (ImplicitSolver.advance)
     searching: wp.array         # int: world still line-searching
     energy0: wp.array           # float64: incremental potential of the accepted iterate
@@ -136,7 +136,7 @@ class SolverScratch:
             edge_nodes=wp.array(edges, dtype=wp.vec2i, device=d), edge_world=wp.array(edge_world, dtype=int, device=d),
             edge_normal=vec(len(edges) * model.pads_per_world),
         )
-        scratch.all_on.fill_(1)
+        scratch.solve_worlds.fill_(1)
         scratch.step_length.fill_(1.0)  # begin_line_search resets it; with no line search it stays 1
         return scratch
 

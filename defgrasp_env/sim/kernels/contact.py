@@ -321,6 +321,7 @@ def evaluate_nodes(
 def keep_pad_depth(
     x_start: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
     free: wp.array(dtype=wp.vec3),
     pad_pos0: wp.array(dtype=wp.vec3),
     pad_rot0: wp.array(dtype=wp.quat),
@@ -342,9 +343,12 @@ def keep_pad_depth(
 
     The plain guess lets a node of a squeezed object that a turn or slide of the pad moves by
     micrometres start outside the pad; Newton sees no contact stiffness there, sends the node
-    millimetres into the pad, and the line search shortens the whole world's step to ~1 %."""
+    millimetres into the pad, and the line search shortens the whole world's step to ~1 %.
+    Only the nodes of worlds with ``solve`` set are moved."""
     i = wp.tid()
     w = node_world[i]
+    if solve[w] == 0:
+        return
     slots = pads_per_world + 1
     fr = free[i]
     for k in range(pads_per_world):
@@ -398,6 +402,7 @@ def deepest_contact(
 @wp.kernel
 def clamp_depth(
     node_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
     free: wp.array(dtype=wp.vec3),
     pad_pos1: wp.array(dtype=wp.vec3),
     pad_rot1: wp.array(dtype=wp.quat),
@@ -413,9 +418,12 @@ def clamp_depth(
     a pad, or below the ground, back to depth ``target`` (m, < bound: float32 rounding of the moved
     position stays within the bound) along that face's normal (free axes only),
     and flag its world: a solve that did not resolve a violent contact returns a state within the
-    bound, reported (``SolveStats.penetrated``) rather than silently penetrated."""
+    bound, reported (``SolveStats.penetrated``) rather than silently penetrated. Only the worlds
+    with ``solve`` set are touched."""
     i = wp.tid()
     w = node_world[i]
+    if solve[w] == 0:
+        return
     fr = free[i]
     slots = pads_per_world + 1
     for k in range(pads_per_world):

@@ -50,7 +50,7 @@ def loop_gate(hit: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32), li
 def extra_begin(regular_count: wp.array(dtype=wp.int32), regular: int, running: wp.array(dtype=wp.int32),
                 extra_count: wp.array(dtype=wp.int32)):
     """Newton's extra iterations run only after all ``regular`` iterations ran (the regular loop did
-    not stop early because every world had converged)."""
+    not stop early because every world had converged; per world, ``extra_iteration_worlds``)."""
     go = wp.int32(0)
     if regular_count[0] == wp.int32(regular):
         go = wp.int32(1)
@@ -62,15 +62,23 @@ def extra_begin(regular_count: wp.array(dtype=wp.int32), regular: int, running: 
 def extra_iteration_worlds(running: wp.array(dtype=wp.int32), extra_count: wp.array(dtype=wp.int32),
                            deep_iterations: int, patient_iterations: int, depth: wp.array(dtype=float),
                            bound: float, patient: wp.array(dtype=int), last_dx: wp.array(dtype=float), tol: float,
-                           diverged: wp.array(dtype=int), newton_active: wp.array(dtype=int)):
+                           diverged: wp.array(dtype=int), solve: wp.array(dtype=int),
+                           substep_iterations: wp.array(dtype=int), regular: int,
+                           newton_active: wp.array(dtype=int)):
     """Which worlds take extra Newton iteration e (= ``extra_count``): in the first
     ``deep_iterations``, those whose iterate is deeper than ``bound`` (m; ``depth`` from
     ``deepest_contact``, cleared here); in the first ``patient_iterations``, also the ``patient``
-    worlds whose last update (m) is above ``tol`` and that did not diverge; no other world."""
+    worlds whose last update (m) is above ``tol`` and that did not diverge; no other world: only
+    worlds of this solve (``solve``) that ran all ``regular`` iterations themselves (a world that
+    converged earlier takes none, whatever the other worlds did: each world's result is the one
+    it gets alone)."""
     w = wp.tid()
     d = depth[w]
     depth[w] = 0.0
     if running[0] == 0:
+        return
+    if solve[w] == 0 or substep_iterations[w] < wp.int32(regular):
+        newton_active[w] = 0
         return
     e = extra_count[0]
     active = 0

@@ -1,5 +1,7 @@
 """Substep and Newton-iteration bookkeeping of the implicit solver: the substep's start (initial
-guess) and end (velocities), applying a Newton update, the per-world stopping tests, mean stress."""
+guess) and end (velocities), applying a Newton update, the per-world stopping tests, mean stress,
+and the per-world copies and clears of a solve restricted to some worlds (``solve`` [W] int: 1 for
+a world this solve computes; the others' rows are not written)."""
 
 import warp as wp
 
@@ -11,6 +13,8 @@ def begin_substep(
     step_start: wp.array(dtype=wp.vec3),
     prescribed: wp.array(dtype=wp.vec3),
     free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
     s1: float,
     dt: float,
     x_start: wp.array(dtype=wp.vec3),
@@ -18,6 +22,8 @@ def begin_substep(
     """Save the substep's start positions and move x to the initial guess x + dt v; prescribed axes
     go to their target interpolated at fraction s1 of the step."""
     i = wp.tid()
+    if solve[node_world[i]] == 0:
+        return
     xi = x[i]
     x_start[i] = xi
     target = wp.lerp(step_start[i], prescribed[i], s1)
@@ -93,6 +99,7 @@ def end_newton_iteration(
 def end_substep(
     x_start: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
     diverged: wp.array(dtype=int),
     inv_dt: float,
     x: wp.array(dtype=wp.vec3),
@@ -100,6 +107,8 @@ def end_substep(
 ):
     """v = (x - x_start) / dt; a diverged world is put back to its start positions at rest."""
     i = wp.tid()
+    if solve[node_world[i]] == 0:
+        return
     if diverged[node_world[i]] != 0:
         x[i] = x_start[i]
         v[i] = wp.vec3(0.0)
@@ -112,9 +121,63 @@ def mean_stress(
     von_mises: wp.array(dtype=float),
     rest_volume: wp.array(dtype=float),
     tet_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
     world_volume: wp.array(dtype=float),
     mean: wp.array(dtype=float),
 ):
     t = wp.tid()
     w = tet_world[t]
+    if solve[w] == 0:
+        return
     wp.atomic_add(mean, w, von_mises[t] * rest_volume[t] / world_volume[w])
+
+
+@wp.kernel
+def copy_world_rows(src: wp.array(dtype=wp.vec3), row_world: wp.array(dtype=int), solve: wp.array(dtype=int),
+                    dst: wp.array(dtype=wp.vec3)):
+    """dst[i] = src[i] for the rows i of the solved worlds (``row_world[i]``: the row's world)."""
+    i = wp.tid()
+    if solve[row_world[i]] != 0:
+        dst[i] = src[i]
+
+
+@wp.kernel
+def copy_pad_poses(src_pos: wp.array(dtype=wp.vec3), src_rot: wp.array(dtype=wp.quat), pads_per_world: int,
+                   solve: wp.array(dtype=int), dst_pos: wp.array(dtype=wp.vec3), dst_rot: wp.array(dtype=wp.quat)):
+    """Pad poses [W*P] of the solved worlds: dst = src."""
+    i = wp.tid()
+    if solve[i // pads_per_world] != 0:
+        dst_pos[i] = src_pos[i]
+        dst_rot[i] = src_rot[i]
+
+
+@wp.kernel
+def clear_solve_report(solve: wp.array(dtype=int), newton_it: wp.array(dtype=int), cg_total: wp.array(dtype=int),
+                       diverged: wp.array(dtype=int), unconverged: wp.array(dtype=int), clamped: wp.array(dtype=int),
+                       penetration: wp.array(dtype=float)):
+    """Zero the per-world report (counters, flags, penetration, m) of each solved world."""
+    w = wp.tid()
+    if solve[w] == 0:
+        return
+    newton_it[w] = 0
+    cg_total[w] = 0
+    diverged[w] = 0
+    unconverged[w] = 0
+    clamped[w] = 0
+    penetration[w] = 0.0
+
+
+@wp.kernel
+def clear_outputs(solve: wp.array(dtype=int), pads_per_world: int, pad_normal_force: wp.array(dtype=float),
+                  pad_force: wp.array(dtype=wp.vec3), mean_von_mises: wp.array(dtype=float),
+                  residual_norm: wp.array(dtype=float)):
+    """Zero the accumulated outputs (pad loads [W*P] N, mean stress [W] Pa, residual [W] N) of each
+    solved world before they are evaluated."""
+    w = wp.tid()
+    if solve[w] == 0:
+        return
+    for k in range(pads_per_world):
+        pad_normal_force[w * pads_per_world + k] = 0.0
+        pad_force[w * pads_per_world + k] = wp.vec3(0.0)
+    mean_von_mises[w] = 0.0
+    residual_norm[w] = 0.0
