@@ -119,13 +119,13 @@ def _rows(model, kind, w):
             "world": slice(w, w + 1)}[kind]
 
 
-def _solve_some_worlds(device):
+def _solve_some_worlds(device, graphs=None):
     """Three worlds brought into contact (5 steps), then one solve of step 6 into three states: all
     worlds (``full``); all worlds with a 2 N push on world 1 (``pushed``, the last solve of world 1);
     worlds 0 and 2 only (``some``, filled with random values first)."""
     worlds = (0, 1, 2)
     model, start, control = build(worlds, device)
-    solver = ImplicitSolver(model)
+    solver = ImplicitSolver(model, SolverConfig(graphs=graphs))
     for k in range(1, 6):
         control.pad_target_positions.assign(np.concatenate([pad_targets(w, k) for w in worlds]))
         solver.step(start, start, control, DT)
@@ -146,12 +146,14 @@ def _solve_some_worlds(device):
     return model, (full, report_full), (pushed, report_pushed), (some, report_some), before
 
 
-def test_a_solve_of_some_worlds_matches_a_full_solve_and_leaves_the_others_as_they_were():
+@pytest.mark.parametrize("graphs", [None, False], ids=["graphs", "launches"])
+def test_a_solve_of_some_worlds_matches_a_full_solve_and_leaves_the_others_as_they_were(graphs):
     """``step(..., worlds=mask)`` (the actuator force limit's retries re-solve only the worlds
     whose motion changed): the solved worlds' rows of every state array and their reports equal,
     bit for bit, those of a solve of all worlds; the other world's rows are the values the output
-    state held before (random here) and its report is that of its last solve (one with a push)."""
-    model, (full, report_full), (_, report_pushed), (some, report_some), before = _solve_some_worlds("cpu")
+    state held before (random here) and its report is that of its last solve (one with a push).
+    With the solve captured as one graph (where the CPU can) and launched kernel by kernel."""
+    model, (full, report_full), (_, report_pushed), (some, report_some), before = _solve_some_worlds("cpu", graphs)
     assert report_pushed.residual_force[1] != report_full.residual_force[1]  # the reports tell the solves apart
     for name, kind in STATE_ROWS.items():
         got, want = getattr(some, name).numpy(), getattr(full, name).numpy()
