@@ -145,7 +145,8 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
         raise FileNotFoundError(f"--resume {folder}: no run.json there (the settings save_run writes)")
     saved = json.loads(path.read_text())
     keys = [k for k in sorted(set(saved) | set(settings)) if k != "device"]
-    differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}" for k in keys if saved.get(k) != settings.get(k)]
+    differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}"
+              for k in keys if saved.get(k) != settings.get(k)]
     if differ:
         raise ValueError(f"--resume {folder}: the run was trained with other options ({'; '.join(differ)}); "
                          "pass the saved run's options")

@@ -128,8 +128,8 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
     from train_ppo import save_curve, save_run, train
 
-    model, curve = train(num_envs=2, timesteps=32, n_steps=8, minibatches=2, episode_seconds=0.3, actions="position-jaw",
-                         object="cuboid")
+    model, curve = train(num_envs=2, timesteps=32, n_steps=8, minibatches=2, episode_seconds=0.3,
+                         actions="position-jaw", object="cuboid")
     assert model.num_timesteps == 32 and len(curve.rows) == 2
     assert sum(r["episodes"] for r in curve.rows) == 2 * (16 // 6)  # 6-step episodes, 2 worlds x 16 steps
     params = [p.detach().clone() for p in model.policy.parameters()]

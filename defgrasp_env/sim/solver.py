@@ -20,13 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .kernels import substep as ksub
 from .materials import check_range
 from .model import Model
 from .solve_report import SolveReport, SolveStats
 from .solver_launches import SubstepLaunches, record_substep_launches
 from .solver_loops import DeviceLoops
 from .solver_scratch import SolverScratch
-from .kernels import substep as ksub
 from .state import Control, State
 
 __all__ = ["ImplicitSolver", "SolveStats", "SolverConfig"]
@@ -172,18 +172,18 @@ class ImplicitSolver:
     def advance(self, state_in: State, state_out: State, control: Control, dt: float,
                 patient: np.ndarray | None = None, worlds: np.ndarray | None = None) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object;
-        distinct, ``state_in`` is only read). Every array of ``state_out`` is written (the solved worlds' rows); its report
-        is left in ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool (default none): worlds
-        given up to ``config.patient_iterations`` extra Newton iterations per substep until they
-        meet ``newton_tolerance``; every other world's result is the same, bit for bit, as without
-        it (its ``converged`` flag stays False when the regular iterations did not converge, even
-        if the extra ones did). ``worlds`` [W] bool (default all): only these worlds are solved;
-        every other world's rows of ``state_out`` and its report in ``scratch`` are left as they
-        are (the solves of different worlds are independent, so a world solved again from the same
-        input gets the same result, bit for bit on the CPU: a caller that re-solves some worlds,
-        like the actuator force limit's retries, need not redo the others). Where the device can
-        (``graphs``), the whole call is one graph launch, captured at the first call with these
-        states, control and ``dt``."""
+        distinct, ``state_in`` is only read). Every array of ``state_out`` is written (the rows of the
+        solved worlds); the report is left in ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool
+        (default none): worlds given up to ``config.patient_iterations`` extra Newton iterations per
+        substep until they meet ``newton_tolerance``; every other world's result is the same, bit for
+        bit, as without it (its ``converged`` flag stays False when the regular iterations did not
+        converge, even if the extra ones did). ``worlds`` [W] bool (default all): only these worlds are
+        solved; every other world's rows of ``state_out`` and its report in ``scratch`` are left as they
+        are (the solves of different worlds are independent, so a world solved again from the same input
+        gets the same result, bit for bit on the CPU: a caller that re-solves some worlds, like the
+        actuator force limit's retries, need not redo the others). Where the device can (``graphs``),
+        the whole call is one graph launch, captured at the first call with these states, control and
+        ``dt``."""
         check_range("dt", dt, 0.0, math.inf, "s")
         s = self.scratch
         if not self._select_worlds(worlds):
@@ -265,7 +265,7 @@ class ImplicitSolver:
 
     def _newton(self, run: SubstepLaunches, patient_iterations: int = 0) -> None:
         """The regular Newton iterations while a world iterates (all of them without checks), then
-        the extra ones (``DeviceLoops.extra_iterations``) if all regular ones ran."""
+        the extra ones (``DeviceLoops.extra_iterations``) in the worlds that ran all regular ones."""
         s = self.scratch
         wp.copy(s.newton_active, s.solve_worlds)
         s.substep_newton_it.zero_()
