@@ -136,7 +136,6 @@ def save_run(model, curve: LearningCurve, out: pathlib.Path, title: str) -> None
     (out / "run.json").write_text(json.dumps(curve.settings, indent=1) + "\n")
 
 
-
 def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
     """The curve rows of the run saved in ``folder`` if its settings (``run.json``) are ``settings``
     (the simulation device may differ); else ValueError naming each difference."""
@@ -144,6 +143,7 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
     if not path.is_file():
         raise FileNotFoundError(f"--resume {folder}: no run.json there (the settings save_run writes)")
     saved = json.loads(path.read_text())
+    settings = json.loads(json.dumps(settings))  # as saved: tuples become lists
     keys = [k for k in sorted(set(saved) | set(settings)) if k != "device"]
     differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}"
               for k in keys if saved.get(k) != settings.get(k)]
