@@ -190,8 +190,8 @@ def _lag(c: _Context) -> list:
                   s.lag_normal),
             *([c.rec(kec.lag_edge_contacts, s.edge_normal.shape[0], s.x_start, x, s.edge_nodes, s.edge_world, *s.pads,
                      m.pad_half_extents, m.pads_per_world, s.edge_normal)] if s.edge_normal.shape[0] else []),
-            c.rec(kc.keep_pad_depth, m.num_nodes, s.x_start, m.node_world, s.solve_worlds, m.free_axes, *s.pads, m.pad_half_extents,
-                  m.pads_per_world, s.lag_normal_force, s.lag_normal, x),
+            c.rec(kc.keep_pad_depth, m.num_nodes, s.x_start, m.node_world, s.solve_worlds, m.free_axes, *s.pads,
+                  m.pad_half_extents, m.pads_per_world, s.lag_normal_force, s.lag_normal, x),
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
 
 
