@@ -57,14 +57,22 @@ class LearningCurve(BaseCallback):
         self._success: list[bool] = []
         self._returns: list[float] = []
         self._grasped: list[float] = []
+        self._step_s: list[float] = []  # wall time of each vector step of the rollout (policy + env)
+        self._slowest: list[tuple[int, int]] = []  # (Newton, CG) iterations of the step's slowest world
         self._t0 = time.perf_counter()
         self._rollout_t0 = self._t0
+        self._step_t0 = self._t0
 
     def _on_rollout_start(self) -> None:
-        self._rollout_t0 = time.perf_counter()
+        self._rollout_t0 = self._step_t0 = time.perf_counter()
 
     def _on_step(self) -> bool:
         infos = self.locals["infos"]
+        now = time.perf_counter()
+        self._step_s.append(now - self._step_t0)
+        self._step_t0 = now
+        self._slowest.append((max(int(info.get("newton_iterations", 0)) for info in infos),
+                              max(int(info.get("cg_iterations", 0)) for info in infos)))
         self._grasped.append(float(np.mean([bool(info.get("grasped", False)) for info in infos])))
         for done, info in zip(self.locals["dones"], infos):
             if done:
@@ -79,13 +87,26 @@ class LearningCurve(BaseCallback):
                           "mean_return": float(np.nanmean(self._returns)) if n else float("nan"),
                           "grasped_fraction": float(np.mean(self._grasped)) if self._grasped else float("nan"),
                           # seconds of this rollout's collection (env steps + policy forward passes)
-                          "rollout_s": round(time.perf_counter() - self._rollout_t0, 2)})
+                          "rollout_s": round(time.perf_counter() - self._rollout_t0, 2),
+                          **self._step_costs()})
         r = self.rows[-1]
         print(f"steps {r['env_steps']:>9d}  wall {r['wall_s']:>8.1f} s  episodes {n:>4d}  "
               f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}  "
-              f"collection {r['rollout_s']:.1f} s",
+              f"collection {r['rollout_s']:.1f} s  step p50/p95 {r['step_ms_p50']:.0f}/{r['step_ms_p95']:.0f} ms  "
+              f"slowest world Newton {r['slowest_newton']:.0f} CG {r['slowest_cg']:.0f}",
               flush=True)
-        self._success, self._returns, self._grasped = [], [], []
+        self._success, self._returns, self._grasped, self._step_s, self._slowest = [], [], [], [], []
+
+    def _step_costs(self) -> dict:
+        """Median / p95 ms of the rollout's vector steps (policy forward pass + env step) and the median
+        over its steps of the slowest world's Newton and CG iterations (what a batched step waits for)."""
+        if not self._step_s:
+            return {"step_ms_p50": float("nan"), "step_ms_p95": float("nan"),
+                    "slowest_newton": float("nan"), "slowest_cg": float("nan")}
+        ms = 1e3 * np.asarray(self._step_s)
+        slowest = np.asarray(self._slowest, float)
+        return {"step_ms_p50": round(float(np.median(ms)), 1), "step_ms_p95": round(float(np.percentile(ms, 95)), 1),
+                "slowest_newton": float(np.median(slowest[:, 0])), "slowest_cg": float(np.median(slowest[:, 1]))}
 
 
 def _held_orientation(venv):
@@ -199,7 +220,8 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
 
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "curve.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        fields = list(dict.fromkeys(k for r in rows for k in r))  # a resumed run's older rows may lack columns
+        w = csv.DictWriter(f, fieldnames=fields, restval="nan")
         w.writeheader()
         w.writerows(rows)
     steps = [r["env_steps"] for r in rows]
@@ -247,11 +269,13 @@ def main(argv=None) -> int:
              f"in {wall / 60:.1f} min")
     save_run(model, curve, out, title)
     print(title)
-    print("| env steps | wall (s) | episodes ended | success rate | mean return | grasped fraction |\n"
-          "|---|---|---|---|---|---|")
+    print("| env steps | wall (s) | episodes ended | success rate | mean return | grasped fraction | "
+          "step ms p50 / p95 | slowest world Newton / CG per step |\n|---|---|---|---|---|---|---|---|")
     for r in curve.rows:
         print(f"| {r['env_steps']} | {r['wall_s']} | {r['episodes']} | {r['success_rate']:.2f} | "
-              f"{r['mean_return']:.1f} | {r['grasped_fraction']:.3f} |")
+              f"{r['mean_return']:.1f} | {r['grasped_fraction']:.3f} | {r.get('step_ms_p50', float('nan')):.0f} / "
+              f"{r.get('step_ms_p95', float('nan')):.0f} | {r.get('slowest_newton', float('nan')):.0f} / "
+              f"{r.get('slowest_cg', float('nan')):.0f} |")
     print(f"env steps/s: {model.num_timesteps / wall:.1f}; curve: {out / 'curve.png'}")
     return 0
 

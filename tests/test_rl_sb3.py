@@ -132,6 +132,9 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
                          actions="position-jaw", object="cuboid")
     assert model.num_timesteps == 32 and len(curve.rows) == 2
     assert sum(r["episodes"] for r in curve.rows) == 2 * (16 // 6)  # 6-step episodes, 2 worlds x 16 steps
+    for r in curve.rows:  # step costs: 4 substeps a step, each at least one Newton iteration with CG in it
+        assert 0 < r["step_ms_p50"] <= r["step_ms_p95"] < 1e3 * r["rollout_s"]
+        assert r["slowest_newton"] >= 4 and r["slowest_cg"] >= r["slowest_newton"]
     params = [p.detach().clone() for p in model.policy.parameters()]
     model.learn(16, reset_num_timesteps=False)
     assert any(not np.allclose(a.numpy(), b.detach().numpy()) for a, b in zip(params, model.policy.parameters()))
