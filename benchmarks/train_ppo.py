@@ -4,7 +4,7 @@ N worlds of ``gym.make_vec("DeformablePickup-v0", num_envs=N, autoreset_mode="Sa
 batched FEM simulation, on the CPU or a CUDA device) drive SB3's PPO through
 ``defgrasp_env.rl.SB3VectorEnv``, with ``VecMonitor`` (episode returns, ``is_success``) and
 ``VecNormalize`` (running observation / reward normalisation). The env's dense reward is used as
-is (reach + grasp + lift + success; see ``DeformablePickupEnv``). After every PPO rollout the
+is (reach + grasp + lift + place + success; see ``DeformablePickupEnv``). After every PPO rollout the
 script records the env steps so far, wall time, the success rate and mean return of the
 episodes that ended in that rollout (the stochastic training policy) and the fraction of its
 world-steps with the object grasped; at the end it prints the learning curve as a table and writes
@@ -47,8 +47,9 @@ class LearningCurve(BaseCallback):
     """Success rate and mean return of the episodes that ended in each rollout, vs env steps and wall time."""
 
     def __init__(self, settings: dict, env_seed: int, max_seconds: float = float("inf"),
-                 rows: list[dict] | None = None):
+                 rows: list[dict] | None = None, success_tolerance: float = 0.05):
         super().__init__()
+        self.success_tolerance = success_tolerance  # m: the env's; "at goal" = grasped and this close
         self.settings = dict(settings)  # the run's env and PPO options and its --seed (run.json)
         self.env_seed = env_seed  # the seed of this session's env: --seed + the env steps of earlier sessions
         self.max_seconds = max_seconds  # training stops at the first step after this wall time
@@ -57,6 +58,7 @@ class LearningCurve(BaseCallback):
         self._success: list[bool] = []
         self._returns: list[float] = []
         self._grasped: list[float] = []
+        self._at_goal: list[float] = []  # fraction of each step's worlds grasped within the success tolerance of the goal
         self._step_s: list[float] = []  # wall time of each vector step of the rollout (policy + env)
         self._slowest: list[tuple[int, int]] = []  # (Newton, CG) iterations of the step's slowest world
         self._t0 = time.perf_counter()
@@ -74,6 +76,8 @@ class LearningCurve(BaseCallback):
         self._slowest.append((max(int(info.get("newton_iterations", 0)) for info in infos),
                               max(int(info.get("cg_iterations", 0)) for info in infos)))
         self._grasped.append(float(np.mean([bool(info.get("grasped", False)) for info in infos])))
+        self._at_goal.append(float(np.mean([bool(info.get("grasped", False)) and info.get("goal_distance", np.inf)
+                                            < self.success_tolerance for info in infos])))
         for done, info in zip(self.locals["dones"], infos):
             if done:
                 self._success.append(bool(info.get("is_success", False)))
@@ -86,16 +90,18 @@ class LearningCurve(BaseCallback):
                           "episodes": n, "success_rate": float(np.mean(self._success)) if n else float("nan"),
                           "mean_return": float(np.nanmean(self._returns)) if n else float("nan"),
                           "grasped_fraction": float(np.mean(self._grasped)) if self._grasped else float("nan"),
+                          "at_goal_fraction": float(np.mean(self._at_goal)) if self._at_goal else float("nan"),
                           # seconds of this rollout's collection (env steps + policy forward passes)
                           "rollout_s": round(time.perf_counter() - self._rollout_t0, 2),
                           **self._step_costs()})
         r = self.rows[-1]
         print(f"steps {r['env_steps']:>9d}  wall {r['wall_s']:>8.1f} s  episodes {n:>4d}  "
               f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}  "
+              f"at goal {r['at_goal_fraction']:.3f}  "
               f"collection {r['rollout_s']:.1f} s  step p50/p95 {r['step_ms_p50']:.0f}/{r['step_ms_p95']:.0f} ms  "
               f"slowest world Newton {r['slowest_newton']:.0f} CG {r['slowest_cg']:.0f}",
               flush=True)
-        self._success, self._returns, self._grasped, self._step_s, self._slowest = [], [], [], [], []
+        self._success, self._returns, self._grasped, self._at_goal, self._step_s, self._slowest = [], [], [], [], [], []
 
     def _step_costs(self) -> dict:
         """Median / p95 ms of the rollout's vector steps (policy forward pass + env step) and the median
@@ -177,17 +183,25 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
 def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
           torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
           gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, resume: pathlib.Path | None = None,
-          **env_kwargs):
+          init_from: pathlib.Path | None = None, **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
     ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples).
     ``resume``: a folder ``save_run`` wrote, with the same settings (``check_resume``); its model,
-    normalisation statistics and curve go on, the env seeded with ``seed`` + the env steps so far."""
+    normalisation statistics and curve go on, the env seeded with ``seed`` + the env steps so far.
+    ``init_from``: a folder ``save_run`` wrote, whose policy weights and normalisation statistics
+    start this new run (e.g. a GPU run's policy fine-tuned with fewer worlds or another reward); its
+    settings may differ; the curve starts afresh."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
+    from defgrasp_env import PickupConfig
+
     settings = dict(num_envs=num_envs, n_steps=n_steps, actions=actions, gamma=gamma, gae_lambda=gae_lambda,
                     n_epochs=n_epochs, seed=seed, **env_kwargs)
+    if init_from is not None:
+        settings["init_from"] = str(init_from)
+    tolerance = PickupConfig(**env_kwargs).success_tolerance
     if resume is not None:
         resume = pathlib.Path(resume)
         rows = check_resume(resume, settings)
@@ -196,10 +210,12 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         venv = VecNormalize.load(str(resume / "vecnormalize.pkl"), venv.venv)
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
-        curve = LearningCurve(settings, env_seed, max_seconds, rows=rows)
+        curve = LearningCurve(settings, env_seed, max_seconds, rows=rows, success_tolerance=tolerance)
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, **env_kwargs)
+    if init_from is not None:
+        venv = VecNormalize.load(str(pathlib.Path(init_from) / "vecnormalize.pkl"), venv.venv)
     rollout = n_steps * num_envs
     minibatches = max(1, min(minibatches, rollout // 64))
     model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=rollout // minibatches,
@@ -207,7 +223,10 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                 target_kl=0.1, max_grad_norm=0.5, vf_coef=0.5, ent_coef=0.0,
                 policy_kwargs=dict(net_arch=[256, 256, 256], log_std_init=-0.5), seed=seed,
                 device=torch_device, verbose=verbose)
-    curve = LearningCurve(settings, seed, max_seconds)
+    if init_from is not None:
+        trained = PPO.load(pathlib.Path(init_from) / "ppo.zip", device=torch_device)
+        model.policy.load_state_dict(trained.policy.state_dict())
+    curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance)
     model.learn(timesteps, callback=curve)
     return model, curve
 
@@ -229,6 +248,8 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
     for ax, x, label in ((axes[0], steps, "env steps"), (axes[1], [r["wall_s"] / 60 for r in rows], "wall time (min)")):
         ax.plot(x, [r["success_rate"] for r in rows], "o-", ms=3, label="success rate (episodes ended)")
         ax.plot(x, [r["grasped_fraction"] for r in rows], "s-", ms=3, label="grasped fraction (world-steps)")
+        ax.plot(x, [r.get("at_goal_fraction", float("nan")) for r in rows], "^-", ms=3,
+                label="grasped at the goal (world-steps)")
         ax.set_xlabel(label)
         ax.set_ylim(-0.02, 1.02)
         ax.set_ylabel("fraction, per PPO rollout")
@@ -256,10 +277,13 @@ def main(argv=None) -> int:
     ap.add_argument("--minutes", type=float, default=float("inf"), help="stop after this wall time (min)")
     ap.add_argument("--out", default=str(ROOT / "datasets" / "output" / "ppo"))
     ap.add_argument("--resume", default=None, help="folder of an earlier run (ppo.zip, vecnormalize.pkl, curve.csv)")
+    ap.add_argument("--init-from", default=None,
+                    help="folder of an earlier run whose policy and normalisation start a new run (other options allowed)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
                          max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma, resume=args.resume,
+                         init_from=args.init_from,
                          object=args.object, youngs_modulus=args.youngs_modulus,
                          episode_seconds=args.episode_seconds, device=args.device)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
@@ -269,11 +293,12 @@ def main(argv=None) -> int:
              f"in {wall / 60:.1f} min")
     save_run(model, curve, out, title)
     print(title)
-    print("| env steps | wall (s) | episodes ended | success rate | mean return | grasped fraction | "
-          "step ms p50 / p95 | slowest world Newton / CG per step |\n|---|---|---|---|---|---|---|---|")
+    print("| env steps | wall (s) | episodes ended | success rate | mean return | grasped fraction | at goal | "
+          "step ms p50 / p95 | slowest world Newton / CG per step |\n|---|---|---|---|---|---|---|---|---|")
     for r in curve.rows:
         print(f"| {r['env_steps']} | {r['wall_s']} | {r['episodes']} | {r['success_rate']:.2f} | "
-              f"{r['mean_return']:.1f} | {r['grasped_fraction']:.3f} | {r.get('step_ms_p50', float('nan')):.0f} / "
+              f"{r['mean_return']:.1f} | {r['grasped_fraction']:.3f} | {r.get('at_goal_fraction', float('nan')):.3f} | "
+              f"{r.get('step_ms_p50', float('nan')):.0f} / "
               f"{r.get('step_ms_p95', float('nan')):.0f} | {r.get('slowest_newton', float('nan')):.0f} / "
               f"{r.get('slowest_cg', float('nan')):.0f} |")
     print(f"env steps/s: {model.num_timesteps / wall:.1f}; curve: {out / 'curve.png'}")

@@ -8,7 +8,7 @@ from gymnasium.vector import AutoresetMode
 
 import defgrasp_env  # noqa: F401  (registers the env)
 from defgrasp_env.envs.task import REWARD_TERMS
-from defgrasp_env.layout import AGENT_POS, ENV_STATE
+from defgrasp_env.layout import AGENT_POS, DELTA_ACTION, ENV_STATE
 from defgrasp_env.sim.meshing import OBJECT_SHAPES
 
 ENV_ID = "DeformablePickup-v0"
@@ -148,6 +148,45 @@ def test_shaped_reward_rises_over_the_whole_reach_and_lift():
     assert low.sum() >= 5
     slope = np.polyfit(height[low], lift[low], 1)[0]
     assert slope >= 1.0, f"lift term rises {slope:.3f} per m near the ground"
+
+
+def test_holding_at_the_goal_pays_more_than_lifting_through_it():
+    """The success needs the object held at the goal for 0.5 s; a PPO policy trained on the lift term
+    alone lifted through the goal at full speed to the workspace ceiling instead. Two rollouts from
+    the same seed (sphere, E = 1e5: not the cuboid PPO trained on): the scripted expert, which holds
+    at the goal, and the same expert that goes on up at full speed from its first step within the
+    success tolerance. PPO's discounted (0.8) reward of the next 10 steps, the success bonus left out,
+    must favour holding by >= 0.3 (0.66 measured with the place term; -0.02 with the reach, grasp
+    and lift terms alone: those favoured passing through)."""
+    from defgrasp_env.policies import ScriptedPickupExpert
+
+    def rollout(go_on_up: bool):
+        env = gym.make(ENV_ID, object="sphere", youngs_modulus=1e5)
+        expert = ScriptedPickupExpert.from_env(env)
+        obs, _ = env.reset(seed=5)
+        rewards, distances, first = [], [], None
+        for t in range(env.spec.max_episode_steps):
+            action = expert(obs)
+            if first is not None and go_on_up:
+                action = DELTA_ACTION.pack(linear_velocity=[0.0, 1.0, 0.0], angular_velocity=np.zeros(3),
+                                           jaw=DELTA_ACTION.get(action, "jaw"))
+            obs, reward, term, trunc, info = env.step(action)
+            rewards.append(reward - info["reward_success"])
+            distances.append(info["goal_distance"])
+            if first is None and info["goal_distance"] < env.unwrapped.config.success_tolerance:
+                first = t
+            if term or trunc or (first is not None and t >= first + 10):
+                break
+        env.close()
+        return np.array(rewards[first + 1:first + 11]), np.array(distances), info["is_success"]
+
+    held, _, held_success = rollout(False)
+    passed, distances, passed_success = rollout(True)
+    assert held_success and not passed_success
+    assert distances.min() < 0.02 and distances[-1] > 0.08  # it went through the goal and on up
+    discount = 0.8 ** np.arange(10)
+    advantage = float(discount[:len(held)] @ held - discount @ passed)
+    assert advantage >= 0.3, f"holding at the goal is worth only {advantage:.3f} more than lifting through it"
 
 
 def test_absolute_action_mode_moves_toward_target():

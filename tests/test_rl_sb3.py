@@ -162,4 +162,18 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
         np.testing.assert_allclose([float(v) for v in loaded.values()], [float(v) for v in saved.values()],
                                    rtol=1e-12, equal_nan=True)
     assert resumed.get_vec_normalize_env().obs_rms["agent_pos"].count > count  # the loaded statistics went on
+
+    # --init-from: a new run (other options: 1 world) starts from the saved policy and statistics
+    save_run(resumed, curve2, tmp_path, "smoke")
+    saved = {k: v.detach().cpu().numpy().copy() for k, v in resumed.policy.state_dict().items()}
+    fresh, _ = train(num_envs=1, timesteps=8, n_steps=8, episode_seconds=0.3, actions="position-jaw", seed=7,
+                     object="cuboid")
+    started, curve3 = train(num_envs=1, timesteps=8, n_steps=8, episode_seconds=0.3, actions="position-jaw", seed=7,
+                            init_from=tmp_path, object="cuboid")
+    assert curve3.settings["init_from"] == str(tmp_path) and len(curve3.rows) == 1
+    def distance(model):
+        return max(float(np.abs(v.detach().cpu().numpy() - saved[k]).max()) for k, v in model.policy.state_dict().items())
+    assert distance(started) < 0.1 * distance(fresh)  # one small PPO update away from the saved weights
+    assert started.get_vec_normalize_env().obs_rms["agent_pos"].count > resumed.get_vec_normalize_env().obs_rms["agent_pos"].count
+    assert np.isfinite(curve3.rows[0]["at_goal_fraction"])
     assert any(not np.allclose(a.numpy(), b.detach().cpu().numpy()) for a, b in zip(weights, resumed.policy.parameters()))

@@ -90,10 +90,12 @@ class DeformablePickupEnv(gym.Env):
         (3, m), its velocity (3, m/s), goal (3, m), 8 fixed surface keypoints (24, m, world).
       * ``pixels`` [H, W, 3] uint8 (``obs_type`` "pixels" or "pixels_agent_pos"): camera image.
 
-    **Reward**: ``reach + grasp + lift + success`` (each also in ``info["reward_<term>"]``):
+    **Reward**: ``reach + grasp + lift + place + success`` (each also in ``info["reward_<term>"]``):
     reach = 0.5 (1 - tanh(5 |tcp - feature|)); grasp = 0.5 when both tip forces exceed 0.5 N;
     lift = 2 (1 - tanh(2 |feature - goal|)) while grasped (rising over the whole 0.58 m lift);
-    success = 10 on the success step (distances in m; ``envs.task.REACH_SCALE``, ``LIFT_SCALE``).
+    place = 1 - tanh(10 |feature - goal|) while grasped (a sharp maximum at the goal, where the
+    object must stay for the success hold); success = 10 on the success step (distances in m;
+    ``envs.task.REACH_SCALE``, ``LIFT_SCALE``, ``PLACE_SCALE``).
 
     **Episode end**: terminated on success = feature point within ``success_tolerance`` (0.05 m) of
     the goal, grasped and not pierced (penetration < 5 mm), for ``success_hold_seconds`` (0.5 s);
