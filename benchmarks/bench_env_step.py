@@ -3,6 +3,7 @@
     python benchmarks/bench_env_step.py --device cuda:0 --worlds 1 512 4096
     python benchmarks/bench_env_step.py --device cuda:0 --worlds 512 --policy expert
     python benchmarks/bench_env_step.py --device cpu --worlds 1 16 --object random --no-append
+    python benchmarks/bench_env_step.py --device cpu --worlds 1 8 --policy press --youngs-modulus 1e6
     python benchmarks/bench_env_step.py --device cuda:0 --worlds 2048 --policy expert --noise 0.3 \
         --youngs-modulus 1e6 --warmup 0 --steps 100
 
@@ -14,7 +15,9 @@ Actions: ``random`` = seeded uniform delta actions in [-1, 1]^7 (a fresh draw pe
 policy), ``expert`` = ``ScriptedPickupExpert`` batched over the W worlds (its time included);
 ``--noise STD`` adds seeded Gaussian noise of that std to the expert's actions (clipped to [-1, 1])
 and zeroes their wrist rotation: the contact-heavy steps of an RL policy learning to grasp, whose
-cost the actuator force limit's retries and the slowest world's iterations set.
+cost the actuator force limit's retries and the slowest world's iterations set; ``press`` = the
+closed gripper pushed down onto the object at full speed and kept pushing (``press_actions``: a
+learner pressing the object into the ground, the wrist at its force limit from the first touch).
 Printed per row: median and p95 ms per step, world-steps/s (W / median), the physics substeps per
 control step, the deepest solver-reported penetration (mm) and largest wrist force (N) over the timed
 steps, world-solves per world-substep (1 = no force-limit retry or patient re-solve; the scene's
@@ -44,7 +47,7 @@ import warp as wp  # noqa: E402
 
 import defgrasp_env  # noqa: E402,F401
 from defgrasp_env.envs.config import PickupConfig  # noqa: E402
-from defgrasp_env.layout import DELTA_ACTION  # noqa: E402
+from defgrasp_env.layout import DELTA_ACTION, ENV_STATE  # noqa: E402
 from defgrasp_env.policies import ScriptedPickupExpert  # noqa: E402
 from defgrasp_env.sim import SolverConfig  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
@@ -53,6 +56,19 @@ from machine import append_results, git_state, host  # noqa: E402
 def solver_with_graphs(graphs: str) -> SolverConfig:
     """The env's default solver settings with ``graphs`` ("auto", "on", "off")."""
     return dataclasses.replace(PickupConfig().solver, graphs={"auto": None, "on": True, "off": False}[graphs])
+
+
+def press_actions(obs: dict, scene) -> np.ndarray:
+    """[W, 7] delta actions of a learner pressing the object into the ground: the gripper closes
+    (jaw +1) over the object's feature point (x, z at up to full speed) and, once closed (gap
+    < 5 mm), goes down at full speed onto the object and keeps pushing; wrist rotation 0. From the
+    first touch the wrist stays at its force limit."""
+    feature = ENV_STATE.get(obs["environment_state"], "feature_position")
+    toward = np.clip((feature - scene.gripper.tcp_positions()) / 0.015, -1.0, 1.0)
+    down = np.where(scene.gripper.gap < 0.005, -1.0, 0.0)
+    velocity = np.stack([toward[:, 0], down, toward[:, 2]], axis=1)
+    return DELTA_ACTION.pack(linear_velocity=velocity, angular_velocity=np.zeros((len(toward), 3)),
+                             jaw=np.ones((len(toward), 1))).astype(np.float32)
 
 
 def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
@@ -71,7 +87,9 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
     for k in range(warmup + steps):
         wp.synchronize_device(device)
         t0 = time.perf_counter()
-        if expert is None:
+        if policy == "press":
+            action = press_actions(obs, scene)
+        elif expert is None:
             action = rng.uniform(-1, 1, (worlds, 7)).astype(np.float32)
         else:
             action = expert(obs)
@@ -118,7 +136,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--worlds", type=int, nargs="+", default=[1, 16])
-    ap.add_argument("--policy", choices=["random", "expert"], default="random")
+    ap.add_argument("--policy", choices=["random", "expert", "press"], default="random",
+                    help="random actions, the batched scripted expert, or pressing the object into the ground")
     ap.add_argument("--object", default="cuboid", help="an object name, 'random', or a mesh path")
     ap.add_argument("--youngs-modulus", type=float, default=1e5)
     ap.add_argument("--warmup", type=int, default=10)

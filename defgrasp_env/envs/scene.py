@@ -274,8 +274,10 @@ class PickupScene:
                         load = actuator_load(wrist, tip, *limits)
                 return (number, tip, wrist), load
 
-            (number, tip, wrist), _, _ = limited_substep(
-                solve, actuator_load(self.gripper.wrist_force, self.gripper.tip_force, *limits))
+            load_before = actuator_load(self.gripper.wrist_force, self.gripper.tip_force, *limits)
+            (number, tip, wrist), _, scale = limited_substep(solve, load_before,
+                                                             held=self.gripper.held_at_limit(load_before))
+            self.gripper.record_limit(scale)
             if number != self._solves:
                 raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
                                    "the last solve's state and report are kept")

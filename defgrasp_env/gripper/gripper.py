@@ -104,6 +104,9 @@ class Gripper:
         self._wrist_force = np.zeros(num_worlds)
         self._q_start = self._q_move = None
         self._plan = None   # (joints before, gap after, joints after) of the planned substep
+        #: [W, 7] per world, the planned substep motion (joints 6, jaw closing 1, m) that the actuator
+        #: force limit stopped last; zeros where the last substep moved (``record_limit``)
+        self._stopped_motion = np.zeros((num_worlds, 7))
         self._before = None  # (gap, grip force, target gap) at the start of the running substep
 
     # -- state -----------------------------------------------------------------------------
@@ -136,6 +139,7 @@ class Gripper:
             self._tip_force[w] = 0.0
             self._grip_stiffness[w] = 0.0
             self._wrist_force[w] = 0.0
+            self._stopped_motion[w] = 0.0
 
     # -- kinematics ------------------------------------------------------------------------
     def flange_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -214,6 +218,27 @@ class Gripper:
         self._q, pos, quat = self.lift_above_ground(q, gap)
         self._gap = gap
         return pos, quat
+
+    def planned_motion(self) -> np.ndarray:
+        """[W, 7]: the planned substep's wrist joint motion (6: m for the slides, rad for the
+        turns) and jaw closing (1, m; 0 where the jaw opens), before any force limit."""
+        q_before, gap, q = self._plan
+        return np.concatenate([q - q_before, np.maximum(self._before[0] - gap, 0.0)[:, None]], axis=1)
+
+    def held_at_limit(self, load_before: np.ndarray) -> np.ndarray:
+        """[W] bool: worlds whose actuators stay stopped this substep without trying their planned
+        motion (``wrist.force_limit.limited_substep``'s ``held``): at a limit at the substep start
+        (``load_before`` [W] >= 1) and stopped by the limit last time on a motion with a positive
+        component along the planned one (the same push: it would read over the limit again). A
+        world whose load relaxed below its limit, or whose command turned away, tries to move."""
+        pushing_on = np.einsum("wi,wi->w", self._stopped_motion, self.planned_motion()) > 0.0
+        return pushing_on & (np.asarray(load_before) >= 1.0)
+
+    def record_limit(self, scale: np.ndarray) -> None:
+        """Remember, per world, the planned motion if the force limit stopped it (``scale`` [W] = 0,
+        the fraction it allowed), else nothing stopped."""
+        stopped = (np.asarray(scale) == 0.0)[:, None]
+        self._stopped_motion = np.where(stopped, self.planned_motion(), 0.0)
 
     def substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray):
         """:meth:`plan_substep` then :meth:`move` with the whole wrist motion; returns the pad poses."""

@@ -19,6 +19,11 @@ regula falsi on the measured load, a few extra solves of that substep) that brin
 and 0 (wrist and closing jaw stop) when the load was at 1 before the substep or no fraction is
 found. So a jaw that closes fast on a stiff object pinned against the ground (or the other pad), or
 a wrist that pushes a pad into one, stops within the substep, before the penalty contact reads kN.
+A world that stays at its limit under the same push (``held``: ``Gripper.held_at_limit``, e.g. a
+learner pressing the object into the ground for seconds) stays stopped in one solve per substep
+instead of trying its motion again (a solve over the limit, a patient re-solve and the stopped
+re-solve: 2.75-3 solves per substep, ~15x the time of a free step on the CPU, and on the GPU the
+batch's slowest world); the result is the same, bit for bit (tests/test_wrist_force_limit.py).
 Pure functions on arrays (shapes [W] per world); the scene supplies ``solve``.
 """
 
@@ -67,7 +72,7 @@ def next_scale(lo, hi, f_lo, f_hi, limit) -> np.ndarray:
 
 
 def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], load_before: np.ndarray,
-                    tolerance: float = FORCE_TOLERANCE, retries: int = MAX_RETRIES):
+                    tolerance: float = FORCE_TOLERANCE, retries: int = MAX_RETRIES, held: np.ndarray | None = None):
     """Run one substep with the actuator load limited to 1 (+ ``tolerance``).
 
     Args:
@@ -76,14 +81,18 @@ def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], lo
             load as ``actuator_load`` (1 = at a limit) and ``result`` anything the caller needs
             (solver report, forces).
         load_before: load [W] at the substep start.
+        held: [W] bool (default none): worlds that stay stopped (scale 0) without trying their
+            planned motion: those at a limit whose actuators the limit stopped before on a motion in
+            the same direction (``Gripper.held_at_limit``). Trying it would read over the limit and
+            stop them again, at the cost of a solve and a patient re-solve per substep.
     Returns:
         (result, load [W], scale [W]) of the accepted solve, which is always the last one run.
     """
     limit = 1.0
     load_before = np.asarray(load_before, dtype=np.float64)
-    scale = np.ones_like(load_before)
+    scale = np.ones_like(load_before) if held is None else np.where(held, 0.0, 1.0)
     result, load = solve(scale)
-    over = load > limit * (1.0 + tolerance)
+    over = (load > limit * (1.0 + tolerance)) & (scale > 0.0)  # a held world has no motion to take back
     if not over.any():
         return result, load, scale
     # stop at once where the actuators already pressed at the limit; else bracket [0, 1]
@@ -91,7 +100,7 @@ def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], lo
     hi, f_hi = scale.copy(), load.copy()
     side = np.zeros_like(scale)  # Illinois: halve the stale end's excess after two moves of one side
     searching = over & (load_before < limit)
-    scale = np.where(over, 0.0, 1.0)
+    scale = np.where(over, 0.0, scale)
     for _ in range(retries):
         if not searching.any():
             break
