@@ -6,8 +6,10 @@ batched FEM simulation, on the CPU or a CUDA device) drive SB3's PPO through
 ``VecNormalize`` (running observation / reward normalisation). The env's dense reward is used as
 is (reach + grasp + lift + place + success; see ``DeformablePickupEnv``). After every PPO rollout the
 script records the env steps so far, wall time, the success rate and mean return of the
-episodes that ended in that rollout (the stochastic training policy) and the fraction of its
-world-steps with the object grasped; at the end it prints the learning curve as a table and writes
+episodes that ended in that rollout (the stochastic training policy), the fraction of its
+world-steps with the object grasped and grasped within the success tolerance of the goal, the
+median / p95 time of its vector steps and the slowest world's Newton / CG iterations per step
+(median over the rollout); at the end it prints the learning curve as a table and writes
 ``curve.csv`` and ``curve.png`` (success and grasp vs env steps and vs wall time) to ``--out``, the
 model to ``--out/ppo.zip``, the observation/reward normalisation to ``--out/vecnormalize.pkl`` and
 the run's settings to ``--out/run.json``; ``--resume DIR`` goes on from such a folder (model,
@@ -216,6 +218,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, **env_kwargs)
     if init_from is not None:
         venv = VecNormalize.load(str(pathlib.Path(init_from) / "vecnormalize.pkl"), venv.venv)
+        venv.gamma = gamma  # the loaded statistics go on; the return normalisation uses this run's discount
     rollout = n_steps * num_envs
     minibatches = max(1, min(minibatches, rollout // 64))
     model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=rollout // minibatches,
@@ -278,7 +281,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "datasets" / "output" / "ppo"))
     ap.add_argument("--resume", default=None, help="folder of an earlier run (ppo.zip, vecnormalize.pkl, curve.csv)")
     ap.add_argument("--init-from", default=None,
-                    help="folder of an earlier run whose policy and normalisation start a new run (other options allowed)")
+                    help="folder of an earlier run whose policy and normalisation start a new run (other options "
+                         "allowed); a run started so is resumed with the same --init-from")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,

@@ -155,9 +155,10 @@ def test_holding_at_the_goal_pays_more_than_lifting_through_it():
     alone lifted through the goal at full speed to the workspace ceiling instead. Two rollouts from
     the same seed (sphere, E = 1e5: not the cuboid PPO trained on): the scripted expert, which holds
     at the goal, and the same expert that goes on up at full speed from its first step within the
-    success tolerance. PPO's discounted (0.8) reward of the next 10 steps, the success bonus left out,
-    must favour holding by >= 0.3 (0.66 measured with the place term; -0.02 with the reach, grasp
-    and lift terms alone: those favoured passing through)."""
+    success tolerance. PPO's discounted (0.8) reward of the next 9 steps (the holding episode's
+    success step ends it then), the success bonus left out, must favour holding by >= 0.7: 1.03
+    measured with the place term, 0.32 with the reach, grasp and lift terms alone (a gradient PPO
+    did not follow in 2.9 M steps)."""
     from defgrasp_env.policies import ScriptedPickupExpert
 
     def rollout(go_on_up: bool):
@@ -184,9 +185,10 @@ def test_holding_at_the_goal_pays_more_than_lifting_through_it():
     passed, distances, passed_success = rollout(True)
     assert held_success and not passed_success
     assert distances.min() < 0.02 and distances[-1] > 0.08  # it went through the goal and on up
-    discount = 0.8 ** np.arange(10)
-    advantage = float(discount[:len(held)] @ held - discount @ passed)
-    assert advantage >= 0.3, f"holding at the goal is worth only {advantage:.3f} more than lifting through it"
+    steps = len(held)  # 9: the held episode ends on its success step (first + 10)
+    discount = 0.8 ** np.arange(steps)
+    advantage = float(discount @ held - discount @ passed[:steps])
+    assert advantage >= 0.7, f"holding at the goal is worth only {advantage:.3f} more than lifting through it"
 
 
 def test_absolute_action_mode_moves_toward_target():

@@ -218,3 +218,47 @@ def test_state_is_the_same_object_after_every_step(substeps):
         assert scene.state is state
     assert not np.array_equal(view, first)  # the object fell 1 cm: the view saw it
     np.testing.assert_array_equal(view, scene.state.positions.numpy())
+
+
+def test_held_at_limit_only_for_the_same_push():
+    """``held_at_limit``: after a try stopped by the force limit (down at 0.3 m/s, jaw closing), a
+    world stays held under the same push (any speed, or within ~26 degrees) at load >= 1; it tries
+    to move when the command turns away (a slow lift, a stop with the jaw still closing, a turn of
+    the wrist, a push more than 26 degrees off), when its load fell below the limit, and after a
+    substep that moved.
+    A held substep keeps the stopped push, so a command turning by small steps is released once it
+    is 26 degrees off the push that was stopped."""
+    down, quat = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0])
+    h, start = 0.0125, np.array([0.0, START_FLANGE_HEIGHT, 0.0])
+
+    def plan(g, velocity, gap=0.0, turn=0.0):
+        c, s = np.cos(turn / 2), np.sin(turn / 2)
+        g.begin_step(np.tile(start + 0.05 * np.asarray(velocity), (g.num_worlds, 1)),
+                     np.tile([0.0, s, 0.0, c] if turn else quat, (g.num_worlds, 1)))
+        g.plan_substep(0, 4, h, np.full(g.num_worlds, gap), np.ones(g.num_worlds, bool))
+
+    g = Gripper(GripperConfig(), 1)
+    g.reset(np.ones(1, bool), np.zeros((1, 2)))
+    at_limit, below = np.ones(1), np.full(1, 0.99)
+    plan(g, 0.3 * down)
+    assert not g.held_at_limit(at_limit)            # nothing stopped yet: it tries
+    g.record_limit(np.zeros(1), np.zeros(1, bool))  # the try was stopped
+    cases = {"same push": (0.3 * down, 0.0, True), "slower": (0.05 * down, 0.0, True),
+             "20 degrees off": (0.3 * np.array([np.sin(0.35), -np.cos(0.35), 0.0]), 0.0, True),
+             "35 degrees off": (0.3 * np.array([np.sin(0.61), -np.cos(0.61), 0.0]), 0.0, False),
+             "slow lift": (-0.05 * down, 0.0, False), "stop": (np.zeros(3), 0.0, False),
+             "turning wrist": (0.3 * down, 0.3, False)}
+    for name, (velocity, turn, expected) in cases.items():
+        plan(g, velocity, turn=turn)
+        assert g.held_at_limit(at_limit)[0] == expected, name
+    plan(g, 0.3 * down)
+    assert not g.held_at_limit(below)[0]            # the object gave way: try again
+    # a held substep keeps the stopped push; a command turning 15 degrees at a time is released at 30
+    for angle, expected in ((0.26, True), (0.52, False)):
+        plan(g, 0.3 * np.array([np.sin(angle), -np.cos(angle), 0.0]))
+        held = g.held_at_limit(at_limit)
+        assert held[0] == expected, angle
+        g.record_limit(np.zeros(1), held)
+    g.record_limit(np.ones(1), np.zeros(1, bool))   # a try that moved: nothing is held any more
+    plan(g, 0.3 * down)
+    assert not g.held_at_limit(at_limit)[0]

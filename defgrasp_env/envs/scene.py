@@ -275,9 +275,9 @@ class PickupScene:
                 return (number, tip, wrist), load
 
             load_before = actuator_load(self.gripper.wrist_force, self.gripper.tip_force, *limits)
-            (number, tip, wrist), _, scale = limited_substep(solve, load_before,
-                                                             held=self.gripper.held_at_limit(load_before))
-            self.gripper.record_limit(scale)
+            held = self.gripper.held_at_limit(load_before)
+            (number, tip, wrist), _, scale = limited_substep(solve, load_before, held=held)
+            self.gripper.record_limit(scale, held)
             if number != self._solves:
                 raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
                                    "the last solve's state and report are kept")

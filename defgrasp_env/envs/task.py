@@ -22,9 +22,9 @@ REACH_SCALE = 5.0
 LIFT_SCALE = 2.0
 #: Distance scale (1/m) of the place term ``1 - tanh(scale * |feature - goal|)``: a sharp maximum at
 #: the goal on top of the broad lift term. With the lift term alone (4 per m at the goal) a PPO policy
-#: learned to lift the cuboid through the goal at full speed to the workspace ceiling and never held
-#: it there for ``success_hold_seconds`` (2.9 M steps, benchmarks/RESULTS.md); ManiSkill's pick tasks
-#: shape their place reward with 5/m over a goal 0.1-0.3 m away.
+#: learned to lift the cuboid through the goal at full speed to the wrist's upper limit and never
+#: held it there for ``success_hold_seconds`` (2.9 M steps, benchmarks/RESULTS.md); ManiSkill's pick
+#: tasks shape their place reward with 5/m over a goal 0.1-0.3 m away.
 PLACE_SCALE = 10.0
 
 

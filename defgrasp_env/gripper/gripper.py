@@ -35,6 +35,9 @@ PAD_BACKING = 0.01
 #: Start height of the flange above the ground (m) and pad clearance kept above the ground (m).
 START_FLANGE_HEIGHT = 0.30
 GROUND_CLEARANCE = 0.001
+#: A world stopped at its force limit stays held while its planned push keeps within this cosine
+#: (~26 degrees) of the push that was stopped (``Gripper.held_at_limit``).
+HOLD_COSINE = 0.9
 #: Half extents (m) of each pad's collision box (the pad plus its backing), in frame G.
 PAD_BOX_HALF_EXTENTS = pad_boxes(gap=GAP_MAX)[1][0] + np.array([PAD_BACKING / 2, 0.0, 0.0])
 _CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
@@ -104,9 +107,9 @@ class Gripper:
         self._wrist_force = np.zeros(num_worlds)
         self._q_start = self._q_move = None
         self._plan = None   # (joints before, gap after, joints after) of the planned substep
-        #: [W, 7] per world, the planned substep motion (joints 6, jaw closing 1, m) that the actuator
-        #: force limit stopped last; zeros where the last substep moved (``record_limit``)
-        self._stopped_motion = np.zeros((num_worlds, 7))
+        #: [W, 3] per world, the planned substep push (flange slide, m, world) that the actuator
+        #: force limit stopped when the world last tried to move; zeros where it moved (``record_limit``)
+        self._stopped_push = np.zeros((num_worlds, 3))
         self._before = None  # (gap, grip force, target gap) at the start of the running substep
 
     # -- state -----------------------------------------------------------------------------
@@ -139,7 +142,7 @@ class Gripper:
             self._tip_force[w] = 0.0
             self._grip_stiffness[w] = 0.0
             self._wrist_force[w] = 0.0
-            self._stopped_motion[w] = 0.0
+            self._stopped_push[w] = 0.0
 
     # -- kinematics ------------------------------------------------------------------------
     def flange_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -219,26 +222,35 @@ class Gripper:
         self._gap = gap
         return pos, quat
 
-    def planned_motion(self) -> np.ndarray:
-        """[W, 7]: the planned substep's wrist joint motion (6: m for the slides, rad for the
-        turns) and jaw closing (1, m; 0 where the jaw opens), before any force limit."""
-        q_before, gap, q = self._plan
-        return np.concatenate([q - q_before, np.maximum(self._before[0] - gap, 0.0)[:, None]], axis=1)
+    def planned_push(self) -> np.ndarray:
+        """[W, 3] (m, world): the planned substep's flange slide (joints 0-2), before any force limit."""
+        q_before, _, q = self._plan
+        return q[:, :3] - q_before[:, :3]
 
     def held_at_limit(self, load_before: np.ndarray) -> np.ndarray:
         """[W] bool: worlds whose actuators stay stopped this substep without trying their planned
-        motion (``wrist.force_limit.limited_substep``'s ``held``): at a limit at the substep start
-        (``load_before`` [W] >= 1) and stopped by the limit last time on a motion with a positive
-        component along the planned one (the same push: it would read over the limit again). A
-        world whose load relaxed below its limit, or whose command turned away, tries to move."""
-        pushing_on = np.einsum("wi,wi->w", self._stopped_motion, self.planned_motion()) > 0.0
-        return pushing_on & (np.asarray(load_before) >= 1.0)
+        motion (``wrist.force_limit.limited_substep``'s ``held``), like a protective stop: at a
+        limit at the substep start (``load_before`` [W] >= 1), their last try stopped by the limit,
+        and the planned flange slide within ~26 degrees of that stopped one (cosine >=
+        ``HOLD_COSINE``, any speed) with no turn of the wrist planned. (The force limit scales the
+        jaw's closing with the wrist's motion, so a held world's jaw waits too, as after a stopped
+        try.) A world whose load fell below its limit (the object gave way), whose command turned,
+        that turns its wrist or only moves its jaw, tries to move."""
+        stopped, push = self._stopped_push, self.planned_push()
+        norms = np.linalg.norm(stopped, axis=1) * np.linalg.norm(push, axis=1)
+        same_push = np.einsum("wi,wi->w", stopped, push) >= HOLD_COSINE * np.maximum(norms, 1e-300)
+        q_before, _, q = self._plan
+        no_turn = np.all(q[:, 3:] == q_before[:, 3:], axis=1)
+        return same_push & (norms > 0.0) & no_turn & (np.asarray(load_before) >= 1.0)
 
-    def record_limit(self, scale: np.ndarray) -> None:
-        """Remember, per world, the planned motion if the force limit stopped it (``scale`` [W] = 0,
-        the fraction it allowed), else nothing stopped."""
-        stopped = (np.asarray(scale) == 0.0)[:, None]
-        self._stopped_motion = np.where(stopped, self.planned_motion(), 0.0)
+    def record_limit(self, scale: np.ndarray, held: np.ndarray) -> None:
+        """After a substep's force limit: a world that tried to move (not ``held`` [W]) and was
+        stopped (``scale`` [W] = 0) remembers the push it tried; one that moved forgets; a held one
+        keeps the push that stopped it (so a command turning step by step releases it)."""
+        stopped = np.asarray(scale) == 0.0
+        tried = ~np.asarray(held)
+        self._stopped_push = np.where((tried & stopped)[:, None], self.planned_push(),
+                                      np.where((tried & ~stopped)[:, None], 0.0, self._stopped_push))
 
     def substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray):
         """:meth:`plan_substep` then :meth:`move` with the whole wrist motion; returns the pad poses."""
