@@ -59,6 +59,7 @@ def _screenshot_once(url: str, path: pathlib.Path, *, size, wait_ms: int, timeou
     exe = require_chromium()
     path = pathlib.Path(path)
     path.unlink(missing_ok=True)  # never read a previous attempt's picture
+    path.parent.mkdir(parents=True, exist_ok=True)  # a test run alone has no artifact folder yet
     profile = pathlib.Path(tempfile.mkdtemp(prefix=f".chromium-profile-{path.stem}-", dir=path.parent))
     cmd = [exe, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
            "--enable-unsafe-swiftshader", "--hide-scrollbars", "--no-first-run", f"--user-data-dir={profile}",

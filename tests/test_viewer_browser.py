@@ -15,6 +15,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -176,10 +177,12 @@ def test_dataset_view_command_serves_the_episode(chromium, episode_file, tmp_pat
             m = re.search(r"viewing .* at (http://127\.0\.0\.1:\d+/)", line)
             url = m.group(1) if m else None
         assert url, "".join(lines)
+        # keep reading its output: a full pipe would block the viewer in a write (and past Ctrl-C)
+        threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True).start()
         img = screenshot(url, ART / "dataset_view.png", ready=drawn)
         assert pad_pixels(img) > 100
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=120) == 0   # the viewer stops on Ctrl-C (slowly on a loaded box)
+        assert proc.wait(timeout=120) == 0, "".join(lines)[-3000:]  # stops on Ctrl-C (slowly on a loaded box)
     finally:
         if proc.poll() is None:
             proc.kill()
