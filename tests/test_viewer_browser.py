@@ -165,7 +165,13 @@ def test_dataset_view_command_serves_the_episode(chromium, episode_file, tmp_pat
     """``defgrasp-dataset view EPISODE --port 0`` prints the URL, serves the episode, stops on Ctrl-C."""
     pytest.importorskip("viser", reason="needs the [viewer] extra (viser)")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "defgrasp_env.recording.cli", "view", str(episode_file), "--port", "0"],
+    # as a user's terminal would: Ctrl-C raises KeyboardInterrupt. A test run started in the
+    # background (nohup, `cmd &`, some CI runners) hands its children SIGINT ignored, and Python
+    # then leaves it ignored, so the child restores the default handler before running the CLI.
+    run_cli = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+               "sys.argv = ['defgrasp-dataset', *sys.argv[1:]]; "
+               "runpy.run_module('defgrasp_env.recording.cli', run_name='__main__')")
+    proc = subprocess.Popen([sys.executable, "-c", run_cli, "view", str(episode_file), "--port", "0"],
                             cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         url, lines, t0 = None, [], time.monotonic()
