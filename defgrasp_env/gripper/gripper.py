@@ -238,19 +238,17 @@ class Gripper:
         that turns its wrist or only moves its jaw, tries to move."""
         stopped, push = self._stopped_push, self.planned_push()
         norms = np.linalg.norm(stopped, axis=1) * np.linalg.norm(push, axis=1)
-        same_push = np.einsum("wi,wi->w", stopped, push) >= HOLD_COSINE * np.maximum(norms, 1e-300)
+        same_push = (norms > 0.0) & (np.einsum("wi,wi->w", stopped, push) >= HOLD_COSINE * norms)
         q_before, _, q = self._plan
         no_turn = np.all(q[:, 3:] == q_before[:, 3:], axis=1)
-        return same_push & (norms > 0.0) & no_turn & (np.asarray(load_before) >= 1.0)
+        return same_push & no_turn & (np.asarray(load_before) >= 1.0)
 
     def record_limit(self, scale: np.ndarray, held: np.ndarray) -> None:
         """After a substep's force limit: a world that tried to move (not ``held`` [W]) and was
         stopped (``scale`` [W] = 0) remembers the push it tried; one that moved forgets; a held one
         keeps the push that stopped it (so a command turning step by step releases it)."""
-        stopped = np.asarray(scale) == 0.0
-        tried = ~np.asarray(held)
-        self._stopped_push = np.where((tried & stopped)[:, None], self.planned_push(),
-                                      np.where((tried & ~stopped)[:, None], 0.0, self._stopped_push))
+        tried_push = np.where((np.asarray(scale) == 0.0)[:, None], self.planned_push(), 0.0)
+        self._stopped_push = np.where(np.asarray(held)[:, None], self._stopped_push, tried_push)
 
     def substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray):
         """:meth:`plan_substep` then :meth:`move` with the whole wrist motion; returns the pad poses."""
