@@ -6,7 +6,10 @@ batched FEM simulation, on the CPU or a CUDA device) drive SB3's PPO through
 ``VecNormalize`` (running observation / reward normalisation). The env's dense reward is used as
 is (reach + grasp + lift + place + success; see ``DeformablePickupEnv``). After every PPO rollout the
 script records the env steps so far, wall time, the success rate and mean return of the
-episodes that ended in that rollout (the stochastic training policy), the fraction of its
+episodes that ended in that rollout (the stochastic training policy; with worlds that begin their
+episodes together this rate swings: successes end early, failures all at the time limit), the
+success rate of the cohort of episodes that began one time limit before the rollout (all ended:
+unbiased, for the policy of one episode earlier), the fraction of its
 world-steps with the object grasped and grasped within the success tolerance of the goal, the
 median / p95 time of its vector steps and the slowest world's Newton / CG iterations per step
 (median over the rollout); at the end it prints the learning curve as a table and writes
@@ -15,7 +18,7 @@ model to ``--out/ppo.zip``, the observation/reward normalisation to ``--out/vecn
 the run's settings to ``--out/run.json``; ``--resume DIR`` goes on from such a folder (model,
 normalisation and curve continue; the env and PPO options, ``--seed`` included, must be the run's;
 the env is seeded with ``--seed`` + the env steps so far, so the resumed run does not replay the
-earlier episodes).
+earlier episodes). ``eval_ppo.py`` evaluates a saved run on fresh episodes (one per world).
 
 ``--actions position-jaw`` (``defgrasp_env.rl.held_orientation``) lets the policy move the wrist
 and the jaw but not turn the wrist (4 actions instead of 7). The PPO settings default to those
@@ -49,8 +52,9 @@ class LearningCurve(BaseCallback):
     """Success rate and mean return of the episodes that ended in each rollout, vs env steps and wall time."""
 
     def __init__(self, settings: dict, env_seed: int, max_seconds: float = float("inf"),
-                 rows: list[dict] | None = None, success_tolerance: float = 0.05):
+                 rows: list[dict] | None = None, success_tolerance: float = 0.05, episode_steps: int = 300):
         super().__init__()
+        self.episode_steps = episode_steps  # the env's time limit (vector steps): every episode has ended this long after its start
         self.success_tolerance = success_tolerance  # m: the env's; "at goal" = grasped and this close
         self.settings = dict(settings)  # the run's env and PPO options and its --seed (run.json)
         self.env_seed = env_seed  # the seed of this session's env: --seed + the env steps of earlier sessions
@@ -66,6 +70,9 @@ class LearningCurve(BaseCallback):
         self._t0 = time.perf_counter()
         self._rollout_t0 = self._t0
         self._step_t0 = self._t0
+        self._steps = 0  # vector steps of this session
+        self._starts: np.ndarray | None = None  # [N] the vector step at which each world's episode began
+        self._ended: list[tuple[int, bool]] = []  # (start step, success) of the episodes not yet in a cohort
 
     def _on_rollout_start(self) -> None:
         self._rollout_t0 = self._step_t0 = time.perf_counter()
@@ -80,30 +87,50 @@ class LearningCurve(BaseCallback):
         self._grasped.append(float(np.mean([bool(info.get("grasped", False)) for info in infos])))
         self._at_goal.append(float(np.mean([bool(info.get("grasped", False)) and info.get("goal_distance", np.inf)
                                             < self.success_tolerance for info in infos])))
-        for done, info in zip(self.locals["dones"], infos):
+        if self._starts is None:
+            self._starts = np.zeros(len(infos), int)
+        self._steps += 1
+        for world, (done, info) in enumerate(zip(self.locals["dones"], infos)):
             if done:
                 self._success.append(bool(info.get("is_success", False)))
                 self._returns.append(float(info.get("episode", {}).get("r", np.nan)))
+                self._ended.append((int(self._starts[world]), self._success[-1]))
+                self._starts[world] = self._steps
         return time.perf_counter() - self._t0 < self.max_seconds
 
     def _on_rollout_end(self) -> None:
         n = len(self._success)
+        cohort = self._cohort()
         self.rows.append({"env_steps": self.num_timesteps, "wall_s": round(self._wall0 + time.perf_counter() - self._t0, 1),
                           "episodes": n, "success_rate": float(np.mean(self._success)) if n else float("nan"),
                           "mean_return": float(np.nanmean(self._returns)) if n else float("nan"),
                           "grasped_fraction": float(np.mean(self._grasped)) if self._grasped else float("nan"),
                           "at_goal_fraction": float(np.mean(self._at_goal)) if self._at_goal else float("nan"),
+                          "cohort_episodes": len(cohort),
+                          "cohort_success_rate": float(np.mean(cohort)) if cohort else float("nan"),
                           # seconds of this rollout's collection (env steps + policy forward passes)
                           "rollout_s": round(time.perf_counter() - self._rollout_t0, 2),
                           **self._step_costs()})
         r = self.rows[-1]
         print(f"steps {r['env_steps']:>9d}  wall {r['wall_s']:>8.1f} s  episodes {n:>4d}  "
               f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}  "
-              f"at goal {r['at_goal_fraction']:.3f}  "
+              f"at goal {r['at_goal_fraction']:.3f}  cohort success {r['cohort_success_rate']:.2f} "
+              f"[{r['cohort_episodes']}]  "
               f"collection {r['rollout_s']:.1f} s  step p50/p95 {r['step_ms_p50']:.0f}/{r['step_ms_p95']:.0f} ms  "
               f"slowest world Newton {r['slowest_newton']:.0f} CG {r['slowest_cg']:.0f}",
               flush=True)
         self._success, self._returns, self._grasped, self._at_goal, self._step_s, self._slowest = [], [], [], [], [], []
+
+    def _cohort(self) -> list[bool]:
+        """Success of the episodes that began in the window of vector steps that ended a time limit
+        ago (of the length of a rollout): all of them have ended, short successful ones and long
+        failed ones alike, so their success rate is unbiased (the rate among episodes that merely
+        *ended* in a rollout over-represents early successes), for the policy of ~one episode ago."""
+        now = self._steps - self.episode_steps
+        begin = now - self.model.n_steps
+        cohort = [success for start, success in self._ended if begin <= start < now]
+        self._ended = [(start, success) for start, success in self._ended if start >= now]
+        return cohort
 
     def _step_costs(self) -> dict:
         """Median / p95 ms of the rollout's vector steps (policy forward pass + env step) and the median
@@ -149,10 +176,14 @@ def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float =
     return VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), clip_obs=10.0, gamma=gamma)
 
 
+#: ``curve.csv`` columns that are counts (an older run's rows lack the later ones: "nan").
+COUNT_COLUMNS = ("env_steps", "episodes", "cohort_episodes")
+
+
 def read_curve(folder: pathlib.Path) -> list[dict]:
     """The rows of ``folder/curve.csv`` (as ``LearningCurve`` writes them)."""
     with open(pathlib.Path(folder) / "curve.csv", newline="") as f:
-        return [{k: (int(v) if k in ("env_steps", "episodes") else float(v)) for k, v in row.items()}
+        return [{k: (int(v) if k in COUNT_COLUMNS and v != "nan" else float(v)) for k, v in row.items()}
                 for row in csv.DictReader(f)]
 
 
@@ -204,6 +235,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     if init_from is not None:
         settings["init_from"] = str(init_from)
     tolerance = PickupConfig(**env_kwargs).success_tolerance
+    episode_steps = PickupConfig(**env_kwargs).max_episode_steps
     if resume is not None:
         resume = pathlib.Path(resume)
         rows = check_resume(resume, settings)
@@ -212,7 +244,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         venv = VecNormalize.load(str(resume / "vecnormalize.pkl"), venv.venv)
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
-        curve = LearningCurve(settings, env_seed, max_seconds, rows=rows, success_tolerance=tolerance)
+        curve = LearningCurve(settings, env_seed, max_seconds, rows=rows, success_tolerance=tolerance,
+                              episode_steps=episode_steps)
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, **env_kwargs)
@@ -229,7 +262,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     if init_from is not None:
         trained = PPO.load(pathlib.Path(init_from) / "ppo.zip", device=torch_device)
         model.policy.load_state_dict(trained.policy.state_dict())
-    curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance)
+    curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps)
     model.learn(timesteps, callback=curve)
     return model, curve
 
@@ -249,7 +282,10 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
     steps = [r["env_steps"] for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for ax, x, label in ((axes[0], steps, "env steps"), (axes[1], [r["wall_s"] / 60 for r in rows], "wall time (min)")):
-        ax.plot(x, [r["success_rate"] for r in rows], "o-", ms=3, label="success rate (episodes ended)")
+        ax.plot(x, [r["success_rate"] for r in rows], "o-", ms=3, alpha=0.5,
+                label="success rate (episodes ended in the rollout: early successes over-represented)")
+        ax.plot(x, [r.get("cohort_success_rate", float("nan")) for r in rows], "D-", ms=3,
+                label="success rate (episodes begun one time limit earlier: unbiased)")
         ax.plot(x, [r["grasped_fraction"] for r in rows], "s-", ms=3, label="grasped fraction (world-steps)")
         ax.plot(x, [r.get("at_goal_fraction", float("nan")) for r in rows], "^-", ms=3,
                 label="grasped at the goal (world-steps)")
@@ -297,10 +333,12 @@ def main(argv=None) -> int:
              f"in {wall / 60:.1f} min")
     save_run(model, curve, out, title)
     print(title)
-    print("| env steps | wall (s) | episodes ended | success rate | mean return | grasped fraction | at goal | "
-          "step ms p50 / p95 | slowest world Newton / CG per step |\n|---|---|---|---|---|---|---|---|---|")
+    print("| env steps | wall (s) | episodes ended | success rate (ended) | success rate (cohort) [episodes] | "
+          "mean return | grasped fraction | at goal | step ms p50 / p95 | slowest world Newton / CG per step |\n"
+          "|---|---|---|---|---|---|---|---|---|---|")
     for r in curve.rows:
         print(f"| {r['env_steps']} | {r['wall_s']} | {r['episodes']} | {r['success_rate']:.2f} | "
+              f"{r.get('cohort_success_rate', float('nan')):.2f} [{r.get('cohort_episodes', 'n/a')}] | "
               f"{r['mean_return']:.1f} | {r['grasped_fraction']:.3f} | {r.get('at_goal_fraction', float('nan')):.3f} | "
               f"{r.get('step_ms_p50', float('nan')):.0f} / "
               f"{r.get('step_ms_p95', float('nan')):.0f} | {r.get('slowest_newton', float('nan')):.0f} / "

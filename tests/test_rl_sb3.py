@@ -177,3 +177,71 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
     assert started.get_vec_normalize_env().obs_rms["agent_pos"].count > resumed.get_vec_normalize_env().obs_rms["agent_pos"].count
     assert 0.0 <= curve3.rows[0]["at_goal_fraction"] <= curve3.rows[0]["grasped_fraction"]
     assert any(not np.allclose(a.numpy(), b.detach().cpu().numpy()) for a, b in zip(weights, resumed.policy.parameters()))
+
+
+def test_cohort_success_rate_is_unbiased_where_the_ended_rate_is_not():
+    """All worlds start together; a success ends an episode after 3-5 steps, a failure at the
+    10-step limit. The rate among the episodes that ended in a rollout reads ~1 in the first
+    rollouts (only successes have ended yet); the cohort rate (episodes begun one time limit
+    before the rollout) recovers the true success probability, and counts every episode once."""
+    import sys
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import LearningCurve
+
+    rng = np.random.default_rng(3)
+    p, worlds, limit, n_steps, rollouts = 0.3, 400, 10, 4, 40
+    curve = LearningCurve({}, 0, episode_steps=limit)
+    curve.model = SimpleNamespace(n_steps=n_steps)
+    def draw():
+        success = rng.random(worlds) < p
+        return success, np.where(success, rng.integers(3, 6, worlds), limit)
+    success, length = draw()
+    age, begun = np.zeros(worlds, int), []  # begun: (start step, success) of every episode
+    starts = np.zeros(worlds, int)
+    for step in range(1, n_steps * rollouts + 1):
+        age += 1
+        done = age == length
+        curve.locals = {"dones": done, "infos": [{"is_success": bool(s and d), "episode": {"r": 0.0}}
+                                                 for s, d in zip(success, done)]}
+        curve._on_step()
+        new_success, new_length = draw()
+        for w in np.flatnonzero(done):
+            begun.append((starts[w], bool(success[w])))
+            starts[w], age[w], success[w], length[w] = step, 0, new_success[w], new_length[w]
+        if step % n_steps == 0:
+            curve._on_rollout_end()
+    assert curve.rows[0]["success_rate"] == 1.0 and curve.rows[1]["success_rate"] > 0.9  # only successes ended yet
+    final = n_steps * rollouts - limit  # episodes begun before this have all ended and been counted
+    counted = [s for start, s in begun if start < final]
+    assert sum(r["cohort_episodes"] for r in curve.rows) == len(counted)
+    pooled = sum(r["cohort_success_rate"] * r["cohort_episodes"] for r in curve.rows if r["cohort_episodes"])
+    # ~7000 episodes: the binomial standard error of the pooled rate is ~0.006; 0.03 is 5 of it
+    assert abs(pooled / len(counted) - p) < 0.03 and abs(np.mean(counted) - pooled / len(counted)) < 1e-12
+
+
+def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
+    """``eval_ppo.evaluate`` on a saved (barely trained) run: one record per world, each ended at
+    the time limit or by success, outcomes that add up, the run's env options unless overridden,
+    and the same episodes again for the same seed (deterministic policy, frozen normalisation)."""
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from eval_ppo import OUTCOMES, evaluate
+    from train_ppo import save_run, train
+
+    model, curve = train(num_envs=2, timesteps=16, n_steps=8, minibatches=2, episode_seconds=0.3,
+                         actions="position-jaw", object="cuboid")
+    save_run(model, curve, tmp_path, "smoke")
+    first = evaluate(tmp_path, 3, seed=11)
+    assert [e["seed"] for e in first["episodes"]] == [11, 12, 13] and first["env"]["youngs_modulus"] == 1e5  # the default
+    for e in first["episodes"]:
+        assert e["outcome"] in OUTCOMES and (e["steps"] == 6 or e["success"])
+        assert e["success"] == (e["outcome"] == "success")
+    assert sum(first["outcomes"].values()) == 3
+    assert evaluate(tmp_path, 3, seed=11)["episodes"] == first["episodes"]
+    softer = evaluate(tmp_path, 1, seed=11, youngs_modulus=1e4)  # an option the run left at its default
+    assert softer["env"] == {"object": "cuboid", "youngs_modulus": 1e4, "episode_seconds": 0.3}
+    with pytest.raises(ValueError, match="gamma"):
+        evaluate(tmp_path, 1, gamma=0.5)

@@ -1,0 +1,126 @@
+"""Evaluate a saved PPO run (``train_ppo.py``'s folder) on fresh episodes: one episode per world.
+
+The success rates ``train_ppo.py`` prints per rollout are those of the episodes that *ended* in the
+rollout under the stochastic training policy; successful episodes end early, so they are
+over-represented there. This script gives the policy's success rate as a user sees it: N worlds
+each run one episode from its reset to its end (success or the time limit), actions from the
+policy's mean (``--stochastic`` samples them instead), observation normalisation frozen. Env
+options are the run's (``run.json``) unless given (``--object``, ``--youngs-modulus``: a policy
+evaluated on another object or stiffness than it was trained on). Seeds start at ``--seed`` (default
+10**9: none of the training episodes' seeds, which count from the run's seed by env steps).
+
+Per episode it records success, the step of success, and how far the policy got, so a failure is
+named: ``never grasped``, ``grasped, never at the goal`` (grasped but never within the success
+tolerance of the goal), ``at the goal, not held`` (within it while grasped, not for the hold time).
+
+    python benchmarks/eval_ppo.py datasets/output/ppo_place --worlds 32 --device cpu
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import numpy as np  # noqa: E402
+
+from train_ppo import make_vec_env  # noqa: E402
+
+#: ``run.json`` keys that are env options (passed to ``gym.make_vec``).
+ENV_OPTIONS = ("object", "youngs_modulus", "episode_seconds")
+OUTCOMES = ("success", "at the goal, not held", "grasped, never at the goal", "never grasped")
+
+
+def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str = "cpu",
+             torch_device: str = "cpu", deterministic: bool = True, **env_overrides) -> dict:
+    """Run ``num_worlds`` episodes (one per world) of the run's policy; returns the settings, the
+    per-episode records (``success``, ``steps``, ``success_step``, ``outcome``, ``min_goal_distance``
+    while grasped (m), ``return``) and their summary (``success_rate``, outcome counts)."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from defgrasp_env import PickupConfig
+
+    run = pathlib.Path(run)
+    settings = json.loads((run / "run.json").read_text())
+    unknown = sorted(set(env_overrides) - set(ENV_OPTIONS))
+    if unknown:
+        raise ValueError(f"env overrides must be among {ENV_OPTIONS}, got {unknown}")
+    given = {k: settings[k] for k in ENV_OPTIONS if k in settings}  # a run.json lacks options left at their default
+    given |= {k: v for k, v in env_overrides.items() if v is not None}
+    config = PickupConfig(**given)
+    env_options = {k: getattr(config, k) for k in ENV_OPTIONS}
+    venv = make_vec_env(num_worlds, seed, actions=settings["actions"], gamma=settings["gamma"], device=device,
+                        **env_options)
+    venv = VecNormalize.load(str(run / "vecnormalize.pkl"), venv.venv)
+    venv.training, venv.norm_reward = False, False
+    model = PPO.load(run / "ppo.zip", device=torch_device)
+    tolerance = config.success_tolerance  # m
+    obs = venv.reset()
+    closest = np.full(num_worlds, np.inf)  # m, the feature point's least goal distance while grasped
+    grasped_ever = np.zeros(num_worlds, bool)
+    records: list[dict | None] = [None] * num_worlds
+    t0 = time.perf_counter()
+    while any(r is None for r in records):
+        actions, _ = model.predict(obs, deterministic=deterministic)
+        obs, _, dones, infos = venv.step(actions)
+        for i, (done, info) in enumerate(zip(dones, infos)):
+            if records[i] is not None:
+                continue
+            grasped = bool(info.get("grasped", False))
+            grasped_ever[i] |= grasped
+            if grasped:
+                closest[i] = min(closest[i], float(info["goal_distance"]))
+            if done:
+                success = bool(info.get("is_success", False))
+                steps = int(info["episode"]["l"])
+                outcome = ("success" if success else "at the goal, not held" if closest[i] < tolerance
+                           else "grasped, never at the goal" if grasped_ever[i] else "never grasped")
+                records[i] = {"seed": seed + i, "success": success, "steps": steps,
+                              "success_step": steps if success else None, "outcome": outcome,
+                              "min_goal_distance": None if not np.isfinite(closest[i]) else round(closest[i], 4),
+                              "return": float(info["episode"]["r"])}
+    wall = time.perf_counter() - t0
+    venv.close()
+    counts = {o: sum(r["outcome"] == o for r in records) for o in OUTCOMES}
+    success_steps = [r["success_step"] for r in records if r["success"]]
+    return {"run": str(run), "worlds": num_worlds, "seed": seed, "device": device, "deterministic": deterministic,
+            "env": env_options, "success_rate": counts["success"] / num_worlds, "outcomes": counts,
+            "success_step_median": float(np.median(success_steps)) if success_steps else None,
+            "wall_s": round(wall, 1), "episodes": records}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("run", help="a train_ppo.py output folder (ppo.zip, vecnormalize.pkl, run.json)")
+    ap.add_argument("--worlds", type=int, default=32, help="episodes, one per world")
+    ap.add_argument("--seed", type=int, default=10**9)
+    ap.add_argument("--device", default="cpu", help="simulation device (cpu, cuda:0)")
+    ap.add_argument("--torch-device", default="cpu")
+    ap.add_argument("--stochastic", action="store_true", help="sample actions instead of the policy's mean")
+    ap.add_argument("--object", default=None, help="evaluate on another object than the run's")
+    ap.add_argument("--youngs-modulus", type=float, default=None, help="evaluate at another E (Pa) than the run's")
+    ap.add_argument("--json", default=None, help="write the result (every episode) to this file")
+    args = ap.parse_args(argv)
+    result = evaluate(pathlib.Path(args.run), args.worlds, args.seed, args.device, args.torch_device,
+                      deterministic=not args.stochastic, object=args.object, youngs_modulus=args.youngs_modulus)
+    env = result["env"]
+    print(f"{args.run}: {env['object']}, E = {env['youngs_modulus']:g} Pa, {args.worlds} episodes "
+          f"(seeds {args.seed}..{args.seed + args.worlds - 1}), {'stochastic' if args.stochastic else 'deterministic'} "
+          f"policy, {args.device}, {result['wall_s']} s")
+    print(f"success {result['outcomes']['success']}/{args.worlds} = {result['success_rate']:.3f}; "
+          f"median step of success {result['success_step_median']}")
+    for outcome, n in result["outcomes"].items():
+        print(f"  {outcome}: {n}")
+    if args.json:
+        pathlib.Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
