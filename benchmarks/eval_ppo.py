@@ -29,6 +29,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import numpy as np  # noqa: E402
 
+from defgrasp_env.layout import AGENT_POS, ENV_STATE  # noqa: E402
 from train_ppo import make_vec_env  # noqa: E402
 
 #: ``run.json`` keys that are env options (passed to ``gym.make_vec``).
@@ -40,7 +41,10 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
              torch_device: str = "cpu", deterministic: bool = True, **env_overrides) -> dict:
     """Run ``num_worlds`` episodes (one per world) of the run's policy; returns the settings, the
     per-episode records (``success``, ``steps``, ``success_step``, ``outcome``, ``min_goal_distance``
-    while grasped (m), ``return``) and their summary (``success_rate``, outcome counts)."""
+    while grasped (m), ``grasped_steps``, ``max_lift`` of the feature point above its start (m),
+    ``final_flange_height`` (m, world y), ``max_wrist_force`` (N), ``least_grasped_gap`` and
+    ``final_gap`` of the jaw (m), ``pierced_steps``, ``return``) and their summary
+    (``success_rate``, outcome counts)."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -64,18 +68,36 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     obs = venv.reset()
     closest = np.full(num_worlds, np.inf)  # m, the feature point's least goal distance while grasped
     grasped_ever = np.zeros(num_worlds, bool)
+    grasped_steps = np.zeros(num_worlds, int)
+    start_height = ENV_STATE.get(venv.get_original_obs()["environment_state"], "feature_position")[:, 1].copy()
+    lift = np.zeros(num_worlds)  # m, the feature point's greatest rise above its start
+    wrist_force = np.zeros(num_worlds)  # N, the greatest wrist force
+    least_gap = np.full(num_worlds, np.inf)  # m, the jaw's least gap while grasped
+    pierced_steps = np.zeros(num_worlds, int)  # steps whose info["pierced"] was set
     records: list[dict | None] = [None] * num_worlds
     t0 = time.perf_counter()
     while any(r is None for r in records):
-        actions, _ = model.predict(obs, deterministic=deterministic)
+        # one world at a time: a batched forward pass rounds differently with the batch size
+        # (~1e-7), which the contact dynamics amplify into another episode; so a seed's episode
+        # does not depend on --worlds
+        actions = np.concatenate([model.predict({k: v[i:i + 1] for k, v in obs.items()},
+                                                deterministic=deterministic)[0] for i in range(num_worlds)])
         obs, _, dones, infos = venv.step(actions)
+        raw = venv.get_original_obs()
         for i, (done, info) in enumerate(zip(dones, infos)):
             if records[i] is not None:
                 continue
             grasped = bool(info.get("grasped", False))
             grasped_ever[i] |= grasped
+            grasped_steps[i] += grasped
+            pierced_steps[i] += bool(info.get("pierced", False))
             if grasped:
                 closest[i] = min(closest[i], float(info["goal_distance"]))
+                least_gap[i] = min(least_gap[i], float(info["jaw_gap"]))
+            last = venv.unnormalize_obs(info["terminal_observation"]) if done else {k: v[i] for k, v in raw.items()}
+            flange = AGENT_POS.get(last["agent_pos"], "wrist_position")
+            lift[i] = max(lift[i], float(ENV_STATE.get(last["environment_state"], "feature_position")[1]) - start_height[i])
+            wrist_force[i] = max(wrist_force[i], float(info["wrist_force"]))
             if done:
                 success = bool(info.get("is_success", False))
                 steps = int(info["episode"]["l"])
@@ -84,6 +106,12 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
                 records[i] = {"seed": seed + i, "success": success, "steps": steps,
                               "success_step": steps if success else None, "outcome": outcome,
                               "min_goal_distance": None if not np.isfinite(closest[i]) else round(closest[i], 4),
+                              "grasped_steps": int(grasped_steps[i]), "max_lift": round(lift[i], 4),
+                              "final_flange_height": round(float(flange[1]), 4),
+                              "max_wrist_force": round(wrist_force[i], 2),
+                              "least_grasped_gap": None if not np.isfinite(least_gap[i]) else round(least_gap[i], 4),
+                              "final_gap": round(float(info["jaw_gap"]), 4),
+                              "pierced_steps": int(pierced_steps[i]),
                               "return": float(info["episode"]["r"])}
     wall = time.perf_counter() - t0
     venv.close()

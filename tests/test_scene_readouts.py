@@ -98,3 +98,51 @@ def test_assembled_model_equals_build_model_bit_for_bit():
             assert x.dtype == y.dtype and np.array_equal(x, y), name
         else:
             assert x == y, name
+
+
+def _numpy_pad_embedding(scene, pad_pos, pad_quat):
+    """Deepest tet centroid inside a pad box per world (m, 0 where none), in numpy: the pad poses
+    [W*P, 3] / [W*P, 4] (xyzw) as given to the state, the box test written out per axis."""
+    from defgrasp_env.transforms import quat_to_matrix
+
+    x = scene.state.positions.numpy().astype(np.float64)
+    tets, tet_world = scene.model.tets.numpy(), scene.model.tet_world.numpy()
+    half = scene.model.pad_half_extents.numpy().astype(np.float64)
+    pads = scene.model.pads_per_world
+    centroid = x[tets].mean(axis=1)
+    out = np.zeros(scene.num_worlds)
+    for pad in range(len(pad_pos)):
+        mine = tet_world == pad // pads
+        local = (centroid[mine] - pad_pos[pad]) @ quat_to_matrix(pad_quat[pad])  # R^T (c - p), row-wise
+        depth = np.min(half[pad] - np.abs(local), axis=1)
+        if depth.size and depth.max() > 0:
+            out[pad // pads] = max(out[pad // pads], depth.max())
+    return out
+
+
+def test_pad_embedding_reads_material_inside_a_pad_and_nothing_outside():
+    """The readout's pad embedding against the numpy computation of the same definition: zero for
+    the expert-free reset scene (pads above the objects), the analytic depth where a pad box is
+    placed around an object's interior (tilted, in one world of three), and zero again in the
+    other worlds; the env's ``pierced`` flag follows it beyond PIERCE_DEPTH."""
+    from defgrasp_env.envs.task import PIERCE_DEPTH
+
+    venv = gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point",
+                        object=("cuboid", "sphere"), youngs_modulus=1e6)  # solid: material at the centre
+    venv.reset(seed=1)
+    scene = venv.unwrapped.scene
+    assert np.all(scene.readout().pad_embedding == 0.0)
+    pos = scene.state.pad_positions.numpy().astype(np.float64)
+    quat = scene.state.pad_orientations.numpy().astype(np.float64)
+    feature = scene.readout().feature_position
+    pos[2] = feature[1]  # world 1's first pad around its object's centre, turned 30 degrees about y
+    quat[2] = [0.0, np.sin(np.pi / 12), 0.0, np.cos(np.pi / 12)]
+    scene.state.pad_positions.assign(pos.astype(np.float32))
+    scene.state.pad_orientations.assign(quat.astype(np.float32))
+    scene._readout = None  # the readout caches per state: the poses changed under it
+    got = scene.readout().pad_embedding
+    want = _numpy_pad_embedding(scene, pos.astype(np.float32).astype(np.float64), quat.astype(np.float32))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)  # float32 kernel vs float64: ~1e-8 m apart
+    assert got[0] == got[2] == 0.0
+    half = scene.model.pad_half_extents.numpy()[2]
+    assert PIERCE_DEPTH < got[1] <= half.min()  # the pad's 16 mm thickness full of material

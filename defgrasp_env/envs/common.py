@@ -72,6 +72,7 @@ def step_infos(scene: PickupScene, result: dict, stats, diverged: np.ndarray) ->
         cg_iterations=stats.cg_iterations.copy(),
         residual_force=stats.residual_force.astype(np.float64),
         penetration=stats.penetration.astype(np.float64),
+        pad_embedding=result["pad_embedding"].copy(),
         wrist_force=scene.gripper.wrist_force.copy(),
         sim_converged=stats.converged.copy(),
         sim_penetrated=stats.penetrated.copy(),

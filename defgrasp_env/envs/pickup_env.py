@@ -98,14 +98,17 @@ class DeformablePickupEnv(gym.Env):
     ``envs.task.REACH_SCALE``, ``LIFT_SCALE``, ``PLACE_SCALE``).
 
     **Episode end**: terminated on success = feature point within ``success_tolerance`` (0.05 m) of
-    the goal, grasped and not pierced (penetration < 5 mm), for ``success_hold_seconds`` (0.5 s);
+    the goal, grasped and not pierced (no node 5 mm deep in a pad or the ground, no tet centroid 5 mm
+    deep in a pad), for ``success_hold_seconds`` (0.5 s);
     truncated after ``episode_seconds`` (15 s, via ``max_episode_steps``) or when the simulation
     diverges (``info["sim_diverged"]``: the state is then kept at its last finite value).
 
     **Info**: ``is_success``, ``grasped``, ``pierced``, ``goal_distance`` (m), reward terms, tip
     forces (N), ``wrist_force`` (N, net force of the pads on the object), jaw gap (m), mean von
     Mises stress (Pa), solver iterations (of the accepted solves, summed over substeps; a force-limit
-    retry is not counted)/residual/penetration (m), ``sim_diverged``,
+    retry is not counted)/residual/penetration (m), ``pad_embedding`` (m: how deep the object's
+    material lies inside a pad, its deepest tet centroid; node contact keeps nodes out of the pads,
+    not the material between them), ``sim_diverged``,
     ``sim_converged`` (Newton met its tolerance in every substep), ``sim_penetrated`` (a node ended
     deeper than ``solver.penetration_bound``, 1 mm, in a pad or the ground); ``reset`` returns
     ``is_success``, ``object``, ``youngs_modulus`` (Pa) and ``replay_spec`` (a ``ReplaySpec``: seed

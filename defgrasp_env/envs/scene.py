@@ -323,7 +323,7 @@ class PickupScene:
         return self.state.positions.numpy()[self.model.world_nodes(w)].copy()
 
     def readout(self) -> StepReadout:
-        """Feature point and velocity, keypoints and finiteness of every world at the current state
+        """Feature point and velocity, keypoints, finiteness and pad embedding of every world at the current state
         (``readouts.StepReadout``): reduced on the simulation's device, once per state (cached until
         the next ``step`` or reset), so observations, reward and the divergence check share it."""
         if self._readout is None:
@@ -342,3 +342,8 @@ class PickupScene:
     def finite(self) -> np.ndarray:
         """[W] bool: the world's node positions and velocities are all finite."""
         return self.readout().finite
+
+    def pad_embedding(self) -> np.ndarray:
+        """[W] m: how deep the object's material lies inside a pad (its deepest tet centroid inside
+        a pad box; ``StepReadout.pad_embedding``), 0 where none is."""
+        return self.readout().pad_embedding

@@ -1,6 +1,7 @@
 """Warp kernels of the pickup scene outside the FEM solver, on the simulation's device: the
 state remap of a rebuild (worlds whose object changed at a reset), the per-world readouts of a
-step (feature point, keypoints, finiteness), which reduce the full state to small [W, ...] arrays,
+step (feature point, keypoints, finiteness, object material inside a pad), which reduce the full
+state to small [W, ...] arrays,
 the pad loads of a solve and the readouts packed for one download, the pad targets for one upload.
 Kernels take arrays and scalars only; the launchers are in ``scene.py`` / ``readouts.py``."""
 
@@ -9,6 +10,8 @@ from __future__ import annotations
 from typing import Any
 
 import warp as wp
+
+from ..sim.kernels.contact import box_penetration
 
 
 @wp.kernel
@@ -105,12 +108,34 @@ def unpack_pad_targets(targets: wp.array(dtype=wp.transform), positions: wp.arra
 
 
 @wp.kernel
+def deepest_material_in_pads(x: wp.array(dtype=wp.vec3), tets: wp.array(dtype=wp.vec4i),
+                             tet_world: wp.array(dtype=wp.int32), pad_positions: wp.array(dtype=wp.vec3),
+                             pad_orientations: wp.array(dtype=wp.quat), pad_half: wp.array(dtype=wp.vec3),
+                             pads_per_world: int, depth: wp.array(dtype=wp.float32)):
+    """One thread per (tet, pad of its world): ``depth[w]`` = max(itself, how deep (m) the tet's
+    centroid lies inside the pad box, from its nearest face). Node contact keeps the object's nodes
+    out of the pads, not its interior: a pad that sinks in between surface nodes (a box edge or
+    corner pressed into a coarse face, or a pad pushed through the object) holds material, and its
+    centroids, inside it. ``depth`` must be cleared (zeros) before the launch."""
+    tid = wp.tid()
+    t = tid // pads_per_world
+    w = tet_world[t]
+    pad = w * pads_per_world + tid % pads_per_world
+    n = tets[t]
+    c = 0.25 * (x[n[0]] + x[n[1]] + x[n[2]] + x[n[3]])
+    local = wp.quat_rotate_inv(pad_orientations[pad], c - pad_positions[pad])
+    d, normal = box_penetration(local, pad_half[pad])
+    if d > 0.0:
+        wp.atomic_max(depth, w, d)
+
+
+@wp.kernel
 def pack_readouts(feature_position: wp.array(dtype=wp.vec3d), feature_velocity: wp.array(dtype=wp.vec3d),
-                  keypoints: wp.array(dtype=wp.vec3), finite: wp.array(dtype=wp.int32), per_world: int,
-                  out: wp.array2d(dtype=wp.float64)):
-    """Row w of ``out`` [W, 7 + 3 per_world] (float64): world w's feature point, its velocity, its
-    ``per_world`` keypoints (float32 widened exactly) and its finiteness flag (0 or 1): the readouts
-    of a state packed for one download."""
+                  keypoints: wp.array(dtype=wp.vec3), finite: wp.array(dtype=wp.int32),
+                  pad_embedding: wp.array(dtype=wp.float32), per_world: int, out: wp.array2d(dtype=wp.float64)):
+    """Row w of ``out`` [W, 8 + 3 per_world] (float64): world w's feature point, its velocity, its
+    ``per_world`` keypoints (float32 widened exactly), its finiteness flag (0 or 1) and its pad
+    embedding (m): the readouts of a state packed for one download."""
     w = wp.tid()
     fp = feature_position[w]
     fv = feature_velocity[w]
@@ -122,3 +147,4 @@ def pack_readouts(feature_position: wp.array(dtype=wp.vec3d), feature_velocity: 
         for i in range(3):
             out[w, 6 + 3 * k + i] = wp.float64(p[i])
     out[w, 6 + 3 * per_world] = wp.float64(finite[w])
+    out[w, 7 + 3 * per_world] = wp.float64(pad_embedding[w])

@@ -12,7 +12,9 @@ from .scene import PickupScene
 REWARD_TERMS = ("reach", "grasp", "lift", "place", "success")
 #: Both tip normal forces above this (N) count as a grasp.
 GRASP_FORCE = 0.5
-#: Deepest pad/ground penetration (m) beyond which the object counts as pierced.
+#: Deepest penetration (m) beyond which the object counts as pierced: of a node in a pad or the
+#: ground, or of the object's material in a pad (``PickupScene.pad_embedding``: a pad sunk in
+#: between surface nodes or pushed into the object).
 PIERCE_DEPTH = 0.005
 #: Distance scales (1/m) of the shaped reach and lift terms, ``1 - tanh(scale * distance)``: each
 #: term must still rise over the whole distance a learner covers, the reach from the start pose
@@ -91,7 +93,8 @@ class PickupTask:
         reach_dist = np.linalg.norm(tcp - feat, axis=1)
         goal_dist = np.linalg.norm(feat - self.goal, axis=1)
         grasped = np.all(scene.gripper.tip_force > GRASP_FORCE, axis=1)
-        pierced = stats.penetration > PIERCE_DEPTH
+        embedding = scene.pad_embedding()
+        pierced = (stats.penetration > PIERCE_DEPTH) | (embedding > PIERCE_DEPTH)
         at_goal = (goal_dist < self.config.success_tolerance) & grasped & ~pierced & valid
         self.held = np.where(at_goal, self.held + 1, 0)
         self.elapsed += 1
@@ -109,4 +112,4 @@ class PickupTask:
             terms[name] = np.where(valid, terms[name], 0.0)
             reward = reward + terms[name]
         return {"reward": reward, "terms": terms, "is_success": success, "grasped": grasped,
-                "pierced": pierced, "goal_distance": goal_dist}
+                "pierced": pierced, "goal_distance": goal_dist, "pad_embedding": embedding}
