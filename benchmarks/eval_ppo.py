@@ -6,7 +6,8 @@ over-represented there. This script gives the policy's success rate as a user se
 each run one episode from its reset to its end (success or the time limit), actions from the
 policy's mean (``--stochastic`` samples them instead), observation normalisation frozen. Env
 options are the run's (``run.json``) unless given (``--object``, ``--youngs-modulus``: a policy
-evaluated on another object or stiffness than it was trained on). Seeds start at ``--seed`` (default
+evaluated on another object or stiffness than it was trained on; ``--edge-contact``: with the pads'
+box edges held out of the object, ``PickupConfig.edge_contact``). Seeds start at ``--seed`` (default
 10**9: none of the training episodes' seeds, which count from the run's seed by env steps).
 
 Per episode it records success, the step of success, and how far the policy got, so a failure is
@@ -33,7 +34,7 @@ from defgrasp_env.layout import AGENT_POS, ENV_STATE  # noqa: E402
 from train_ppo import make_vec_env  # noqa: E402
 
 #: ``run.json`` keys that are env options (passed to ``gym.make_vec``).
-ENV_OPTIONS = ("object", "youngs_modulus", "episode_seconds")
+ENV_OPTIONS = ("object", "youngs_modulus", "episode_seconds", "edge_contact")
 OUTCOMES = ("success", "at the goal, not held", "grasped, never at the goal", "never grasped")
 
 
@@ -133,10 +134,13 @@ def main(argv=None) -> int:
     ap.add_argument("--stochastic", action="store_true", help="sample actions instead of the policy's mean")
     ap.add_argument("--object", default=None, help="evaluate on another object than the run's")
     ap.add_argument("--youngs-modulus", type=float, default=None, help="evaluate at another E (Pa) than the run's")
+    ap.add_argument("--edge-contact", action="store_true",
+                    help="evaluate with the pads' box edges held out of the object (PickupConfig.edge_contact)")
     ap.add_argument("--json", default=None, help="write the result (every episode) to this file")
     args = ap.parse_args(argv)
     result = evaluate(pathlib.Path(args.run), args.worlds, args.seed, args.device, args.torch_device,
-                      deterministic=not args.stochastic, object=args.object, youngs_modulus=args.youngs_modulus)
+                      deterministic=not args.stochastic, object=args.object, youngs_modulus=args.youngs_modulus,
+                      edge_contact=args.edge_contact or None)
     env = result["env"]
     print(f"{args.run}: {env['object']}, E = {env['youngs_modulus']:g} Pa, {args.worlds} episodes "
           f"(seeds {args.seed}..{args.seed + args.worlds - 1}), {'stochastic' if args.stochastic else 'deterministic'} "

@@ -211,6 +211,7 @@ def test_absolute_action_mode_moves_toward_target():
     ({"control_hz": 0.5}, "control_hz must be in [1, 200] Hz"),
     ({"ground_friction": -1.0}, "ground_friction must be in [0, inf)"),
     ({"colour": "red"}, "unknown option(s) ['colour']"),
+    ({"edge_contact": "yes"}, "edge_contact must be a bool, got 'yes'"),
 ])
 def test_bad_options_rejected(kwargs, message):
     with pytest.raises((ValueError, TypeError)) as err:
@@ -261,3 +262,16 @@ def test_torch_outputs_and_zero_copy_full_state():
     assert not torch.equal(before, full["positions"])
     np.testing.assert_array_equal(full["positions"].numpy(), scene.state.positions.numpy())
     assert full["von_mises"].shape == (scene.model.num_tets,)
+
+
+def test_edge_contact_option_reaches_the_simulation():
+    """``edge_contact=True`` builds the scene's model with pad edge contact (its surface edges
+    allocated in the solver), the default without; both step."""
+    for flag in (False, True):
+        env = gym.make(ENV_ID, edge_contact=flag)
+        env.reset(seed=0)
+        scene = env.unwrapped.scene
+        assert scene.model.contact.edge_contact is flag
+        assert (scene.solver.scratch.edge_nodes.shape[0] > 0) is flag
+        env.step(env.action_space.sample() * 0)
+        env.close()

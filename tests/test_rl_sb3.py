@@ -242,6 +242,6 @@ def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
     assert sum(first["outcomes"].values()) == 3
     assert evaluate(tmp_path, 3, seed=11)["episodes"] == first["episodes"]
     softer = evaluate(tmp_path, 1, seed=11, youngs_modulus=1e4)  # an option the run left at its default
-    assert softer["env"] == {"object": "cuboid", "youngs_modulus": 1e4, "episode_seconds": 0.3}
+    assert softer["env"] == {"object": "cuboid", "youngs_modulus": 1e4, "episode_seconds": 0.3, "edge_contact": False}
     with pytest.raises(ValueError, match="gamma"):
         evaluate(tmp_path, 1, gamma=0.5)

@@ -79,6 +79,9 @@ class PickupConfig:
     ground_friction: float = 0.5
     pad_friction: float = 1.0
     contact_stiffness: float = 1e6
+    #: ``ContactParams.edge_contact``: also hold the pads' box edges out of the object between its
+    #: surface nodes (off by default, as there; see its docstring)
+    edge_contact: bool = False
     init_position_noise: float = 0.02
     init_yaw_noise: float = math.pi
     control_hz: float = 20.0
@@ -109,7 +112,7 @@ class PickupConfig:
             for nu in self.poisson_ratios:
                 for rho in self.densities:
                     Material(rho, e, nu)  # validates all three
-        ContactParams(self.contact_stiffness, self.ground_friction, self.pad_friction)
+        ContactParams(self.contact_stiffness, self.ground_friction, self.pad_friction, edge_contact=self.edge_contact)
         check_range("init_position_noise", self.init_position_noise, 0.0, 0.1, "m", low_open=False, high_open=False)
         check_range("init_yaw_noise", self.init_yaw_noise, 0.0, math.pi, "rad", low_open=False, high_open=False)
         check_range("control_hz", self.control_hz, 1.0, 200.0, "Hz", low_open=False, high_open=False)

@@ -124,7 +124,8 @@ class PickupScene:
         config = self.config
         self._object_names = tuple(s.object_name for s in setups)
         self._meshes = [object_mesh(s.object_name, config.object_resolution) for s in setups]
-        contact = ContactParams(config.contact_stiffness, config.ground_friction, config.pad_friction)
+        contact = ContactParams(config.contact_stiffness, config.ground_friction, config.pad_friction,
+                                edge_contact=config.edge_contact)
         half = Gripper.pad_half_extents
         self.model = assemble_model(self._meshes, [s.material for s in setups],
                                     [(s.position, s.quat) for s in setups], [half, half], contact, config.device)
