@@ -12,7 +12,9 @@ box edges held out of the object, ``PickupConfig.edge_contact``). Seeds start at
 
 Per episode it records success, the step of success, and how far the policy got, so a failure is
 named: ``never grasped``, ``grasped, never at the goal`` (grasped but never within the success
-tolerance of the goal), ``at the goal, not held`` (within it while grasped, not for the hold time).
+tolerance of the goal, pierced steps not counted), ``at the goal, not held`` (within it while
+grasped, not for the hold time). Heights of an episode's last step come from the terminal
+observation VecNormalize returns, unnormalised (exact unless a value was clipped at 10 std).
 
     python benchmarks/eval_ppo.py datasets/output/ppo_place --worlds 32 --device cpu
 """
@@ -92,7 +94,7 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
             grasped_ever[i] |= grasped
             grasped_steps[i] += grasped
             pierced_steps[i] += bool(info.get("pierced", False))
-            if grasped:
+            if grasped and not info.get("pierced", False):  # a pierced hold is not "at the goal"
                 closest[i] = min(closest[i], float(info["goal_distance"]))
                 least_gap[i] = min(least_gap[i], float(info["jaw_gap"]))
             last = venv.unnormalize_obs(info["terminal_observation"]) if done else {k: v[i] for k, v in raw.items()}
@@ -134,15 +136,18 @@ def main(argv=None) -> int:
     ap.add_argument("--stochastic", action="store_true", help="sample actions instead of the policy's mean")
     ap.add_argument("--object", default=None, help="evaluate on another object than the run's")
     ap.add_argument("--youngs-modulus", type=float, default=None, help="evaluate at another E (Pa) than the run's")
-    ap.add_argument("--edge-contact", action="store_true",
-                    help="evaluate with the pads' box edges held out of the object (PickupConfig.edge_contact)")
+    ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=None,
+                    help="evaluate with (or --no-edge-contact without) the pads' box edges held out of the "
+                         "object (PickupConfig.edge_contact; default: the run's)")
     ap.add_argument("--json", default=None, help="write the result (every episode) to this file")
     args = ap.parse_args(argv)
     result = evaluate(pathlib.Path(args.run), args.worlds, args.seed, args.device, args.torch_device,
                       deterministic=not args.stochastic, object=args.object, youngs_modulus=args.youngs_modulus,
-                      edge_contact=args.edge_contact or None)
+                      edge_contact=args.edge_contact)
     env = result["env"]
-    print(f"{args.run}: {env['object']}, E = {env['youngs_modulus']:g} Pa, {args.worlds} episodes "
+    moduli = env["youngs_modulus"]
+    moduli = f"{moduli:g}" if isinstance(moduli, (int, float)) else ", ".join(f"{m:g}" for m in moduli)
+    print(f"{args.run}: {env['object']}, E = {moduli} Pa, {args.worlds} episodes "
           f"(seeds {args.seed}..{args.seed + args.worlds - 1}), {'stochastic' if args.stochastic else 'deterministic'} "
           f"policy, {args.device}, {result['wall_s']} s")
     print(f"success {result['outcomes']['success']}/{args.worlds} = {result['success_rate']:.3f}; "

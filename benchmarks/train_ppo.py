@@ -125,7 +125,9 @@ class LearningCurve(BaseCallback):
         """Success of the episodes that began in the window of vector steps that ended a time limit
         ago (of the length of a rollout): all of them have ended, short successful ones and long
         failed ones alike, so their success rate is unbiased (the rate among episodes that merely
-        *ended* in a rollout over-represents early successes), for the policy of ~one episode ago."""
+        *ended* in a rollout over-represents early successes), for the policy of ~one episode ago.
+        Per session: a resumed run's env is reset, so its first rows have no cohort (nan) and the
+        episodes begun in a session's last time limit are not counted."""
         now = self._steps - self.episode_steps
         begin = now - self.model.n_steps
         cohort = [success for start, success in self._ended if begin <= start < now]

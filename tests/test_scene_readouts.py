@@ -132,8 +132,8 @@ def test_pad_embedding_reads_material_inside_a_pad_and_nothing_outside():
     venv.reset(seed=1)
     scene = venv.unwrapped.scene
     assert np.all(scene.readout().pad_embedding == 0.0)
-    pos = scene.state.pad_positions.numpy().astype(np.float64)
-    quat = scene.state.pad_orientations.numpy().astype(np.float64)
+    original_pos, original_quat = scene.state.pad_positions.numpy().copy(), scene.state.pad_orientations.numpy().copy()
+    pos, quat = original_pos.astype(np.float64), original_quat.astype(np.float64)
     feature = scene.readout().feature_position
     pos[2] = feature[1]  # world 1's first pad around its object's centre, turned 30 degrees about y
     quat[2] = [0.0, np.sin(np.pi / 12), 0.0, np.cos(np.pi / 12)]
@@ -146,3 +146,13 @@ def test_pad_embedding_reads_material_inside_a_pad_and_nothing_outside():
     assert got[0] == got[2] == 0.0
     half = scene.model.pad_half_extents.numpy()[2]
     assert PIERCE_DEPTH < got[1] <= half.min()  # the pad's 16 mm thickness full of material
+    from types import SimpleNamespace
+
+    no_node_deep = SimpleNamespace(penetration=np.zeros(3))  # the solver's node depths: none
+    pierced = venv.unwrapped.task.evaluate(scene, no_node_deep, np.ones(3, bool))["pierced"]
+    assert pierced.tolist() == [False, True, False]
+    scene.state.pad_positions.assign(original_pos)  # the pads back above the objects: zero again,
+    scene.state.pad_orientations.assign(original_quat)  # not the maximum of the last readout
+    scene._readout = None
+    assert np.all(scene.readout().pad_embedding == 0.0)
+    assert not venv.unwrapped.task.evaluate(scene, no_node_deep, np.ones(3, bool))["pierced"].any()
