@@ -1,8 +1,9 @@
 """Evaluate a saved PPO run (``train_ppo.py``'s folder) on fresh episodes: one episode per world.
 
-The success rates ``train_ppo.py`` prints per rollout are those of the episodes that *ended* in the
-rollout under the stochastic training policy; successful episodes end early, so they are
-over-represented there. This script gives the policy's success rate as a user sees it: N worlds
+The success rates ``train_ppo.py`` prints per rollout are those of the stochastic training policy,
+of the episodes that ended in the rollout (which swings when worlds begin their episodes together:
+successes end early, failures at the time limit) and of a cohort of earlier-begun episodes. This
+script gives the policy's success rate as a user sees it: N worlds
 each run one episode from its reset to its end (success or the time limit), actions from the
 policy's mean (``--stochastic`` samples them instead), observation normalisation frozen. Env
 options are the run's (``run.json``) unless given (``--object``, ``--youngs-modulus``: a policy
