@@ -11,7 +11,8 @@ evaluated on another object or stiffness than it was trained on; ``--edge-contac
 box edges held out of the object, ``PickupConfig.edge_contact``). Seeds start at ``--seed`` (default
 10**9: none of the training episodes' seeds, which count from the run's seed by env steps).
 
-Per episode it records success, the step of success, and how far the policy got, so a failure is
+A run trained on several objects with ``--fixed-world-objects`` is evaluated so (world i holds
+the i-th object) and reported per object too. Per episode it records the object, success, the step of success, and how far the policy got, so a failure is
 named: ``never grasped``, ``grasped, never at the goal`` (grasped but never within the success
 tolerance of the goal, pierced steps not counted), ``at the goal, not held`` (within it while
 grasped, not for the hold time). Heights of an episode's last step come from the terminal
@@ -63,13 +64,17 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     given |= {k: v for k, v in env_overrides.items() if v is not None}
     config = PickupConfig(**given)
     env_options = {k: getattr(config, k) for k in ENV_OPTIONS}
+    # a run trained with world i holding one object evaluates so too, unless the object is overridden
+    fixed = bool(settings.get("fixed_world_objects", False)) and env_overrides.get("object") is None
     venv = make_vec_env(num_worlds, seed, actions=settings["actions"], gamma=settings["gamma"], device=device,
-                        **env_options)
+                        fixed_world_objects=fixed, **env_options)
     venv = VecNormalize.load(str(run / "vecnormalize.pkl"), venv.venv)
+    venv.action_space = venv.venv.action_space  # pickled with the statistics: keep the env's
     venv.training, venv.norm_reward = False, False
     model = PPO.load(run / "ppo.zip", device=torch_device)
     tolerance = config.success_tolerance  # m
     obs = venv.reset()
+    objects = venv.unwrapped.env.unwrapped.scene.object_names  # each world's object in its episode
     closest = np.full(num_worlds, np.inf)  # m, the feature point's least goal distance while grasped
     grasped_ever = np.zeros(num_worlds, bool)
     grasped_steps = np.zeros(num_worlds, int)
@@ -107,7 +112,7 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
                 steps = int(info["episode"]["l"])
                 outcome = ("success" if success else "at the goal, not held" if closest[i] < tolerance
                            else "grasped, never at the goal" if grasped_ever[i] else "never grasped")
-                records[i] = {"seed": seed + i, "success": success, "steps": steps,
+                records[i] = {"seed": seed + i, "object": objects[i], "success": success, "steps": steps,
                               "success_step": steps if success else None, "outcome": outcome,
                               "min_goal_distance": None if not np.isfinite(closest[i]) else round(closest[i], 4),
                               "grasped_steps": int(grasped_steps[i]), "max_lift": round(lift[i], 4),
@@ -121,8 +126,11 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     venv.close()
     counts = {o: sum(r["outcome"] == o for r in records) for o in OUTCOMES}
     success_steps = [r["success_step"] for r in records if r["success"]]
+    by_object = {name: {o: sum(r["outcome"] == o for r in records if r["object"] == name) for o in OUTCOMES}
+                 for name in dict.fromkeys(objects)}
     return {"run": str(run), "worlds": num_worlds, "seed": seed, "device": device, "deterministic": deterministic,
-            "env": env_options, "success_rate": counts["success"] / num_worlds, "outcomes": counts,
+            "env": env_options, "fixed_world_objects": fixed, "success_rate": counts["success"] / num_worlds,
+            "outcomes": counts, "outcomes_by_object": by_object,
             "success_step_median": float(np.median(success_steps)) if success_steps else None,
             "wall_s": round(wall, 1), "episodes": records}
 
@@ -155,6 +163,11 @@ def main(argv=None) -> int:
           f"median step of success {result['success_step_median']}")
     for outcome, n in result["outcomes"].items():
         print(f"  {outcome}: {n}")
+    if len(result["outcomes_by_object"]) > 1:
+        for name, counts in result["outcomes_by_object"].items():
+            total = sum(counts.values())
+            print(f"  {name}: success {counts['success']}/{total}; " + ", ".join(
+                f"{o} {n}" for o, n in counts.items() if o != "success"))
     if args.json:
         pathlib.Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
     return 0

@@ -20,8 +20,12 @@ normalisation and curve continue; the env and PPO options, ``--seed`` included, 
 the env is seeded with ``--seed`` + the env steps so far, so the resumed run does not replay the
 earlier episodes). ``eval_ppo.py`` evaluates a saved run on fresh episodes (one per world).
 
-``--actions position-jaw`` (``defgrasp_env.rl.held_orientation``) lets the policy move the wrist
-and the jaw but not turn the wrist (4 actions instead of 7). The PPO settings default to those
+``--actions position-jaw`` (``defgrasp_env.rl.action_subset``) lets the policy move the wrist
+and the jaw but not turn the wrist (4 actions instead of 7); ``position-yaw-jaw`` also turns it
+about the vertical (5). ``--object cuboid,sphere,torus,cylinder,rope --fixed-world-objects`` trains
+on the five objects at once, each in a fifth of the worlds for every episode (no model rebuild at
+the autoresets, which a draw per episode would cost at nearly every step). ``--init-from`` may
+start from a run with another action set (its action head is mapped by component). The PPO settings default to those
 ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
 8 epochs of 32 minibatches per rollout, 3 x 256 networks, initial log std -0.5, target KL 0.1);
 fewer minibatches where a rollout is too small for 64 samples in each (small CPU runs).
@@ -146,36 +150,82 @@ class LearningCurve(BaseCallback):
                 "slowest_newton": float(np.median(slowest[:, 0])), "slowest_cg": float(np.median(slowest[:, 1]))}
 
 
-def _held_orientation(venv):
-    from defgrasp_env.rl.held_orientation import HeldOrientationActions
+def action_components(actions: str) -> tuple[str, ...]:
+    """The ``DELTA_ACTION`` components the policy of an ``--actions`` set controls, in its order."""
+    from defgrasp_env.layout import DELTA_ACTION
+    from defgrasp_env.rl.action_subset import POSITION_JAW, POSITION_YAW_JAW
 
-    return HeldOrientationActions(venv)
+    sets = {"full": DELTA_ACTION.names, "position-jaw": POSITION_JAW, "position-yaw-jaw": POSITION_YAW_JAW}
+    if actions not in sets:
+        raise ValueError(f"actions must be one of {sorted(sets)}, got {actions!r}")
+    return tuple(sets[actions])
 
 
-#: ``--actions``: what the policy controls (the wrapper applied to the SB3 view of the env).
-ACTION_SETS = {"full": lambda venv: venv, "position-jaw": _held_orientation}
+#: ``--actions``: what the policy controls (``action_components``; an ``ActionSubset`` unless "full").
+ACTION_SETS = ("full", "position-jaw", "position-yaw-jaw")
 
 
-def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float = 0.99, **env_kwargs):
-    """The SB3 view of the native vector env (``actions``: a key of ``ACTION_SETS``), with episode
-    statistics and running normalisation of observations and rewards (discount ``gamma``)."""
+def cycled_objects(num_envs: int, **env_kwargs) -> tuple[str, ...]:
+    """World i's object for ``--fixed-world-objects``: the config's objects in turn (i mod their count)."""
+    from defgrasp_env import PickupConfig
+
+    names = PickupConfig(**env_kwargs).object_names
+    return tuple(names[i % len(names)] for i in range(num_envs))
+
+
+def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float = 0.99,
+                 fixed_world_objects: bool = False, **env_kwargs):
+    """The SB3 view of the native vector env (``actions``: one of ``ACTION_SETS``), with episode
+    statistics and running normalisation of observations and rewards (discount ``gamma``).
+    ``fixed_world_objects``: world i holds ``cycled_objects(...)[i]`` in every episode (the vector
+    env's ``world_objects``: no model rebuild at autoresets), instead of a draw per episode."""
     import gymnasium as gym
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from defgrasp_env import PickupConfig
+    from defgrasp_env.rl.action_subset import ActionSubset
     from defgrasp_env.rl.sb3_vec_env import SB3VectorEnv
 
-    if actions not in ACTION_SETS:
-        raise ValueError(f"actions must be one of {sorted(ACTION_SETS)}, got {actions!r}")
-
+    components = action_components(actions)
     # gym.make_vec passes the registered 300-step limit on: derive it from the options instead
     steps = PickupConfig(**env_kwargs).max_episode_steps
+    world_objects = cycled_objects(num_envs, **env_kwargs) if fixed_world_objects else None
     env = gym.make_vec("DeformablePickup-v0", num_envs=num_envs, autoreset_mode="SameStep",
-                       max_episode_steps=steps, **env_kwargs)
+                       max_episode_steps=steps, world_objects=world_objects, **env_kwargs)
     venv = SB3VectorEnv(env)
     venv.seed(seed)
-    venv = ACTION_SETS[actions](venv)
+    if actions != "full":
+        venv = ActionSubset(venv, components)
     return VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), clip_obs=10.0, gamma=gamma)
+
+
+def transfer_policy(source_state: dict, source_actions: str, target_state: dict, target_actions: str,
+                    log_std_init: float) -> dict:
+    """``target_state`` (a fresh policy's ``state_dict``) with every weight of ``source_state`` (a
+    trained policy's) copied in: the shared layers as they are, and the action head's rows
+    (``action_net``, ``log_std``) by action component, so a policy trained with one ``--actions``
+    set starts another (e.g. ``position-jaw`` -> ``position-yaw-jaw``): a component the source did
+    not control starts with a zero mean (the env's still wrist) and ``log_std_init``; one the
+    target does not control is dropped."""
+    old, new = action_components(source_actions), action_components(target_actions)
+    out = {}
+    for key, value in target_state.items():
+        if key not in source_state:
+            raise ValueError(f"the trained policy has no {key!r}: other network architecture")
+        src = source_state[key]
+        if key in ("action_net.weight", "action_net.bias", "log_std"):
+            value = value.clone()
+            value.fill_(log_std_init if key == "log_std" else 0.0)
+            for row, name in enumerate(new):
+                if name in old:
+                    value[row] = src[old.index(name)]
+        elif src.shape != value.shape:
+            raise ValueError(f"the trained policy's {key!r} has shape {tuple(src.shape)}, this run's "
+                             f"{tuple(value.shape)}: other observations or network architecture")
+        else:
+            value = src.clone()
+        out[key] = value
+    return out
 
 
 #: ``curve.csv`` columns that are counts (an older run's rows lack the later ones: "nan").
@@ -218,7 +268,7 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
 def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
           torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
           gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, resume: pathlib.Path | None = None,
-          init_from: pathlib.Path | None = None, **env_kwargs):
+          init_from: pathlib.Path | None = None, fixed_world_objects: bool = False, **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
     ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples).
@@ -226,7 +276,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     normalisation statistics and curve go on, the env seeded with ``seed`` + the env steps so far.
     ``init_from``: a folder ``save_run`` wrote, whose policy weights and normalisation statistics
     start this new run (e.g. a GPU run's policy fine-tuned with fewer worlds or another reward); its
-    settings may differ; the curve starts afresh."""
+    settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
+    ``fixed_world_objects``: see ``make_vec_env``."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -236,13 +287,16 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                     n_epochs=n_epochs, seed=seed, **env_kwargs)
     if init_from is not None:
         settings["init_from"] = str(init_from)
+    if fixed_world_objects:  # only when set: the run.json of earlier runs lacks it
+        settings["fixed_world_objects"] = True
     tolerance = PickupConfig(**env_kwargs).success_tolerance
     episode_steps = PickupConfig(**env_kwargs).max_episode_steps
     if resume is not None:
         resume = pathlib.Path(resume)
         rows = check_resume(resume, settings)
         env_seed = seed + (rows[-1]["env_steps"] if rows else 0)
-        venv = make_vec_env(num_envs, env_seed, actions=actions, gamma=gamma, **env_kwargs)
+        venv = make_vec_env(num_envs, env_seed, actions=actions, gamma=gamma,
+                            fixed_world_objects=fixed_world_objects, **env_kwargs)
         venv = VecNormalize.load(str(resume / "vecnormalize.pkl"), venv.venv)
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
@@ -250,20 +304,25 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                               episode_steps=episode_steps)
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
-    venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, **env_kwargs)
+    venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, fixed_world_objects=fixed_world_objects,
+                        **env_kwargs)
     if init_from is not None:
         venv = VecNormalize.load(str(pathlib.Path(init_from) / "vecnormalize.pkl"), venv.venv)
         venv.gamma = gamma  # the loaded statistics go on; the return normalisation uses this run's discount
+        venv.action_space = venv.venv.action_space  # pickled with the statistics: that of the loaded run's actions
     rollout = n_steps * num_envs
     minibatches = max(1, min(minibatches, rollout // 64))
+    log_std_init = -0.5
     model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=rollout // minibatches,
                 n_epochs=n_epochs, learning_rate=3e-4, gamma=gamma, gae_lambda=gae_lambda, clip_range=0.2,
                 target_kl=0.1, max_grad_norm=0.5, vf_coef=0.5, ent_coef=0.0,
-                policy_kwargs=dict(net_arch=[256, 256, 256], log_std_init=-0.5), seed=seed,
+                policy_kwargs=dict(net_arch=[256, 256, 256], log_std_init=log_std_init), seed=seed,
                 device=torch_device, verbose=verbose)
     if init_from is not None:
         trained = PPO.load(pathlib.Path(init_from) / "ppo.zip", device=torch_device)
-        model.policy.load_state_dict(trained.policy.state_dict())
+        source_actions = json.loads((pathlib.Path(init_from) / "run.json").read_text())["actions"]
+        model.policy.load_state_dict(transfer_policy(trained.policy.state_dict(), source_actions,
+                                                     model.policy.state_dict(), actions, log_std_init))
     curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps)
     model.learn(timesteps, callback=curve)
     return model, curve
@@ -301,15 +360,26 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
     fig.savefig(out / "curve.png", dpi=110)
 
 
+def parse_object(text: str) -> str | tuple[str, ...]:
+    """``--object``: one name (or 'random'), or several separated by commas (a tuple)."""
+    names = tuple(n.strip() for n in text.split(","))
+    return names if len(names) > 1 else names[0]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--num-envs", type=int, default=16)
     ap.add_argument("--timesteps", type=int, default=100_000, help="env steps (all worlds together)")
     ap.add_argument("--n-steps", type=int, default=16, help="PPO rollout length per world")
-    ap.add_argument("--actions", choices=sorted(ACTION_SETS), default="full",
-                    help="what the policy controls: all 7 delta actions, or wrist position and jaw")
+    ap.add_argument("--actions", choices=ACTION_SETS, default="full",
+                    help="what the policy controls: all 7 delta actions, wrist position and jaw, or wrist "
+                         "position, its turn about the vertical and jaw")
     ap.add_argument("--gamma", type=float, default=0.8)
-    ap.add_argument("--object", default="cuboid")
+    ap.add_argument("--object", default="cuboid",
+                    help="an object name, 'random' (the five), or names separated by commas (drawn from)")
+    ap.add_argument("--fixed-world-objects", action="store_true",
+                    help="world i holds the i-th object (mod their count) in every episode: no model rebuild "
+                         "at autoresets (the vector env's world_objects)")
     ap.add_argument("--youngs-modulus", type=float, default=1e6)
     ap.add_argument("--episode-seconds", type=float, default=15.0)
     ap.add_argument("--device", default="cpu", help="simulation device (cpu, cuda:0)")
@@ -325,8 +395,8 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
                          max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma, resume=args.resume,
-                         init_from=args.init_from,
-                         object=args.object, youngs_modulus=args.youngs_modulus,
+                         init_from=args.init_from, fixed_world_objects=args.fixed_world_objects,
+                         object=parse_object(args.object), youngs_modulus=args.youngs_modulus,
                          episode_seconds=args.episode_seconds, device=args.device)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     out = pathlib.Path(args.out)

@@ -85,33 +85,63 @@ def test_split_info_handles_masks_objects_and_rows():
     venv.close()
 
 
-def test_held_orientation_actions_step_the_env_with_zero_rotation():
-    """4-D actions through ``HeldOrientationActions`` give the bits of the native env stepped with the
-    same linear velocity and jaw and zero angular velocity; the wrist's orientation never changes."""
-    from defgrasp_env.rl.held_orientation import HeldOrientationActions
+def _quat_rel(q, q0):
+    """xyzw quaternion q * conj(q0) (the rotation from q0 to q, world frame), rows [N, 4]."""
+    x1, y1, z1, w1 = np.moveaxis(q, -1, 0)
+    x2, y2, z2, w2 = np.moveaxis(q0 * np.array([-1, -1, -1, 1]), -1, 0)
+    return np.stack([w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2], -1)
 
-    venv = HeldOrientationActions(SB3VectorEnv(_vec(steps=10)))
+
+# the DELTA_ACTION [7] (vx vy vz wx wy wz jaw) a subset's action a gives, written out by hand
+@pytest.mark.parametrize("subset, full", [
+    ("POSITION_JAW", lambda a, z: np.concatenate([a[:, :3], z, z, z, a[:, 3:]], axis=1)),
+    ("POSITION_YAW_JAW", lambda a, z: np.concatenate([a[:, :3], z, a[:, 3:4], z, a[:, 4:]], axis=1)),
+])
+def test_action_subsets_step_the_env_as_the_full_action_with_the_other_components_zero(subset, full):
+    """Actions through ``ActionSubset`` give the bits of the native env stepped with the full
+    action written out by hand; without yaw the wrist's orientation never changes, with it the
+    wrist turns about the vertical only (it keeps pointing down)."""
+    from defgrasp_env.rl import action_subset
+
+    components = getattr(action_subset, subset)
+    venv = action_subset.ActionSubset(SB3VectorEnv(_vec(steps=10)), components)
     ref = _vec(steps=10)
-    assert venv.action_space.shape == (4,)
+    k = len(components)
+    assert venv.action_space.shape == (k,)
     venv.seed(2)
     obs = venv.reset()
     ref_obs, _ = ref.reset(seed=2)
     quat0 = AGENT_POS.get(obs["agent_pos"], "wrist_quat").copy()
     rng = np.random.default_rng(0)
+    zero = np.zeros((2, 1), np.float32)
     for _ in range(4):
-        a = rng.uniform(-1, 1, (2, 4)).astype(np.float32)
+        a = rng.uniform(-1, 1, (2, k)).astype(np.float32)
         venv.step_async(a)
         obs, reward, _, _ = venv.step_wait()
-        full = np.concatenate([a[:, :3], np.zeros((2, 3), np.float32), a[:, 3:]], axis=1)
-        ref_obs, ref_r, *_ = ref.step(full)
-        for k in ref_obs:
-            np.testing.assert_array_equal(obs[k], ref_obs[k])
+        ref_obs, ref_r, *_ = ref.step(full(a, zero))
+        for key in ref_obs:
+            np.testing.assert_array_equal(obs[key], ref_obs[key])
         np.testing.assert_array_equal(reward, ref_r.astype(np.float32))
-    np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_quat"), quat0, atol=1e-6)
+    turn = _quat_rel(AGENT_POS.get(obs["agent_pos"], "wrist_quat"), quat0)
+    np.testing.assert_allclose(turn[:, [0, 2]], 0.0, atol=1e-6)  # no tilt: about y at most
+    yaw = 2 * np.arctan2(np.abs(turn[:, 1]), np.abs(turn[:, 3]))
+    if "wy" in components:
+        assert np.all(yaw > 0.01)  # 4 random yaw rates of up to 1.5 rad/s x 0.05 s
+    else:
+        np.testing.assert_allclose(yaw, 0.0, atol=1e-6)
     assert not np.allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"),
                            AGENT_POS.get(ref.reset(seed=2)[0]["agent_pos"], "wrist_position"))  # it moved
-    with pytest.raises(ValueError, match=r"shape \(2, 4\)"):
+    with pytest.raises(ValueError, match=rf"shape \(2, {k}\)"):
         venv.step_async(np.zeros((2, 7), np.float32))
+
+
+@pytest.mark.parametrize("components", [("vx", "spin"), ("vx", "vx"), ()])
+def test_action_subset_rejects_bad_components(components):
+    from defgrasp_env.rl.action_subset import ActionSubset
+
+    with pytest.raises(ValueError, match="distinct names of"):
+        ActionSubset(SB3VectorEnv(_vec(steps=10)), components)
 
 
 def test_rejects_other_autoreset_modes():
@@ -245,3 +275,73 @@ def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
     assert softer["env"] == {"object": "cuboid", "youngs_modulus": 1e4, "episode_seconds": 0.3, "edge_contact": False}
     with pytest.raises(ValueError, match="gamma"):
         evaluate(tmp_path, 1, gamma=0.5)
+
+    # a run on several objects, one per world (started from the position-jaw run with the yaw added):
+    # evaluated with world i holding the i-th object, and reported per object
+    many = tmp_path / "many"
+    model, curve = train(num_envs=2, timesteps=16, n_steps=8, minibatches=2, episode_seconds=0.3,
+                         actions="position-yaw-jaw", object=("sphere", "rope"), fixed_world_objects=True,
+                         init_from=tmp_path)
+    assert model.action_space.shape == (5,) and curve.settings["fixed_world_objects"] is True
+    save_run(model, curve, many, "smoke")
+    both = evaluate(many, 3, seed=11)
+    assert both["fixed_world_objects"] and [e["object"] for e in both["episodes"]] == ["sphere", "rope", "sphere"]
+    assert {k: sum(v.values()) for k, v in both["outcomes_by_object"].items()} == {"sphere": 2, "rope": 1}
+    one = evaluate(many, 2, seed=11, object="rope")  # an object override: every world holds it
+    assert not one["fixed_world_objects"] and [e["object"] for e in one["episodes"]] == ["rope", "rope"]
+
+
+def test_transfer_policy_maps_the_action_head_by_component():
+    """A position-jaw policy started into a position-yaw-jaw one: the same mean actions for the
+    shared components on any observation, zero mean yaw (the wrist held still, as before) with the
+    initial log std, and the value function unchanged; full -> position-jaw drops the rotations."""
+    import sys
+
+    import torch
+    from stable_baselines3 import PPO
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import make_vec_env, transfer_policy
+
+    def model(actions, seed):
+        return PPO("MultiInputPolicy", make_vec_env(1, 0, actions=actions, episode_seconds=0.3), n_steps=8,
+                   batch_size=8, policy_kwargs=dict(net_arch=[32, 32], log_std_init=-0.5), seed=seed)
+
+    old, new, full = model("position-jaw", 1), model("position-yaw-jaw", 2), model("full", 3)
+    with torch.no_grad():
+        old.policy.log_std.copy_(torch.tensor([-1.0, -2.0, -3.0, -4.0]))
+    new.policy.load_state_dict(transfer_policy(old.policy.state_dict(), "position-jaw",
+                                               new.policy.state_dict(), "position-yaw-jaw", -0.5))
+    rng = np.random.default_rng(0)
+    obs = {k: torch.as_tensor(rng.normal(size=(5,) + space.shape), dtype=torch.float32)
+           for k, space in old.observation_space.spaces.items()}
+    with torch.no_grad():
+        mean_old = old.policy.get_distribution(obs).distribution.mean.numpy()
+        mean_new = new.policy.get_distribution(obs).distribution.mean.numpy()
+        np.testing.assert_allclose(new.policy.predict_values(obs).numpy(), old.policy.predict_values(obs).numpy(),
+                                   rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(mean_new[:, [0, 1, 2, 4]], mean_old, rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(mean_new[:, 3], 0.0)
+    np.testing.assert_array_equal(new.policy.log_std.detach().numpy(), [-1.0, -2.0, -3.0, -0.5, -4.0])
+    with torch.no_grad():
+        full.policy.log_std.copy_(torch.arange(7.0))
+    state = transfer_policy(full.policy.state_dict(), "full", old.policy.state_dict(), "position-jaw", -0.5)
+    np.testing.assert_array_equal(state["log_std"].numpy(), [0.0, 1.0, 2.0, 6.0])  # vx vy vz jaw
+    with pytest.raises(ValueError, match="other network architecture"):
+        transfer_policy({}, "full", old.policy.state_dict(), "position-jaw", -0.5)
+
+
+def test_fixed_world_objects_cycle_the_objects_over_the_worlds():
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import make_vec_env, parse_object
+
+    objects = parse_object("cuboid, sphere,rope")
+    assert objects == ("cuboid", "sphere", "rope") and parse_object("random") == "random"
+    venv = make_vec_env(4, 0, actions="position-yaw-jaw", fixed_world_objects=True, object=objects,
+                        episode_seconds=0.3)
+    venv.reset()
+    inner = venv.venv.venv.venv.env.unwrapped  # VecNormalize > VecMonitor > ActionSubset > SB3VectorEnv
+    assert inner.scene.object_names == ("cuboid", "sphere", "rope", "cuboid")
+    assert venv.action_space.shape == (5,)

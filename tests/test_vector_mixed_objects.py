@@ -131,6 +131,55 @@ def test_next_step_autoreset_redraws_objects_and_reports_them():
     assert len(names) == 2 and names[0] != names[1]
 
 
+def test_world_objects_fix_each_worlds_object_over_autoresets_without_rebuilding_and_replay():
+    """``world_objects``: every episode of world i holds world_objects[i] (E and pose still drawn),
+    autoresets keep the model (no rebuild), and each reset's ReplaySpec repeats it in a single env."""
+    fixed = ("rope", "cuboid", "rope")
+    kwargs = dict(object="random", youngs_modulus=(1e5, 1e6))
+    venv = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", max_episode_steps=2,
+                        autoreset_mode=AutoresetMode.SAME_STEP, world_objects=list(fixed), **kwargs)
+    _, info = venv.reset(seed=11)
+    scene = venv.unwrapped.scene
+    model = scene.model
+    assert tuple(info["object"]) == fixed == scene.object_names
+    specs, moduli = [info["replay_spec"][0]], {info["youngs_modulus"][0]}
+    for a in _actions(3, 6, seed=2):
+        _, _, _, truncated, info = venv.step(a)
+        if truncated.any():
+            assert truncated.all() and tuple(info["object"]) == fixed
+            specs.append(info["replay_spec"][0])
+            moduli.add(info["youngs_modulus"][0])
+    assert venv.unwrapped.scene is scene and scene.model is model  # no reset rebuilt the arrays
+    assert len(specs) == 4 and moduli == {1e5, 1e6}  # E is still drawn per episode
+    # a draw continues the world's RNG exactly as the single env's reset with the object option
+    single = gym.make(ENV_ID, **kwargs)
+    for spec in specs:
+        assert spec.options == {"object": "rope"}
+        _, sinfo = spec.reset(single)
+        s = single.unwrapped.scene.setups[0]
+        assert sinfo["object"] == "rope" and s.material == spec.material
+        assert np.array_equal(s.position, spec.position) and np.array_equal(s.quat, spec.quat)
+    # the same world of a run without world_objects draws other objects from the same seed
+    free = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
+    assert tuple(free.reset(seed=11)[1]["object"]) != fixed
+
+
+@pytest.mark.parametrize("objects, error", [
+    (("cuboid", "sphere"), "one object per world \\(3\\), got 2"),
+    (("cuboid", "sphere", "banana"), "world_objects\\[2\\] must be one of"),
+    ("cuboid", "sequence of 3 object names"),
+])
+def test_bad_world_objects_rejected(objects, error):
+    with pytest.raises((ValueError, TypeError), match=error):
+        gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", object="random",
+                     world_objects=objects)
+
+
+def test_world_objects_must_be_among_the_config_objects():
+    with pytest.raises(ValueError, match="world_objects\\[0\\] must be one of the config's objects \\['cuboid'\\]"):
+        gym.make_vec(ENV_ID, num_envs=1, vectorization_mode="vector_entry_point", world_objects=["sphere"])
+
+
 def test_object_tuple_with_a_user_mesh(tmp_path):
     path = tmp_path / "ball.stl"
     trimesh.creation.icosphere(2, radius=0.025).export(path)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import dataclasses
@@ -20,6 +21,24 @@ from .seeds import world_seeds
 from .task import PickupTask, action_space, observation_spaces
 
 
+def check_world_objects(world_objects: Sequence[str] | None, num_envs: int,
+                        allowed: tuple[str, ...]) -> tuple[str, ...] | None:
+    """``world_objects`` as a tuple after checking it: None, or ``num_envs`` names each in
+    ``allowed`` (the config's objects); else ValueError naming the bad entry."""
+    if world_objects is None:
+        return None
+    if isinstance(world_objects, str):
+        raise TypeError(f"world_objects must be a sequence of {num_envs} object names, got the str {world_objects!r}")
+    names = tuple(world_objects)
+    if len(names) != num_envs:
+        raise ValueError(f"world_objects must name one object per world ({num_envs}), got {len(names)}")
+    for i, name in enumerate(names):
+        if name not in allowed:
+            raise ValueError(f"world_objects[{i}] must be one of the config's objects {list(allowed)} "
+                             f"(set object= to 'random' or a tuple holding it), got {name!r}")
+    return names
+
+
 class DeformablePickupVectorEnv(VectorEnv):
     """``gym.make_vec("DeformablePickup-v0", num_envs=N, ...)``: N worlds stepped together.
 
@@ -31,6 +50,15 @@ class DeformablePickupVectorEnv(VectorEnv):
     that world's RNG, as a single env reset on the same seed or RNG state draws them; ``reset`` and
     every autoresetting ``step`` report them per reset world in ``info["object"]`` (object array
     [N] of str), ``info["youngs_modulus"]`` ([N] Pa), with masks ``_object`` / ``_youngs_modulus``.
+
+    ``world_objects`` (a sequence of N names, each one of the config's objects) instead fixes world
+    ``i``'s object to ``world_objects[i]`` for every episode (the rest is drawn as before: E, pose,
+    ...), as a single env reset with ``options={"object": world_objects[i]}`` draws it (its
+    ``ReplaySpec`` carries that option). Worlds with different objects then never rebuild the
+    model at a reset, which a GPU learner with thousands of worlds and autoresets every step needs:
+    with ``object="random"`` nearly every step resets some world to another object and rebuilds all
+    worlds' arrays and the solver's captured graphs. Example (each object in a fifth of the worlds):
+    ``gym.make_vec(..., num_envs=N, object="random", world_objects=[OBJECTS[i % 5] for i in range(N)])``.
 
     Storage of worlds with different objects (node and tet counts differ by world): the worlds'
     nodes and tets stay packed in flat arrays with per-world offsets (``model.node_start``,
@@ -68,10 +96,12 @@ class DeformablePickupVectorEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, torch_outputs: bool = False,
                  config: PickupConfig | None = None, viewer_world: int = 0, viewer_host: str = "127.0.0.1",
-                 viewer_port: int = 8080, **kwargs: Any):
+                 viewer_port: int = 8080, world_objects: Sequence[str] | None = None, **kwargs: Any):
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         self.config = make_config(config, kwargs)
+        #: the object each world holds in every episode (``world_objects``), or None: drawn per episode
+        self.world_objects = check_world_objects(world_objects, num_envs, self.config.object_names)
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -201,7 +231,9 @@ class DeformablePickupVectorEnv(VectorEnv):
         setups = [None] * self.num_envs
         for w in np.flatnonzero(reset):
             # a world outside the mask is drawn (at the build) from an RNG that was not reseeded
-            setups[w], spec = draw_world(self.config, self._rngs[w], seeds[w] if mask[w] else None)
+            fixed = None if self.world_objects is None else self.world_objects[w]
+            setups[w], spec = draw_world(self.config, self._rngs[w], seeds[w] if mask[w] else None, fixed,
+                                         None if fixed is None else {"object": fixed})
             if built or setups[w].object_name != self.scene.object_names[w]:
                 self._origins[w] = spec  # this reset builds the world's object
                 specs[w] = spec
