@@ -12,7 +12,8 @@ box edges held out of the object, ``PickupConfig.edge_contact``). Seeds start at
 10**9: none of the training episodes' seeds, which count from the run's seed by env steps).
 
 A run trained on several objects with ``--fixed-world-objects`` is evaluated so (world i holds
-the i-th object) and reported per object too. Per episode it records the object, success, the step of success, and how far the policy got, so a failure is
+the i-th object) and reported per object too, unless ``--object`` overrides the objects (then
+drawn per episode from those given). Per episode it records the object, success, the step of success, and how far the policy got, so a failure is
 named: ``never grasped``, ``grasped, never at the goal`` (grasped but never within the success
 tolerance of the goal, pierced steps not counted), ``at the goal, not held`` (within it while
 grasped, not for the hold time). Heights of an episode's last step come from the terminal
@@ -35,7 +36,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import numpy as np  # noqa: E402
 
 from defgrasp_env.layout import AGENT_POS, ENV_STATE  # noqa: E402
-from train_ppo import make_vec_env  # noqa: E402
+from train_ppo import load_normalisation, make_vec_env, parse_object  # noqa: E402
 
 #: ``run.json`` keys that are env options (passed to ``gym.make_vec``).
 ENV_OPTIONS = ("object", "youngs_modulus", "episode_seconds", "edge_contact")
@@ -51,7 +52,6 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     ``final_gap`` of the jaw (m), ``pierced_steps``, ``return``) and their summary
     (``success_rate``, outcome counts)."""
     from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import VecNormalize
 
     from defgrasp_env import PickupConfig
 
@@ -68,8 +68,7 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     fixed = bool(settings.get("fixed_world_objects", False)) and env_overrides.get("object") is None
     venv = make_vec_env(num_worlds, seed, actions=settings["actions"], gamma=settings["gamma"], device=device,
                         fixed_world_objects=fixed, **env_options)
-    venv = VecNormalize.load(str(run / "vecnormalize.pkl"), venv.venv)
-    venv.action_space = venv.venv.action_space  # pickled with the statistics: keep the env's
+    venv = load_normalisation(run, venv)
     venv.training, venv.norm_reward = False, False
     model = PPO.load(run / "ppo.zip", device=torch_device)
     tolerance = config.success_tolerance  # m
@@ -143,7 +142,9 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cpu", help="simulation device (cpu, cuda:0)")
     ap.add_argument("--torch-device", default="cpu")
     ap.add_argument("--stochastic", action="store_true", help="sample actions instead of the policy's mean")
-    ap.add_argument("--object", default=None, help="evaluate on another object than the run's")
+    ap.add_argument("--object", default=None, type=parse_object,
+                    help="evaluate on another object than the run's (names separated by commas: drawn per "
+                         "episode; an override gives up a --fixed-world-objects run's assignment)")
     ap.add_argument("--youngs-modulus", type=float, default=None, help="evaluate at another E (Pa) than the run's")
     ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=None,
                     help="evaluate with (or --no-edge-contact without) the pads' box edges held out of the "
@@ -156,7 +157,8 @@ def main(argv=None) -> int:
     env = result["env"]
     moduli = env["youngs_modulus"]
     moduli = f"{moduli:g}" if isinstance(moduli, (int, float)) else ", ".join(f"{m:g}" for m in moduli)
-    print(f"{args.run}: {env['object']}, E = {moduli} Pa, {args.worlds} episodes "
+    objects = env["object"] if isinstance(env["object"], str) else ", ".join(env["object"])
+    print(f"{args.run}: {objects}, E = {moduli} Pa, {args.worlds} episodes "
           f"(seeds {args.seed}..{args.seed + args.worlds - 1}), {'stochastic' if args.stochastic else 'deterministic'} "
           f"policy, {args.device}, {result['wall_s']} s")
     print(f"success {result['outcomes']['success']}/{args.worlds} = {result['success_rate']:.3f}; "

@@ -150,21 +150,6 @@ class LearningCurve(BaseCallback):
                 "slowest_newton": float(np.median(slowest[:, 0])), "slowest_cg": float(np.median(slowest[:, 1]))}
 
 
-def action_components(actions: str) -> tuple[str, ...]:
-    """The ``DELTA_ACTION`` components the policy of an ``--actions`` set controls, in its order."""
-    from defgrasp_env.layout import DELTA_ACTION
-    from defgrasp_env.rl.action_subset import POSITION_JAW, POSITION_YAW_JAW
-
-    sets = {"full": DELTA_ACTION.names, "position-jaw": POSITION_JAW, "position-yaw-jaw": POSITION_YAW_JAW}
-    if actions not in sets:
-        raise ValueError(f"actions must be one of {sorted(sets)}, got {actions!r}")
-    return tuple(sets[actions])
-
-
-#: ``--actions``: what the policy controls (``action_components``; an ``ActionSubset`` unless "full").
-ACTION_SETS = ("full", "position-jaw", "position-yaw-jaw")
-
-
 def cycled_objects(num_envs: int, **env_kwargs) -> tuple[str, ...]:
     """World i's object for ``--fixed-world-objects``: the config's objects in turn (i mod their count)."""
     from defgrasp_env import PickupConfig
@@ -175,7 +160,8 @@ def cycled_objects(num_envs: int, **env_kwargs) -> tuple[str, ...]:
 
 def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float = 0.99,
                  fixed_world_objects: bool = False, **env_kwargs):
-    """The SB3 view of the native vector env (``actions``: one of ``ACTION_SETS``), with episode
+    """The SB3 view of the native vector env (``actions``: a key of ``defgrasp_env.rl.action_subset.
+    ACTION_SETS``), with episode
     statistics and running normalisation of observations and rewards (discount ``gamma``).
     ``fixed_world_objects``: world i holds ``cycled_objects(...)[i]`` in every episode (the vector
     env's ``world_objects``: no model rebuild at autoresets), instead of a draw per episode."""
@@ -183,10 +169,11 @@ def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float =
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from defgrasp_env import PickupConfig
-    from defgrasp_env.rl.action_subset import ActionSubset
+    from defgrasp_env.rl.action_subset import ACTION_SETS, ActionSubset
     from defgrasp_env.rl.sb3_vec_env import SB3VectorEnv
 
-    components = action_components(actions)
+    if actions not in ACTION_SETS:
+        raise ValueError(f"actions must be one of {sorted(ACTION_SETS)}, got {actions!r}")
     # gym.make_vec passes the registered 300-step limit on: derive it from the options instead
     steps = PickupConfig(**env_kwargs).max_episode_steps
     world_objects = cycled_objects(num_envs, **env_kwargs) if fixed_world_objects else None
@@ -195,37 +182,22 @@ def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float =
     venv = SB3VectorEnv(env)
     venv.seed(seed)
     if actions != "full":
-        venv = ActionSubset(venv, components)
+        venv = ActionSubset(venv, ACTION_SETS[actions])
     return VecNormalize(VecMonitor(venv, info_keywords=("is_success",)), clip_obs=10.0, gamma=gamma)
 
 
-def transfer_policy(source_state: dict, source_actions: str, target_state: dict, target_actions: str,
-                    log_std_init: float) -> dict:
-    """``target_state`` (a fresh policy's ``state_dict``) with every weight of ``source_state`` (a
-    trained policy's) copied in: the shared layers as they are, and the action head's rows
-    (``action_net``, ``log_std``) by action component, so a policy trained with one ``--actions``
-    set starts another (e.g. ``position-jaw`` -> ``position-yaw-jaw``): a component the source did
-    not control starts with a zero mean (the env's still wrist) and ``log_std_init``; one the
-    target does not control is dropped."""
-    old, new = action_components(source_actions), action_components(target_actions)
-    out = {}
-    for key, value in target_state.items():
-        if key not in source_state:
-            raise ValueError(f"the trained policy has no {key!r}: other network architecture")
-        src = source_state[key]
-        if key in ("action_net.weight", "action_net.bias", "log_std"):
-            value = value.clone()
-            value.fill_(log_std_init if key == "log_std" else 0.0)
-            for row, name in enumerate(new):
-                if name in old:
-                    value[row] = src[old.index(name)]
-        elif src.shape != value.shape:
-            raise ValueError(f"the trained policy's {key!r} has shape {tuple(src.shape)}, this run's "
-                             f"{tuple(value.shape)}: other observations or network architecture")
-        else:
-            value = src.clone()
-        out[key] = value
-    return out
+def load_normalisation(folder: pathlib.Path, venv, gamma: float | None = None):
+    """The observation/reward normalisation saved in ``folder`` (``vecnormalize.pkl``) around the
+    ``venv`` a new ``make_vec_env`` built (its ``.venv``: the VecMonitor), keeping this env's action
+    space (VecNormalize pickles the saved run's, which differs for another action set) and, if
+    given, this run's discount ``gamma`` for the return normalisation."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    loaded = VecNormalize.load(str(pathlib.Path(folder) / "vecnormalize.pkl"), venv.venv)
+    loaded.action_space = loaded.venv.action_space
+    if gamma is not None:
+        loaded.gamma = gamma
+    return loaded
 
 
 #: ``curve.csv`` columns that are counts (an older run's rows lack the later ones: "nan").
@@ -279,9 +251,9 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
     ``fixed_world_objects``: see ``make_vec_env``."""
     from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import VecNormalize
 
     from defgrasp_env import PickupConfig
+    from defgrasp_env.rl.policy_transfer import transfer_policy
 
     settings = dict(num_envs=num_envs, n_steps=n_steps, actions=actions, gamma=gamma, gae_lambda=gae_lambda,
                     n_epochs=n_epochs, seed=seed, **env_kwargs)
@@ -297,7 +269,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         env_seed = seed + (rows[-1]["env_steps"] if rows else 0)
         venv = make_vec_env(num_envs, env_seed, actions=actions, gamma=gamma,
                             fixed_world_objects=fixed_world_objects, **env_kwargs)
-        venv = VecNormalize.load(str(resume / "vecnormalize.pkl"), venv.venv)
+        venv = load_normalisation(resume, venv)
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
         curve = LearningCurve(settings, env_seed, max_seconds, rows=rows, success_tolerance=tolerance,
@@ -307,9 +279,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, fixed_world_objects=fixed_world_objects,
                         **env_kwargs)
     if init_from is not None:
-        venv = VecNormalize.load(str(pathlib.Path(init_from) / "vecnormalize.pkl"), venv.venv)
-        venv.gamma = gamma  # the loaded statistics go on; the return normalisation uses this run's discount
-        venv.action_space = venv.venv.action_space  # pickled with the statistics: that of the loaded run's actions
+        # the loaded statistics go on; the return normalisation uses this run's discount
+        venv = load_normalisation(init_from, venv, gamma)
     rollout = n_steps * num_envs
     minibatches = max(1, min(minibatches, rollout // 64))
     log_std_init = -0.5
@@ -320,7 +291,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                 device=torch_device, verbose=verbose)
     if init_from is not None:
         trained = PPO.load(pathlib.Path(init_from) / "ppo.zip", device=torch_device)
-        source_actions = json.loads((pathlib.Path(init_from) / "run.json").read_text())["actions"]
+        source_actions = json.loads((pathlib.Path(init_from) / "run.json").read_text()).get("actions", "full")
         model.policy.load_state_dict(transfer_policy(trained.policy.state_dict(), source_actions,
                                                      model.policy.state_dict(), actions, log_std_init))
     curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps)
@@ -367,11 +338,13 @@ def parse_object(text: str) -> str | tuple[str, ...]:
 
 
 def main(argv=None) -> int:
+    from defgrasp_env.rl.action_subset import ACTION_SETS
+
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--num-envs", type=int, default=16)
     ap.add_argument("--timesteps", type=int, default=100_000, help="env steps (all worlds together)")
     ap.add_argument("--n-steps", type=int, default=16, help="PPO rollout length per world")
-    ap.add_argument("--actions", choices=ACTION_SETS, default="full",
+    ap.add_argument("--actions", choices=sorted(ACTION_SETS), default="full",
                     help="what the policy controls: all 7 delta actions, wrist position and jaw, or wrist "
                          "position, its turn about the vertical and jaw")
     ap.add_argument("--gamma", type=float, default=0.8)

@@ -39,7 +39,7 @@ def record(tmp_path, steps: int, **kwargs):
 def test_every_world_episode_is_a_valid_file_that_replays_bit_exactly(tmp_path, obj):
     """3 worlds, episodes cut at 45 steps (the expert has grasped and is lifting: contact, friction
     and stress are active), 100 steps: 2 finished episodes per world plus the unfinished third,
-    written by close(). With object="random" each world keeps its object; replays name it."""
+    written by close(). With object="random" each episode draws its object; replays name it."""
     venv, ended = record(tmp_path, 100, num_envs=3, object=obj, youngs_modulus=(1e5, 1e6), max_episode_steps=45)
     assert ended.tolist() == [2, 2, 2]
     assert len(venv.paths) == 9

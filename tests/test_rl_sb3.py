@@ -301,7 +301,9 @@ def test_transfer_policy_maps_the_action_head_by_component():
     from stable_baselines3 import PPO
 
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
-    from train_ppo import make_vec_env, transfer_policy
+    from train_ppo import make_vec_env
+
+    from defgrasp_env.rl.policy_transfer import transfer_policy
 
     def model(actions, seed):
         return PPO("MultiInputPolicy", make_vec_env(1, 0, actions=actions, episode_seconds=0.3), n_steps=8,
@@ -325,10 +327,17 @@ def test_transfer_policy_maps_the_action_head_by_component():
     np.testing.assert_array_equal(new.policy.log_std.detach().numpy(), [-1.0, -2.0, -3.0, -0.5, -4.0])
     with torch.no_grad():
         full.policy.log_std.copy_(torch.arange(7.0))
-    state = transfer_policy(full.policy.state_dict(), "full", old.policy.state_dict(), "position-jaw", -0.5)
+    source = full.policy.state_dict()
+    state = transfer_policy(source, "full", old.policy.state_dict(), "position-jaw", -0.5)
     np.testing.assert_array_equal(state["log_std"].numpy(), [0.0, 1.0, 2.0, 6.0])  # vx vy vz jaw
+    for key in ("action_net.weight", "action_net.bias"):
+        np.testing.assert_array_equal(state[key].numpy(), source[key].numpy()[[0, 1, 2, 6]])
     with pytest.raises(ValueError, match="other network architecture"):
         transfer_policy({}, "full", old.policy.state_dict(), "position-jaw", -0.5)
+    with pytest.raises(ValueError, match="action set must be one of"):
+        transfer_policy(source, "full", old.policy.state_dict(), "yaw-only", -0.5)
+    for venv in (old.env, new.env, full.env):
+        venv.close()
 
 
 def test_fixed_world_objects_cycle_the_objects_over_the_worlds():
@@ -345,3 +354,4 @@ def test_fixed_world_objects_cycle_the_objects_over_the_worlds():
     inner = venv.venv.venv.venv.env.unwrapped  # VecNormalize > VecMonitor > ActionSubset > SB3VectorEnv
     assert inner.scene.object_names == ("cuboid", "sphere", "rope", "cuboid")
     assert venv.action_space.shape == (5,)
+    venv.close()

@@ -142,26 +142,29 @@ def test_world_objects_fix_each_worlds_object_over_autoresets_without_rebuilding
     scene = venv.unwrapped.scene
     model = scene.model
     assert tuple(info["object"]) == fixed == scene.object_names
-    specs, moduli = [info["replay_spec"][0]], {info["youngs_modulus"][0]}
+    specs, moduli = [list(info["replay_spec"])], {info["youngs_modulus"][0]}
     for a in _actions(3, 6, seed=2):
         _, _, _, truncated, info = venv.step(a)
         if truncated.any():
             assert truncated.all() and tuple(info["object"]) == fixed
-            specs.append(info["replay_spec"][0])
+            specs.append(list(info["replay_spec"]))
             moduli.add(info["youngs_modulus"][0])
     assert venv.unwrapped.scene is scene and scene.model is model  # no reset rebuilt the arrays
     assert len(specs) == 4 and moduli == {1e5, 1e6}  # E is still drawn per episode
     # a draw continues the world's RNG exactly as the single env's reset with the object option
     single = gym.make(ENV_ID, **kwargs)
-    for spec in specs:
-        assert spec.options == {"object": "rope"}
-        _, sinfo = spec.reset(single)
-        s = single.unwrapped.scene.setups[0]
-        assert sinfo["object"] == "rope" and s.material == spec.material
-        assert np.array_equal(s.position, spec.position) and np.array_equal(s.quat, spec.quat)
-    # the same world of a run without world_objects draws other objects from the same seed
+    for episode in specs:
+        for name, spec in zip(fixed, episode):
+            assert spec.options == {"object": name}
+            _, sinfo = spec.reset(single)
+            s = single.unwrapped.scene.setups[0]
+            assert sinfo["object"] == name and s.material == spec.material
+            assert np.array_equal(s.position, spec.position) and np.array_equal(s.quat, spec.quat)
+    # the same worlds of a run without world_objects draw other objects from the same seed
     free = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
     assert tuple(free.reset(seed=11)[1]["object"]) != fixed
+    for env in (venv, single, free):
+        env.close()
 
 
 @pytest.mark.parametrize("objects, error", [

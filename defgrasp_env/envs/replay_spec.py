@@ -31,7 +31,7 @@ class ReplaySpec:
         rng_state: numpy ``bit_generator.state`` (JSON-able dict) the reset drew from, when
             ``seed`` is None; else None.
         options: the single-env reset options that give the same draws (``{"object": name}`` for a
-            vector world of ``object="random"``, which keeps its object), or None.
+            world of a vector env whose ``world_objects`` fix its object), or None.
         object_name: the world's object (a name of ``OBJECT_SHAPES`` or a mesh path).
         material: what the reset drew (density kg/m^3, Young's modulus Pa, Poisson ratio).
         position: initial object frame origin (m, world); ``quat``: its orientation (xyzw).

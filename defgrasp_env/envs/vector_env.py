@@ -24,7 +24,8 @@ from .task import PickupTask, action_space, observation_spaces
 def check_world_objects(world_objects: Sequence[str] | None, num_envs: int,
                         allowed: tuple[str, ...]) -> tuple[str, ...] | None:
     """``world_objects`` as a tuple after checking it: None, or ``num_envs`` names each in
-    ``allowed`` (the config's objects); else ValueError naming the bad entry."""
+    ``allowed`` (the config's objects). TypeError for a str (not a sequence of names), ValueError
+    for another length or for an entry not in ``allowed`` (naming it and its index)."""
     if world_objects is None:
         return None
     if isinstance(world_objects, str):
@@ -57,8 +58,9 @@ class DeformablePickupVectorEnv(VectorEnv):
     ``ReplaySpec`` carries that option). Worlds with different objects then never rebuild the
     model at a reset, which a GPU learner with thousands of worlds and autoresets every step needs:
     with ``object="random"`` nearly every step resets some world to another object and rebuilds all
-    worlds' arrays and the solver's captured graphs. Example (each object in a fifth of the worlds):
-    ``gym.make_vec(..., num_envs=N, object="random", world_objects=[OBJECTS[i % 5] for i in range(N)])``.
+    worlds' arrays and the solver's captured graphs. Example (each of the five objects in a fifth
+    of the worlds; ``OBJECT_SHAPES`` from ``defgrasp_env.sim``): ``gym.make_vec(..., num_envs=N,
+    object="random", world_objects=[list(OBJECT_SHAPES)[i % 5] for i in range(N)])``.
 
     Storage of worlds with different objects (node and tet counts differ by world): the worlds'
     nodes and tets stay packed in flat arrays with per-world offsets (``model.node_start``,

@@ -11,6 +11,9 @@ other two rotation rates only let an exploring policy tumble the gripper. The na
 * ``POSITION_YAW_JAW`` (5): also ``wy``, the angular velocity about the world's vertical y axis
   (x ``max_angular_speed`` rad/s): the wrist points down and turns about the vertical.
 
+``ACTION_SETS`` names them (and "full"); ``policy_transfer.transfer_policy`` starts a policy of
+one set from a trained policy of another.
+
     venv = ActionSubset(SB3VectorEnv(gym.make_vec("DeformablePickup-v0", num_envs=N,
                                                   autoreset_mode="SameStep")), POSITION_YAW_JAW)
 """
@@ -25,12 +28,16 @@ from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from ..layout import DELTA_ACTION
 
-__all__ = ["ActionSubset", "POSITION_JAW", "POSITION_YAW_JAW"]
+__all__ = ["ACTION_SETS", "ActionSubset", "POSITION_JAW", "POSITION_YAW_JAW"]
 
 #: Wrist position and jaw (``DELTA_ACTION`` component names, in the policy's order).
 POSITION_JAW = ("vx", "vy", "vz", "jaw")
 #: Wrist position, its turn about the world's vertical axis, and the jaw.
 POSITION_YAW_JAW = ("vx", "vy", "vz", "wy", "jaw")
+#: The named action sets (``train_ppo.py --actions``): the components each policy controls, in order
+#: ("full": all of ``DELTA_ACTION``, no wrapper needed). A saved run names its set; changing a set's
+#: components would change what the saved policies' outputs mean.
+ACTION_SETS = {"full": DELTA_ACTION.names, "position-jaw": POSITION_JAW, "position-yaw-jaw": POSITION_YAW_JAW}
 
 
 class ActionSubset(VecEnvWrapper):
