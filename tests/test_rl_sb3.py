@@ -355,3 +355,43 @@ def test_fixed_world_objects_cycle_the_objects_over_the_worlds():
     assert inner.scene.object_names == ("cuboid", "sphere", "rope", "cuboid")
     assert venv.action_space.shape == (5,)
     venv.close()
+
+
+def test_feature_beyond_pad_faces_against_placed_pads():
+    """Pads placed by hand around a resting cube's feature point: between the faces -> 0; moved
+    30 mm along a pad's length -> 30 mm less the pad's half length; turned 90 degrees about the
+    pad's closing axis, the same offset reads along the width (the pad's own frame is used)."""
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from eval_ppo import feature_beyond_pad_faces
+
+    from defgrasp_env.gripper import Gripper
+    from defgrasp_env.transforms import quat_multiply, quat_to_matrix
+
+    env = gym.make("DeformablePickup-v0")
+    env.reset(seed=0)
+    scene = env.unwrapped.scene
+    feature = scene.feature_points()[0][0]
+    half = np.asarray(Gripper.pad_half_extents)
+    quat = scene.state.pad_orientations.numpy().astype(np.float64)  # [2, 4] as the reset left them
+    R = [quat_to_matrix(q) for q in quat]
+
+    def place(offset_local, q=quat):
+        pos = np.stack([feature - quat_to_matrix(q[p]) @ offset_local for p in range(2)])
+        scene.state.pad_positions.assign(pos.astype(np.float32))
+        scene.state.pad_orientations.assign(q.astype(np.float32))
+        return feature_beyond_pad_faces(scene)[0]
+
+    np.testing.assert_allclose(place(np.array([0.02, 0.0, 0.0])), [0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(place(np.array([0.02, 0.03, 0.0])), [0.03 - half[1], 0.0], atol=1e-6)
+    np.testing.assert_allclose(place(np.array([0.02, 0.0, -0.025])), [0.0, 0.025 - half[2]], atol=1e-6)
+    # the pads turned 90 degrees about their closing axis (x): a world offset that was along the
+    # length now lies along the width
+    turn = np.array([np.sin(np.pi / 4), 0.0, 0.0, np.cos(np.pi / 4)])
+    turned = np.stack([quat_multiply(q, turn) for q in quat])
+    world_offset = R[0] @ np.array([0.02, 0.03, 0.0])
+    local = quat_to_matrix(turned[0]).T @ world_offset
+    got = place(local, turned)
+    np.testing.assert_allclose(got, [0.0, 0.03 - half[2]], atol=1e-6)
+    env.close()
