@@ -13,9 +13,10 @@ box edges held out of the object, ``PickupConfig.edge_contact``). Seeds start at
 
 A run trained on several objects with ``--fixed-world-objects`` is evaluated so (world i holds
 the i-th object) and reported per object too, unless ``--object`` overrides the objects (then
-drawn per episode from those given). Per episode it records the object, success, the step of success, and how far the policy got, so a failure is
-named: ``never grasped``, ``grasped, never at the goal`` (grasped but never within the success
-tolerance of the goal, pierced steps not counted), ``at the goal, not held`` (within it while
+drawn per episode from those given). Per episode it records the object, success, the step of
+success, and how far the policy got, so a failure is named: ``never grasped``, ``grasped, never
+at the goal`` (grasped but never within the success tolerance of the goal, pierced steps not
+counted), ``at the goal, not held`` (within it while
 grasped, not for the hold time). Heights of an episode's last step come from the terminal
 observation VecNormalize returns, unnormalised (exact unless a value was clipped at 10 std).
 
@@ -50,8 +51,8 @@ def feature_beyond_pad_faces(scene) -> np.ndarray:
     the faces holds the object off its centre: a prism gripped across its width near its top
     (a sound grasp), or, with a jaw gap below the object's width there, on the pads' edges or
     corners (a sphere pinched above its equator, a cube across a corner), which node-against-pad
-    contact resolves poorly (README, known gaps). The scripted expert's holds read 0 for all five objects (the torus's rim lies along
-    the closing axis, which is not counted)."""
+    contact resolves poorly (README, known gaps). The scripted expert's holds read 0 for all five
+    objects (the torus's rim lies along the closing axis, which is not counted)."""
     from defgrasp_env.gripper import Gripper
     from defgrasp_env.transforms import quat_to_matrix
 
@@ -60,12 +61,9 @@ def feature_beyond_pad_faces(scene) -> np.ndarray:
     pos = scene.state.pad_positions.numpy().reshape(scene.num_worlds, pads, 3)
     quat = scene.state.pad_orientations.numpy().reshape(scene.num_worlds, pads, 4).astype(np.float64)
     half = np.asarray(Gripper.pad_half_extents, np.float64)[1:]  # length, width (x: the closing axis)
-    beyond = np.zeros((scene.num_worlds, 2))
-    for w in range(scene.num_worlds):
-        for p in range(pads):
-            local = (feature[w] - pos[w, p]) @ quat_to_matrix(quat[w, p])  # the pad's frame
-            beyond[w] = np.maximum(beyond[w], np.maximum(np.abs(local[1:]) - half, 0.0))
-    return beyond
+    # the feature point in each pad's frame: R^T (feature - pad centre), [W, P, 3]
+    local = np.einsum("wpji,wpj->wpi", quat_to_matrix(quat), feature[:, None, :] - pos)
+    return np.maximum(np.abs(local[..., 1:]) - half, 0.0).max(axis=1)
 
 
 def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str = "cpu",

@@ -25,8 +25,8 @@ and the jaw but not turn the wrist (4 actions instead of 7); ``position-yaw-jaw`
 about the vertical (5). ``--object cuboid,sphere,torus,cylinder,rope --fixed-world-objects`` trains
 on the five objects at once, each in a fifth of the worlds for every episode (no model rebuild at
 the autoresets, which a draw per episode would cost at nearly every step). ``--init-from`` may
-start from a run with another action set (its action head is mapped by component). The PPO settings default to those
-ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
+start from a run with another action set (its action head is mapped by component). The PPO
+settings default to those ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
 8 epochs of 32 minibatches per rollout, 3 x 256 networks, initial log std -0.5, target KL 0.1);
 fewer minibatches where a rollout is too small for 64 samples in each (small CPU runs).
 
@@ -160,9 +160,9 @@ def cycled_objects(num_envs: int, **env_kwargs) -> tuple[str, ...]:
 
 def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float = 0.99,
                  fixed_world_objects: bool = False, **env_kwargs):
-    """The SB3 view of the native vector env (``actions``: a key of ``defgrasp_env.rl.action_subset.
-    ACTION_SETS``), with episode
-    statistics and running normalisation of observations and rewards (discount ``gamma``).
+    """The SB3 view of the native vector env (``actions``: a key of
+    ``defgrasp_env.rl.action_subset.ACTION_SETS``), with episode statistics and running
+    normalisation of observations and rewards (discount ``gamma``).
     ``fixed_world_objects``: world i holds ``cycled_objects(...)[i]`` in every episode (the vector
     env's ``world_objects``: no model rebuild at autoresets), instead of a draw per episode."""
     import gymnasium as gym
