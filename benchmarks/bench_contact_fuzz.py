@@ -203,6 +203,8 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=10, help="steps per sequence (default 10)")
     p.add_argument("--objects", nargs="+", default=list(OBJECT_SHAPES), choices=list(OBJECT_SHAPES))
     p.add_argument("--moduli", nargs="+", type=float, default=list(MODULI))
+    p.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=PickupConfig().edge_contact,
+                   help="hold the pads' box edges out of the object too (PickupConfig.edge_contact; default: on)")
     p.add_argument("--no-append", action="store_true")
     args = p.parse_args()
     rows = ["| object | E (Pa) | deepest (mm) | crossed | flagged | unflagged | diverged | clamped | tip max (N) "
@@ -211,7 +213,7 @@ def main() -> None:
     worst, tip, wrist, clamped, substeps = 0.0, 0.0, 0.0, 0, 0
     for name in args.objects:
         for e in args.moduli:
-            r = run_cell(name, e, args.steps)
+            r = run_cell(name, e, args.steps, edge_contact=args.edge_contact)
             worst, tip, wrist = max(worst, r["deepest"]), max(tip, r["tip"]), max(wrist, r["wrist"])
             clamped, substeps = clamped + r["clamped"], substeps + r["substeps"]
             rows.append(f"| {name} | {e:.0e} | {r['deepest'] * 1e3:.3f} | {r['crossed']} | {r['flagged']} | "
@@ -229,7 +231,8 @@ def main() -> None:
     print(rows[-1])
     text = (f"\n## bench_contact_fuzz ({datetime.date.today()}, {host()}, load {os.getloadavg()[0]:.1f}, "
             f"{git_state()})\n\n{args.steps} steps x sequences {', '.join(SEQUENCES)} per cell; "
-            "max_linear_speed 2 m/s, max_angular_speed 2 pi rad/s.\n\n" + "\n".join(rows) + "\n")
+            "max_linear_speed 2 m/s, max_angular_speed 2 pi rad/s"
+            f", edge contact {'on' if args.edge_contact else 'off'}.\n\n" + "\n".join(rows) + "\n")
     if not args.no_append:
         append_results(text)
 

@@ -64,13 +64,14 @@ class LaunchCounter:
         wp.capture_launch = counted_graph
 
 
-def run(obj: str, e: float, seed: int, max_steps: int, counter: LaunchCounter) -> dict:
+def run(obj: str, e: float, seed: int, max_steps: int, counter: LaunchCounter, edge_contact: bool = True) -> dict:
     import gymnasium as gym
 
     import defgrasp_env  # noqa: F401
     from defgrasp_env.policies import ScriptedPickupExpert
 
-    env = gym.make("DeformablePickup-v0", object=obj, youngs_modulus=e, max_episode_steps=max_steps)
+    env = gym.make("DeformablePickup-v0", object=obj, youngs_modulus=e, max_episode_steps=max_steps,
+                   edge_contact=edge_contact)
     expert = ScriptedPickupExpert.from_env(env)
     obs, _ = env.reset(seed=seed)
     expert.reset()
@@ -122,6 +123,8 @@ def main(argv=None) -> None:
     p.add_argument("--moduli", nargs="+", type=float, default=[1e4, 1e7])
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-steps", type=int, default=300)
+    p.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
+                   help="PickupConfig.edge_contact (default: on, the env's default)")
     p.add_argument("--no-append", action="store_true")
     p.add_argument("--note", default="")
     args = p.parse_args(argv)
@@ -130,7 +133,7 @@ def main(argv=None) -> None:
     rows = []
     for e in args.moduli:
         for obj in args.objects:
-            rows.append(run(obj, e, args.seed, args.max_steps, counter))
+            rows.append(run(obj, e, args.seed, args.max_steps, counter, args.edge_contact))
             print(table(rows[-1:]).splitlines()[-1], flush=True)
     load1 = os.getloadavg()[0]
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")

@@ -265,13 +265,13 @@ def test_torch_outputs_and_zero_copy_full_state():
 
 
 def test_edge_contact_option_reaches_the_simulation():
-    """``edge_contact=True`` builds the scene's model with pad edge contact (its surface edges
-    allocated in the solver), the default without; both step."""
+    """``edge_contact=True`` builds the scene's model with pad edge contact (its surface triangles
+    and pad edge points allocated in the solver), ``False`` without; both step."""
     for flag in (False, True):
         env = gym.make(ENV_ID, edge_contact=flag)
         env.reset(seed=0)
         scene = env.unwrapped.scene
         assert scene.model.contact.edge_contact is flag
-        assert (scene.solver.scratch.edge_nodes.shape[0] > 0) is flag
+        assert scene.solver.scratch.edges.active is flag
         env.step(env.action_space.sample() * 0)
         env.close()

@@ -42,10 +42,10 @@ class ContactParams:
             width of the friction law: an object held with a margin creeps at most at this speed).
         modulus_scale: penalty stiffness of a node per Young's modulus and node size (dimensionless).
         stiffening_depth: depth (m) beyond which the penalty force grows cubically.
-        edge_contact: also penalise where the object's surface edges cross the border of a pad face
-            (``sim/kernels/edge_contact.py``), so a pad edge cannot sink in between surface nodes.
-            Off by default: it holds a pad edge out of a coarse stiff mesh, but in the contact fuzz
-            it made the Newton solves of a swept stiff cuboid fail to converge (README, known gaps).
+        edge_contact: also hold the pads' box edges and corners out of the object's surface
+            (``sim/kernels/pad_edge_contact.py``: points every <= 1.5 mm along each pad box edge
+            against the surface triangle nearest to each at the substep start, frictionless, the
+            first 0.5 mm free), so a pad edge cannot sink in between surface nodes.
     """
 
     stiffness: float = 1e6
@@ -54,7 +54,7 @@ class ContactParams:
     stick_velocity: float = 1e-4
     modulus_scale: float = 100.0
     stiffening_depth: float = 2.5e-4
-    edge_contact: bool = False
+    edge_contact: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.edge_contact, bool):

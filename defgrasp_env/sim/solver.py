@@ -252,7 +252,8 @@ class ImplicitSolver:
             for cmd in run.lag:
                 cmd.launch()
             self._newton(run, cfg.patient_iterations if patient_any else 0)
-            run.clamp.launch()
+            for cmd in run.clamp:
+                cmd.launch()
             run.end.launch()
             if k == cfg.substeps - 1:
                 self._evaluate_outputs(run)

@@ -6,7 +6,7 @@ iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coar
 ``cg`` (a block of CG iterations, repeated), ``coarse_post``, the line search (``energy0`` once,
 ``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` (the iterate's deepest contact) decides
 the extra iterations (with the loop control of ``solver_loops``);
-``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
+``clamp`` (nodes and pad edge points left deeper than the penetration bound put back to it), ``end`` (velocities) and,
 after the last substep, ``outputs`` (forces, stresses, residual).
 Launches are recorded once per substep length and (state in, state out, control) set
 (``wp.launch(record_cmd=True)``; ``ImplicitSolver`` keeps the 8 sets used last). Each phase is a list
@@ -25,7 +25,7 @@ import warp as wp
 
 from .kernels import coarse_space as kcs
 from .kernels import contact as kc
-from .kernels import edge_contact as kec
+from .kernels import pad_edge_contact as kpe
 from .kernels import elastic as ke
 from .kernels import energy as kenergy
 from .kernels import line_search as kls
@@ -76,7 +76,7 @@ class SubstepLaunches:
     trial: list
     apply: list
     depth: list         # launches: the iterate's deepest contact per world (extra iterations)
-    clamp: object
+    clamp: list         # launches: nodes and edge points left deeper than the bound put back
     end: object
     outputs: list
     cg_block: int       # CG iterations per launch of ``cg``
@@ -99,23 +99,50 @@ class _Context:
 
 def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
     """Inertia, gravity and contact terms of every node at ``x`` (or their energy): the node
-    terms, then the pad edge contacts (``kernels/edge_contact.py``) added onto them."""
+    terms, then the pad edge points' contacts (``kernels/pad_edge_contact.py``) added onto them."""
     m, s, work, ctl = c.model, c.scratch, c.work, c.control
     common = (m.node_mass, m.node_world, active, ctl.external_force, m.gravity, c.h, *s.pads, m.pad_half_extents,
               m.pads_per_world, s.lag_normal_force, s.lag_normal, m.node_contact_stiffness,
               m.contact.stiffening_depth, m.contact.ground_friction, m.contact.pad_friction,
               m.contact.stick_velocity)
-    pairs = s.edge_normal.shape[0]
-    edges = (x, s.edge_nodes, s.edge_world, active, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world,
-             s.edge_normal, m.node_contact_stiffness, m.contact.stiffening_depth)
+    e = s.edges
+    points = (x, e.triangles, active, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points,
+              e.point_pad, e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_stiffness,
+              m.contact.stiffening_depth)
+    slots = m.num_worlds * e.points_per_world if e.active else 0
     if energy is not None:
         return [c.rec(kenergy.node_energy, m.num_nodes, x, s.x_start, work.velocities, *common, energy),
-                *([c.rec(kec.edge_energy, pairs, *edges, energy)] if pairs else [])]
+                *([c.rec(kpe.edge_point_energy, slots, *points, energy)] if slots else [])]
     return [c.rec(kc.evaluate_nodes, m.num_nodes, x, s.x_start, work.velocities, *common, record_pads, s.residual,
                   s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force, work.pad_normal_force,
                   work.pad_force, s.penetration),
-            *([c.rec(kec.evaluate_edges, pairs, *edges, record_pads, s.residual, s.diag_block, s.contact_hessian,
-                     work.contact_force, work.pad_normal_force, work.pad_force, s.penetration)] if pairs else [])]
+            *([c.rec(kpe.evaluate_edge_points, slots, *points, record_pads, s.residual, s.diag_block,
+                     s.contact_hessian, work.contact_force, work.pad_normal_force, work.pad_force, s.penetration)]
+              if slots else [])]
+
+
+def _edge_search(c: _Context, x) -> list:
+    """The pad edge points' triangles for the substep (``kernels/pad_edge_contact.py``'s search)."""
+    m, s, e = c.model, c.scratch, c.scratch.edges
+    if not e.active:
+        return []
+    slots, pairs = m.num_worlds * e.points_per_world, e.triangles.shape[0] * m.pads_per_world
+    search = (s.x_start, x, e.triangles, e.triangle_world, *s.pads, m.pad_half_extents, m.pads_per_world, e.points,
+              e.point_first, e.points_per_world)
+    return [c.rec(kpe.clear_edge_search, slots, e.best_dist, e.best_tri),
+            c.rec(kpe.nearest_surface_triangles, pairs, *search, 0, e.best_dist, e.best_tri),
+            c.rec(kpe.nearest_surface_triangles, pairs, *search, 1, e.best_dist, e.best_tri),
+            c.rec(kpe.lag_edge_points, slots, s.x_start, e.triangles, s.pad_pos0, s.pad_rot0, m.pad_half_extents,
+                  m.pads_per_world, e.points, e.point_pad, e.point_share, e.points_per_world,
+                  m.node_contact_stiffness, e.best_tri, e.point_tri, e.point_bary, e.point_normal,
+                  e.point_stiffness)]
+
+
+def _edge_geometry(c: _Context) -> tuple:
+    """Arguments shared by the edge points' depth and clamp kernels, up to the normals."""
+    m, s, e = c.model, c.scratch, c.scratch.edges
+    return (e.triangles, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points, e.point_pad,
+            e.points_per_world, e.point_tri, e.point_bary, e.point_normal, m.contact.stiffening_depth)
 
 
 def _tets(c: _Context, x, active, energy=None):
@@ -188,8 +215,7 @@ def _lag(c: _Context) -> list:
     return [c.rec(kc.lag_contacts, m.num_nodes, s.x_start, x, m.node_world, *s.pads, m.pad_half_extents,
                   m.pads_per_world, m.node_contact_stiffness, m.contact.stiffening_depth, s.lag_normal_force,
                   s.lag_normal),
-            *([c.rec(kec.lag_edge_contacts, s.edge_normal.shape[0], s.x_start, x, s.edge_nodes, s.edge_world, *s.pads,
-                     m.pad_half_extents, m.pads_per_world, s.edge_normal)] if s.edge_normal.shape[0] else []),
+            *_edge_search(c, x),
             c.rec(kc.keep_pad_depth, m.num_nodes, s.x_start, m.node_world, s.solve_worlds, m.free_axes, *s.pads,
                   m.pad_half_extents, m.pads_per_world, s.lag_normal_force, s.lag_normal, x),
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
@@ -239,13 +265,21 @@ def _apply(c: _Context, config) -> list:
 
 
 def _depth(c: _Context):
-    m, s = c.model, c.scratch
+    m, s, e = c.model, c.scratch, c.scratch.edges
     return [c.rec(kc.deepest_contact, m.num_nodes, c.work.positions, m.node_world, s.pad_pos1, s.pad_rot1,
                   m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth),
-            *([c.rec(kec.deepest_edge_contact, s.edge_normal.shape[0], c.work.positions, s.edge_nodes, s.edge_world,
-                     s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, s.edge_normal,
-                     m.contact.stiffening_depth, s.depth)]
-              if s.edge_normal.shape[0] else [])]
+            *([c.rec(kpe.deepest_edge_point, m.num_worlds * e.points_per_world, c.work.positions,
+                     *_edge_geometry(c), s.depth)] if e.active else [])]
+
+
+def _clamp(c: _Context, config) -> list:
+    """Nodes, then the pad edge points' triangles, left deeper than the penetration bound put back."""
+    m, s, e, x = c.model, c.scratch, c.scratch.edges, c.work.positions
+    bound = config.penetration_bound
+    return [c.rec(kc.clamp_depth, m.num_nodes, m.node_world, s.solve_worlds, m.free_axes, s.pad_pos1, s.pad_rot1,
+                  m.pad_half_extents, m.pads_per_world, s.lag_normal, bound, 0.9 * bound, x, s.clamped),
+            *([c.rec(kpe.clamp_edge_points, m.num_worlds * e.points_per_world, e.triangles, s.solve_worlds,
+                     m.free_axes, *_edge_geometry(c)[1:], bound, 0.9 * bound, x, s.clamped)] if e.active else [])]
 
 
 def _outputs(c: _Context) -> list:
@@ -279,9 +313,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
         trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=_depth(c),
-        clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, s.solve_worlds, model.free_axes, s.pad_pos1,
-                    s.pad_rot1, model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
-                    0.9 * config.penetration_bound, x, s.clamped),
+        clamp=_clamp(c, config),
         end=c.rec(ksub.end_substep, model.num_nodes, s.x_start, model.node_world, s.solve_worlds, s.diverged, 1.0 / h,
                   x, s.v_new),
         outputs=seq(_outputs(c)), cg_block=block,

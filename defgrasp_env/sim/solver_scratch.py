@@ -7,10 +7,57 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import warp as wp
 
 from .model import Model
-from .surface_edges import surface_edges
+from .pad_edge_points import pad_edge_points, surface_triangles
+
+
+@dataclass
+class EdgeContactScratch:
+    """Arrays of the pad edge contact (``kernels/pad_edge_contact.py``): T surface triangles, Q edge
+    points per world (all its pads'), W worlds. Empty (T = Q = 0) unless ``ContactParams.edge_contact``."""
+
+    triangles: wp.array         # [T] vec3i: global node ids of the objects' surface triangles (outward)
+    triangle_world: wp.array    # [T] int: world of each triangle
+    points: wp.array            # [Q] vec3: edge points in unit box coordinates (times the half extents: pad frame, m)
+    point_pad: wp.array         # [Q] int: the point's pad within its world
+    point_share: wp.array       # [Q] float, m: length of pad edge the point stands for
+    point_first: wp.array       # [P+1] int: first point of each pad of a world
+    best_dist: wp.array         # [W*Q] float, m: search: nearest triangle's distance
+    best_tri: wp.array          # [W*Q] int: search: lowest id of the triangles at that distance
+    point_tri: wp.array         # [W*Q] int: triangle the point meets this substep (-1: none)
+    point_bary: wp.array        # [W*Q] vec3: barycentric weights of the triangle's surface point
+    point_normal: wp.array      # [W*Q] vec3: the triangle's outward unit normal at the substep start
+    point_stiffness: wp.array   # [W*Q] float, N/m: penalty stiffness of the point's contact
+
+    @classmethod
+    def from_model(cls, model: Model) -> "EdgeContactScratch":
+        d, w, pads = model.device, model.num_worlds, model.pads_per_world
+        on = model.contact.edge_contact and pads > 0
+        tris, tri_world = surface_triangles(model) if on else (np.zeros((0, 3), np.int32), np.zeros(0, np.int32))
+        half = model.pad_half_extents.numpy()[:pads] if on else np.zeros((0, 3))
+        points, point_pad, share, first = pad_edge_points(half) if on else (
+            np.zeros((0, 3), np.float32), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(1, np.int32))
+        slots = w * len(points)
+        return cls(
+            triangles=wp.array(tris, dtype=wp.vec3i, device=d), triangle_world=wp.array(tri_world, dtype=int, device=d),
+            points=wp.array(points, dtype=wp.vec3, device=d), point_pad=wp.array(point_pad, dtype=int, device=d),
+            point_share=wp.array(share, dtype=float, device=d), point_first=wp.array(first, dtype=int, device=d),
+            best_dist=wp.zeros(slots, dtype=float, device=d), best_tri=wp.zeros(slots, dtype=int, device=d),
+            point_tri=wp.full(slots, -1, dtype=int, device=d), point_bary=wp.zeros(slots, dtype=wp.vec3, device=d),
+            point_normal=wp.zeros(slots, dtype=wp.vec3, device=d),
+            point_stiffness=wp.zeros(slots, dtype=float, device=d))
+
+    @property
+    def points_per_world(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def active(self) -> bool:
+        """Whether there is any edge point (edge contact on, pads present)."""
+        return self.points.shape[0] > 0 and self.triangles.shape[0] > 0
 
 
 @dataclass
@@ -86,11 +133,7 @@ class SolverScratch:
     coarse_rhs: wp.array        # [W, C] float: T^T r
     coarse_coef: wp.array       # [W, C] float: (T^T A T)^-1 T^T r
     coarse_guess: wp.array      # [N] vec3, m: T coef of the coarse initial guess
-    # edge contact with the pads (kernels/edge_contact.py): E surface edges (0 unless
-    # ContactParams.edge_contact)
-    edge_nodes: wp.array        # [E] vec2i: global node ids of the objects' surface edges
-    edge_world: wp.array        # [E] int: world of each surface edge
-    edge_normal: wp.array       # [E*P] vec3: contact face (outward normal, pad frame) of each surface edge and pad
+    edges: EdgeContactScratch   # pad edge contact (empty unless ContactParams.edge_contact)
 
     @classmethod
     def from_model(cls, model: Model) -> "SolverScratch":
@@ -112,7 +155,6 @@ class SolverScratch:
 
         aggregate = model.node_aggregate
         size = 3 * (int(aggregate.max()) + 1)
-        edges, edge_world = surface_edges(model) if model.contact.edge_contact else surface_edges(None)
 
         def coarse(dtype, ndim):
             return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)
@@ -133,8 +175,7 @@ class SolverScratch:
             coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
             coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
             coarse_guess=vec(),
-            edge_nodes=wp.array(edges, dtype=wp.vec2i, device=d), edge_world=wp.array(edge_world, dtype=int, device=d),
-            edge_normal=vec(len(edges) * model.pads_per_world),
+            edges=EdgeContactScratch.from_model(model),
         )
         scratch.solve_worlds.fill_(1)
         scratch.step_length.fill_(1.0)  # begin_line_search resets it; with no line search it stays 1

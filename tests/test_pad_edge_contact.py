@@ -1,0 +1,226 @@
+"""Pad edge contact's parts against independent references (``kernels/pad_edge_contact.py``,
+``sim/pad_edge_points.py``): the nearest point of a triangle against dense sampling, the search's
+triangle against a brute-force numpy search, the edge-point lattice against its definition, and the
+contact force against central differences of its energy. The whole contact (a pad edge pressed
+between surface nodes) is tested in ``test_fem_contact_edges.py``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+
+from defgrasp_env.sim.kernels import pad_edge_contact as kpe
+from defgrasp_env.sim.materials import Material
+from defgrasp_env.sim.meshing import make_object_mesh
+from defgrasp_env.sim.model import ContactParams, build_model
+from defgrasp_env.sim.pad_edge_points import EDGE_POINT_SPACING, pad_edge_points, surface_triangles
+from defgrasp_env.sim.solver_scratch import EdgeContactScratch
+from defgrasp_env.transforms import axis_angle_to_quat, quat_rotate
+
+HALF = np.array([0.008175, 0.01875, 0.011])  # the env's pad collision box (m)
+KNEE = ContactParams().stiffening_depth
+
+
+@wp.kernel
+def _closest(a: wp.array(dtype=wp.vec3), b: wp.array(dtype=wp.vec3), c: wp.array(dtype=wp.vec3),
+             p: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    out[i] = kpe.closest_point_barycentric(a[i], b[i], c[i], p[i])
+
+
+def test_closest_point_of_a_triangle_against_dense_sampling():
+    """Random triangles and points (inside, beside every edge and vertex region): the kernel's
+    nearest point is no farther than the nearest of ~5000 barycentric samples (to the samples'
+    spacing), and its weights are a convex combination."""
+    rng = np.random.default_rng(7)
+    count = 300
+    a, b, c = (rng.normal(0, 0.01, (count, 3)) for _ in range(3))
+    p = rng.normal(0, 0.015, (count, 3))
+    arrays = [wp.array(v.astype(np.float32), dtype=wp.vec3, device="cpu") for v in (a, b, c, p)]
+    out = wp.zeros(count, dtype=wp.vec3, device="cpu")
+    wp.launch(_closest, count, [*arrays, out], device="cpu")
+    bary = out.numpy().astype(np.float64)
+    assert np.all(bary >= -1e-6) and np.allclose(bary.sum(1), 1.0, atol=1e-5)
+    n = 100
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    keep = i + j <= n
+    w = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], 1) / n
+    for k in range(count):
+        tri = np.stack([a[k], b[k], c[k]])
+        samples = w @ tri
+        best = np.linalg.norm(samples - p[k], axis=1).min()
+        got = np.linalg.norm(bary[k] @ tri - p[k])
+        spacing = np.linalg.norm(tri - np.roll(tri, 1, 0), axis=1).max() / n
+        assert got <= best + 1e-6, (k, got, best)
+        assert got >= best - spacing - 1e-6, (k, got, best)
+
+
+@pytest.mark.parametrize("half, spacing", [(HALF, EDGE_POINT_SPACING), ((0.01, 0.002, 0.005), 0.0033)])
+def test_edge_points_lie_on_every_edge_at_most_spacing_apart_with_each_corner_once(half, spacing):
+    points, pads, share, first = pad_edge_points(np.asarray([half, half]), spacing)
+    assert first.tolist() == [0, len(points) // 2, len(points)] and pads.tolist() == [0] * first[1] + [1] * first[1]
+    one = points[: first[1]].astype(np.float64)
+    on_faces = np.isclose(np.abs(one), 1.0)
+    assert np.all(on_faces.sum(1) >= 2)  # every point on a box edge
+    corners = one[on_faces.sum(1) == 3]
+    assert len(corners) == 8 and len(np.unique(corners, axis=0)) == 8
+    assert len(np.unique(one, axis=0)) == len(one)  # no point twice
+    for axis in range(3):  # neighbours along each of the 12 edges at most ``spacing`` apart
+        others = [j for j in range(3) if j != axis]
+        for sb in (-1, 1):
+            for sc in (-1, 1):
+                on = one[np.isclose(one[:, others[0]], sb) & np.isclose(one[:, others[1]], sc)]
+                along = np.sort(on[:, axis]) * half[axis]
+                assert np.isclose(along[0], -half[axis]) and np.isclose(along[-1], half[axis])
+                assert np.diff(along).max() <= spacing + 1e-9
+    # the edge length each point stands for sums to the 12 edges' length (corners counted on x)
+    assert np.isclose(share[: first[1]].sum(), 8 * np.sum(half), rtol=0.15)
+
+
+def _model(name="cuboid", e=1e6):
+    mesh = make_object_mesh(name)
+    return mesh, build_model([mesh, mesh], [Material(youngs_modulus=e)] * 2, pad_half_extents=[HALF, HALF],
+                             contact=ContactParams(edge_contact=True), device="cpu")
+
+
+def _search(model, edges, x, pos, rot):
+    """Run the search and lag kernels with both the substep's pad poses = (pos, rot) and x still."""
+    xw = wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu")
+    pw = wp.array(pos.astype(np.float32), dtype=wp.vec3, device="cpu")
+    qw = wp.array(rot.astype(np.float32), dtype=wp.quat, device="cpu")
+    pads = (pw, qw, pw, qw)
+    slots = model.num_worlds * edges.points_per_world
+    args = (xw, xw, edges.triangles, edges.triangle_world, *pads, model.pad_half_extents, model.pads_per_world,
+            edges.points, edges.point_first, edges.points_per_world)
+    wp.launch(kpe.clear_edge_search, slots, [edges.best_dist, edges.best_tri], device="cpu")
+    for choose in (0, 1):
+        wp.launch(kpe.nearest_surface_triangles, edges.triangles.shape[0] * model.pads_per_world,
+                  [*args, choose, edges.best_dist, edges.best_tri], device="cpu")
+    wp.launch(kpe.lag_edge_points, slots, [xw, edges.triangles, pw, qw, model.pad_half_extents, model.pads_per_world,
+                                           edges.points, edges.point_pad, edges.point_share, edges.points_per_world,
+                                           model.node_contact_stiffness, edges.best_tri, edges.point_tri,
+                                           edges.point_bary, edges.point_normal, edges.point_stiffness], device="cpu")
+    return xw, pads
+
+
+def _pad_points_world(edges, pos, rot, model):
+    points = edges.points.numpy().astype(np.float64)
+    pad_of = edges.point_pad.numpy()
+    out = []
+    for w in range(model.num_worlds):
+        k = w * model.pads_per_world + pad_of
+        out.append(pos[k] + quat_rotate(rot[k], points * HALF))
+    return np.concatenate(out)
+
+
+def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
+    """Two worlds of the cuboid (the second shifted so that its object overlaps no pad of world 0),
+    pads placed across the objects' surfaces at random poses: every edge point within the search
+    radius (2 mm, nothing moves) gets a triangle of its own world at the brute-force nearest
+    distance (float32) and that triangle's outward normal; points
+    farther away get none."""
+    mesh, model = _model()
+    edges = EdgeContactScratch.from_model(model)
+    tris, tri_world = surface_triangles(model)
+    x = model.rest_positions.numpy().astype(np.float64)
+    x[model.world_nodes(1)] += np.array([0.3, 0.0, 0.0])
+    rng = np.random.default_rng(11)
+    checked = 0
+    for trial in range(6):
+        rot = rng.normal(size=(4, 4))
+        rot /= np.linalg.norm(rot, axis=1, keepdims=True)
+        # pad centres near the objects' top and side faces, half a pad inside
+        pos = np.array([[0.0, 0.04, 0.0], [0.02, 0.02, 0.0], [0.3, 0.04, 0.01], [0.32, 0.02, 0.0]])
+        pos += rng.normal(0, 0.004, pos.shape)
+        _search(model, edges, x, pos, rot)
+        q = _pad_points_world(edges, pos, rot, model)
+        got = edges.point_tri.numpy()
+        normals = edges.point_normal.numpy()
+        per_world = edges.points_per_world
+        for slot in range(len(q)):
+            w = slot // per_world
+            mine = np.flatnonzero(tri_world == w)
+            d = _point_triangle_distances(q[slot], x[tris[mine]])
+            best = d.min()
+            if best > kpe.SEARCH_MARGIN * 0.999:
+                if best > kpe.SEARCH_MARGIN * 1.001:
+                    assert got[slot] == -1, (slot, best)
+                continue
+            t = got[slot]
+            assert t >= 0 and tri_world[t] == w, (slot, t)
+            assert abs(_point_triangle_distances(q[slot], x[tris[t]][None])[0] - best) < 2e-6, (slot, best)
+            a, b, c = x[tris[t]]
+            n = np.cross(b - a, c - a)
+            assert np.allclose(normals[slot], n / np.linalg.norm(n), atol=1e-5)
+            checked += 1
+    assert checked > 200, checked
+
+
+def _point_triangle_distances(p, tri):
+    """Distances from p [3] to triangles tri [T, 3, 3]: to the plane where p projects inside,
+    else to the nearest of the three edges (float64, vectorised over the triangles)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    height = np.einsum("ij,ij->i", p - a, normal)
+    proj = p - height[:, None] * normal
+    inside = np.ones(len(tri), bool)
+    for u, v in ((a, b), (b, c), (c, a)):  # the projection on the inner side of every edge
+        inside &= np.einsum("ij,ij->i", np.cross(v - u, proj - u), normal) >= 0
+    best = np.full(len(tri), np.inf)
+    for u, v in ((a, b), (b, c), (c, a)):
+        t = np.clip(np.einsum("ij,ij->i", p - u, v - u) / np.einsum("ij,ij->i", v - u, v - u), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(p - (u + t[:, None] * (v - u)), axis=1))
+    return np.where(inside, np.abs(height), best)
+
+
+def test_edge_point_force_is_minus_the_gradient_of_its_energy():
+    """A pad pressed 1.2 mm into the cuboid's top face at a tilt, so its edge points lie at
+    depths past the skin and the cubic knee: the force the evaluate kernel adds to the nodes
+    equals minus the central-difference gradient of the energy kernel (float64 sums; step 1e-6 m),
+    and the force on the pad balances the nodes' forces."""
+    mesh, model = _model(e=1e6)
+    edges = EdgeContactScratch.from_model(model)
+    x = model.rest_positions.numpy().astype(np.float64)
+    top = x[:, 1].max()
+    axis = np.array([1.0, 0.0, 0.3])
+    rot = np.repeat(axis_angle_to_quat(0.5 * axis / np.linalg.norm(axis))[None], 4, 0)
+    pos = np.array([[0.003, 0.0, 0.002], [0.3, 1.0, 0.0], [0.3, 1.0, 0.0], [0.3, 1.0, 0.0]])
+    lowest = (quat_rotate(rot[:1], (np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * HALF))[:, 1]
+              .min())
+    pos[0, 1] = top - lowest - 0.0012  # the lowest corner 1.2 mm below the face
+    xw, pads = _search(model, edges, x, pos, rot)
+    n = model.num_nodes
+    active = wp.ones(model.num_worlds, dtype=int, device="cpu")
+    slots = model.num_worlds * edges.points_per_world
+    args = (edges.triangles, active, pads[2], pads[3], model.pad_half_extents, model.pads_per_world, edges.points,
+            edges.point_pad, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
+            edges.point_stiffness, KNEE)
+
+    def energy(xx):
+        out = wp.zeros(model.num_worlds, dtype=wp.float64, device="cpu")
+        wp.launch(kpe.edge_point_energy, slots,
+                  [wp.array(xx.astype(np.float64).astype(np.float32), dtype=wp.vec3, device="cpu"), *args, out],
+                  device="cpu")
+        return float(out.numpy().sum())
+
+    zeros = lambda dtype: wp.zeros(n, dtype=dtype, device="cpu")  # noqa: E731
+    residual, diag, hess, force = zeros(wp.vec3), zeros(wp.mat33), zeros(wp.mat33), zeros(wp.vec3)
+    pad_fn = wp.zeros(4, dtype=float, device="cpu")
+    pad_f = wp.zeros(4, dtype=wp.vec3, device="cpu")
+    pen = wp.zeros(2, dtype=float, device="cpu")
+    wp.launch(kpe.evaluate_edge_points, slots, [xw, *args, 1, residual, diag, hess, force, pad_fn, pad_f, pen],
+              device="cpu")
+    f = residual.numpy().astype(np.float64)
+    touched = np.flatnonzero(np.abs(f).sum(1) > 0)
+    assert len(touched) >= 3 and pen.numpy()[0] > 1e-3
+    assert np.allclose(-f.sum(0), pad_f.numpy()[0], rtol=1e-4, atol=1e-4)
+    eps = 1e-6
+    for i in touched[:12]:
+        for j in range(3):
+            xp, xm = x.copy(), x.copy()
+            xp[i, j] += eps
+            xm[i, j] -= eps
+            fd = -(energy(xp) - energy(xm)) / (2 * eps)
+            assert abs(fd - f[i, j]) < 0.02 * np.abs(f[i]).max() + 1e-3, (i, j, fd, f[i, j])
