@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import numpy as np  # noqa: E402
 
 from defgrasp_env.layout import AGENT_POS, ENV_STATE  # noqa: E402
-from train_ppo import load_normalisation, make_vec_env, parse_object, read_settings  # noqa: E402
+from train_ppo import load_normalisation, make_vec_env, parse_object  # noqa: E402
 
 #: ``run.json`` keys that are env options (passed to ``gym.make_vec``).
 ENV_OPTIONS = ("object", "youngs_modulus", "episode_seconds", "edge_contact")
@@ -81,7 +81,7 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     from defgrasp_env import PickupConfig
 
     run = pathlib.Path(run)
-    settings = read_settings(run)
+    settings = json.loads((run / "run.json").read_text())
     unknown = sorted(set(env_overrides) - set(ENV_OPTIONS))
     if unknown:
         raise ValueError(f"env overrides must be among {ENV_OPTIONS}, got {unknown}")

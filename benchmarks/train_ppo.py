@@ -220,24 +220,13 @@ def save_run(model, curve: LearningCurve, out: pathlib.Path, title: str) -> None
     (out / "run.json").write_text(json.dumps(curve.settings, indent=1) + "\n")
 
 
-#: Settings that a run.json written before they were recorded lacks, with the value such runs used
-#: (they trained before pad edge contact became the env's default).
-UNRECORDED_SETTINGS = {"edge_contact": False}
-
-
-def read_settings(folder: pathlib.Path) -> dict:
-    """The settings of the run saved in ``folder`` (its ``run.json``, with ``UNRECORDED_SETTINGS``
-    where it predates them)."""
-    path = pathlib.Path(folder) / "run.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"{folder}: no run.json there (the settings save_run writes)")
-    return UNRECORDED_SETTINGS | json.loads(path.read_text())
-
-
 def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
     """The curve rows of the run saved in ``folder`` if its settings (``run.json``) are ``settings``
     (the simulation device may differ); else ValueError naming each difference."""
-    saved = read_settings(folder)
+    path = pathlib.Path(folder) / "run.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"--resume {folder}: no run.json there (the settings save_run writes)")
+    saved = json.loads(path.read_text())
     settings = json.loads(json.dumps(settings))  # as saved: tuples become lists
     keys = [k for k in sorted(set(saved) | set(settings)) if k != "device"]
     differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}"
@@ -268,9 +257,10 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
 
     settings = dict(num_envs=num_envs, n_steps=n_steps, actions=actions, gamma=gamma, gae_lambda=gae_lambda,
                     n_epochs=n_epochs, seed=seed, **env_kwargs)
-    settings.setdefault("edge_contact", PickupConfig(**env_kwargs).edge_contact)  # always recorded
     if init_from is not None:
         settings["init_from"] = str(init_from)
+    if env_kwargs.get("edge_contact") is False:  # the default: earlier runs' run.json lacks it
+        settings.pop("edge_contact")
     if fixed_world_objects:  # only when set: the run.json of earlier runs lacks it
         settings["fixed_world_objects"] = True
     tolerance = PickupConfig(**env_kwargs).success_tolerance
@@ -367,7 +357,7 @@ def main(argv=None) -> int:
                          "at autoresets (the vector env's world_objects)")
     ap.add_argument("--youngs-modulus", type=float, default=1e6)
     ap.add_argument("--episode-seconds", type=float, default=15.0)
-    ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
+    ap.add_argument("--edge-contact", action="store_true",
                     help="hold the pads' box edges and corners out of the object (PickupConfig.edge_contact)")
     ap.add_argument("--device", default="cpu", help="simulation device (cpu, cuda:0)")
     ap.add_argument("--torch-device", default="cpu", help="PPO network device")

@@ -42,3 +42,30 @@ def test_adversarial_actions(name, e):
     assert r["substeps"] > 0, r  # the monitor saw the solves
     assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
     assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
+
+
+def _within_bounds(r) -> None:
+    grip = GripperConfig().grip_force_limit
+    assert r["crossed"] == 0 and r["diverged"] == 0 and r["unflagged"] == 0, r
+    assert r["deepest"] < 1e-3, r["deepest"]
+    assert r["substeps"] > 0, r
+    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
+    assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, e", [("cuboid", 1e5), ("sphere", 1e4), ("torus", 1e6), ("cylinder", 1e5)])
+def test_adversarial_actions_with_pad_edge_contact(name, e):
+    """The same fuzz with the pads' box edges held out of the object (``edge_contact=True``), on the
+    cells where earlier versions of that contact diverged or read kN (the soft cuboid and sphere
+    swept at 2 m/s: a pad edge thrown out of a soft object, or pushed out through a face that
+    fought the ground or the node contacts) and two cells not used to tune it: every bound holds."""
+    _within_bounds(run_cell(name, e, STEPS, edge_contact=True))
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="known gap: with edge contact a pad swept at 2 m/s into a stiff object "
+                                       "reads a pad normal force above grip + wrist limit + impact (README)")
+@pytest.mark.parametrize("name, e", [("sphere", 1e6), ("cuboid", 1e7)])
+def test_pad_edge_contact_tip_force_on_stiff_objects(name, e):
+    _within_bounds(run_cell(name, e, STEPS, edge_contact=True))

@@ -84,12 +84,14 @@ def _model(name="cuboid", e=1e6):
                              contact=ContactParams(edge_contact=True), device="cpu")
 
 
-def _search(model, edges, x, pos, rot):
-    """Run the search and lag kernels with both the substep's pad poses = (pos, rot) and x still."""
+def _search(model, edges, x, pos, rot, start=None):
+    """Run the search and lag kernels with the nodes still at x and the pads at (pos, rot) at the
+    substep's end, at (start, rot) at its start (default: pos)."""
     xw = wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu")
     pw = wp.array(pos.astype(np.float32), dtype=wp.vec3, device="cpu")
     qw = wp.array(rot.astype(np.float32), dtype=wp.quat, device="cpu")
-    pads = (pw, qw, pw, qw)
+    p0 = pw if start is None else wp.array(start.astype(np.float32), dtype=wp.vec3, device="cpu")
+    pads = (p0, qw, pw, qw)
     slots = model.num_worlds * edges.points_per_world
     args = (xw, xw, edges.triangles, edges.triangle_world, *pads, model.pad_half_extents, model.pads_per_world,
             edges.points, edges.point_first, edges.points_per_world)
@@ -97,10 +99,13 @@ def _search(model, edges, x, pos, rot):
     for choose in (0, 1):
         wp.launch(kpe.nearest_surface_triangles, edges.triangles.shape[0] * model.pads_per_world,
                   [*args, choose, edges.best_dist, edges.best_tri], device="cpu")
-    wp.launch(kpe.lag_edge_points, slots, [xw, edges.triangles, pw, qw, model.pad_half_extents, model.pads_per_world,
-                                           edges.points, edges.point_pad, edges.point_share, edges.points_per_world,
-                                           model.node_contact_stiffness, edges.best_tri, edges.point_tri,
-                                           edges.point_bary, edges.point_normal, edges.point_stiffness], device="cpu")
+    wp.launch(kpe.lag_edge_points, slots, [xw, xw, edges.triangles, *pads, model.pad_half_extents,
+                                           model.pads_per_world, edges.points, edges.point_pad, edges.point_share,
+                                           edges.points_per_world, model.node_contact_stiffness,
+                                           wp.zeros(model.num_nodes * 3, dtype=float, device="cpu"),
+                                           wp.zeros(model.num_nodes * 3, dtype=wp.vec3, device="cpu"),
+                                           edges.best_tri, edges.point_tri, edges.point_bary, edges.point_normal,
+                                           edges.point_stiffness, edges.point_allowed, KNEE], device="cpu")
     return xw, pads
 
 
@@ -117,9 +122,9 @@ def _pad_points_world(edges, pos, rot, model):
 def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
     """Two worlds of the cuboid (the second shifted so that its object overlaps no pad of world 0),
     pads placed across the objects' surfaces at random poses: every edge point within the search
-    radius (2 mm, nothing moves) gets a triangle of its own world at the brute-force nearest
-    distance (float32) and that triangle's outward normal; points
-    farther away get none."""
+    radius (2 mm, nothing moves) of a triangle that faces its pad's centre gets a triangle of its
+    own world at the brute-force nearest distance among those (float32) and that triangle's
+    outward normal; points farther away get none."""
     mesh, model = _model()
     edges = EdgeContactScratch.from_model(model)
     tris, tri_world = surface_triangles(model)
@@ -140,7 +145,10 @@ def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
         per_world = edges.points_per_world
         for slot in range(len(q)):
             w = slot // per_world
-            mine = np.flatnonzero(tri_world == w)
+            centre = pos[w * model.pads_per_world + edges.point_pad.numpy()[slot % per_world]]
+            a, b, c = (x[tris[:, j]] for j in range(3))
+            facing = np.cross(b - a, c - a) @ (centre - q[slot]) > 0
+            mine = np.flatnonzero((tri_world == w) & facing)
             d = _point_triangle_distances(q[slot], x[tris[mine]])
             best = d.min()
             if best > kpe.SEARCH_MARGIN * 0.999:
@@ -176,8 +184,8 @@ def _point_triangle_distances(p, tri):
 
 
 def test_edge_point_force_is_minus_the_gradient_of_its_energy():
-    """A pad pressed 1.2 mm into the cuboid's top face at a tilt, so its edge points lie at
-    depths past the skin and the cubic knee: the force the evaluate kernel adds to the nodes
+    """A pad pressed 1.2 mm into the cuboid's top face at a tilt over the substep (from 3 mm
+    higher), so its edge points lie at depths past the skin and the cubic knee: the force the evaluate kernel adds to the nodes
     equals minus the central-difference gradient of the energy kernel (float64 sums; step 1e-6 m),
     and the force on the pad balances the nodes' forces."""
     mesh, model = _model(e=1e6)
@@ -190,13 +198,13 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
     lowest = (quat_rotate(rot[:1], (np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * HALF))[:, 1]
               .min())
     pos[0, 1] = top - lowest - 0.0012  # the lowest corner 1.2 mm below the face
-    xw, pads = _search(model, edges, x, pos, rot)
+    xw, pads = _search(model, edges, x, pos, rot, start=pos + np.array([0.0, 0.003, 0.0]))  # it came from above
     n = model.num_nodes
     active = wp.ones(model.num_worlds, dtype=int, device="cpu")
     slots = model.num_worlds * edges.points_per_world
     args = (edges.triangles, active, pads[2], pads[3], model.pad_half_extents, model.pads_per_world, edges.points,
             edges.point_pad, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
-            edges.point_stiffness, KNEE)
+            edges.point_stiffness, edges.point_allowed, KNEE)
 
     def energy(xx):
         out = wp.zeros(model.num_worlds, dtype=wp.float64, device="cpu")
@@ -214,7 +222,7 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
               device="cpu")
     f = residual.numpy().astype(np.float64)
     touched = np.flatnonzero(np.abs(f).sum(1) > 0)
-    assert len(touched) >= 3 and pen.numpy()[0] > 1e-3
+    assert len(touched) >= 3 and pen.numpy()[0] > 2 * KNEE  # (depth beyond the skin: past the cubic knee)
     assert np.allclose(-f.sum(0), pad_f.numpy()[0], rtol=1e-4, atol=1e-4)
     eps = 1e-6
     for i in touched[:12]:

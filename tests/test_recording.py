@@ -159,9 +159,6 @@ def test_config_json_round_trip_is_exact():
     assert config_from_json(config_to_json(cfg)) == cfg
     with pytest.raises(ValueError, match="unknown"):
         config_from_json('{"nonsense": 1}')
-    # a file written before edge contact was recorded was simulated without it (off by default then)
-    assert PickupConfig().edge_contact is True and config_from_json('{"object": "torus"}').edge_contact is False
-    assert config_from_json(config_to_json(PickupConfig(edge_contact=False))).edge_contact is False
 
 
 def test_readme_schema_table_matches_the_code():

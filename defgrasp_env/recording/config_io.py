@@ -48,20 +48,12 @@ def _build(cls: type, data: dict) -> Any:
     return cls(**kwargs)
 
 
-#: PickupConfig fields that files written before the field existed lack, with the value their
-#: simulation used (pad edge contact was off then; it is on by default now).
-UNRECORDED_FIELDS = {"edge_contact": False}
-
-
 def config_from_json(text: str) -> PickupConfig:
-    """Inverse of :func:`config_to_json` (validated by the dataclasses themselves); a field in
-    ``UNRECORDED_FIELDS`` that the text lacks takes the value the file was simulated with."""
+    """Inverse of :func:`config_to_json` (validated by the dataclasses themselves)."""
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"config_json is not valid JSON: {exc}") from exc
-    if isinstance(data, dict):
-        data = UNRECORDED_FIELDS | data
     return _build(PickupConfig, data)
 
 

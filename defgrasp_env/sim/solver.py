@@ -252,8 +252,7 @@ class ImplicitSolver:
             for cmd in run.lag:
                 cmd.launch()
             self._newton(run, cfg.patient_iterations if patient_any else 0)
-            for cmd in run.clamp:
-                cmd.launch()
+            run.clamp.launch()
             run.end.launch()
             if k == cfg.substeps - 1:
                 self._evaluate_outputs(run)

@@ -6,7 +6,7 @@ iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coar
 ``cg`` (a block of CG iterations, repeated), ``coarse_post``, the line search (``energy0`` once,
 ``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` (the iterate's deepest contact) decides
 the extra iterations (with the loop control of ``solver_loops``);
-``clamp`` (nodes and pad edge points left deeper than the penetration bound put back to it), ``end`` (velocities) and,
+``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
 after the last substep, ``outputs`` (forces, stresses, residual).
 Launches are recorded once per substep length and (state in, state out, control) set
 (``wp.launch(record_cmd=True)``; ``ImplicitSolver`` keeps the 8 sets used last). Each phase is a list
@@ -76,7 +76,7 @@ class SubstepLaunches:
     trial: list
     apply: list
     depth: list         # launches: the iterate's deepest contact per world (extra iterations)
-    clamp: list         # launches: nodes and edge points left deeper than the bound put back
+    clamp: object
     end: object
     outputs: list
     cg_block: int       # CG iterations per launch of ``cg``
@@ -108,7 +108,7 @@ def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
     e = s.edges
     points = (x, e.triangles, active, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points,
               e.point_pad, e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_stiffness,
-              m.contact.stiffening_depth)
+              e.point_allowed, m.contact.stiffening_depth)
     slots = m.num_worlds * e.points_per_world if e.active else 0
     if energy is not None:
         return [c.rec(kenergy.node_energy, m.num_nodes, x, s.x_start, work.velocities, *common, energy),
@@ -132,17 +132,21 @@ def _edge_search(c: _Context, x) -> list:
     return [c.rec(kpe.clear_edge_search, slots, e.best_dist, e.best_tri),
             c.rec(kpe.nearest_surface_triangles, pairs, *search, 0, e.best_dist, e.best_tri),
             c.rec(kpe.nearest_surface_triangles, pairs, *search, 1, e.best_dist, e.best_tri),
-            c.rec(kpe.lag_edge_points, slots, s.x_start, e.triangles, s.pad_pos0, s.pad_rot0, m.pad_half_extents,
+            c.rec(kpe.lag_edge_points, slots, s.x_start, x, e.triangles, *s.pads, m.pad_half_extents,
                   m.pads_per_world, e.points, e.point_pad, e.point_share, e.points_per_world,
-                  m.node_contact_stiffness, e.best_tri, e.point_tri, e.point_bary, e.point_normal,
-                  e.point_stiffness)]
+                  m.node_contact_stiffness, s.lag_normal_force, s.lag_normal, e.best_tri, e.point_tri, e.point_bary,
+                  e.point_normal,
+                  e.point_stiffness, e.point_allowed, m.contact.stiffening_depth)]
 
 
-def _edge_geometry(c: _Context) -> tuple:
-    """Arguments shared by the edge points' depth and clamp kernels, up to the normals."""
+def _keep_edge_depth(c: _Context, x) -> list:
+    """The initial guess's fix for the pad edge points (after the nodes')."""
     m, s, e = c.model, c.scratch, c.scratch.edges
-    return (e.triangles, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points, e.point_pad,
-            e.points_per_world, e.point_tri, e.point_bary, e.point_normal, m.contact.stiffening_depth)
+    if not e.active:
+        return []
+    return [c.rec(kpe.keep_edge_point_depth, m.num_worlds * e.points_per_world, e.triangles, s.solve_worlds,
+                  m.free_axes, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points, e.point_pad,
+                  e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_allowed, x)]
 
 
 def _tets(c: _Context, x, active, energy=None):
@@ -218,6 +222,7 @@ def _lag(c: _Context) -> list:
             *_edge_search(c, x),
             c.rec(kc.keep_pad_depth, m.num_nodes, s.x_start, m.node_world, s.solve_worlds, m.free_axes, *s.pads,
                   m.pad_half_extents, m.pads_per_world, s.lag_normal_force, s.lag_normal, x),
+            *_keep_edge_depth(c, x),
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
 
 
@@ -265,21 +270,9 @@ def _apply(c: _Context, config) -> list:
 
 
 def _depth(c: _Context):
-    m, s, e = c.model, c.scratch, c.scratch.edges
+    m, s = c.model, c.scratch
     return [c.rec(kc.deepest_contact, m.num_nodes, c.work.positions, m.node_world, s.pad_pos1, s.pad_rot1,
-                  m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth),
-            *([c.rec(kpe.deepest_edge_point, m.num_worlds * e.points_per_world, c.work.positions,
-                     *_edge_geometry(c), s.depth)] if e.active else [])]
-
-
-def _clamp(c: _Context, config) -> list:
-    """Nodes, then the pad edge points' triangles, left deeper than the penetration bound put back."""
-    m, s, e, x = c.model, c.scratch, c.scratch.edges, c.work.positions
-    bound = config.penetration_bound
-    return [c.rec(kc.clamp_depth, m.num_nodes, m.node_world, s.solve_worlds, m.free_axes, s.pad_pos1, s.pad_rot1,
-                  m.pad_half_extents, m.pads_per_world, s.lag_normal, bound, 0.9 * bound, x, s.clamped),
-            *([c.rec(kpe.clamp_edge_points, m.num_worlds * e.points_per_world, e.triangles, s.solve_worlds,
-                     m.free_axes, *_edge_geometry(c)[1:], bound, 0.9 * bound, x, s.clamped)] if e.active else [])]
+                  m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth)]
 
 
 def _outputs(c: _Context) -> list:
@@ -313,7 +306,9 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
         trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=_depth(c),
-        clamp=_clamp(c, config),
+        clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, s.solve_worlds, model.free_axes, s.pad_pos1,
+                    s.pad_rot1, model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
+                    0.9 * config.penetration_bound, x, s.clamped),
         end=c.rec(ksub.end_substep, model.num_nodes, s.x_start, model.node_world, s.solve_worlds, s.diverged, 1.0 / h,
                   x, s.v_new),
         outputs=seq(_outputs(c)), cg_block=block,

@@ -31,6 +31,7 @@ class EdgeContactScratch:
     point_bary: wp.array        # [W*Q] vec3: barycentric weights of the triangle's surface point
     point_normal: wp.array      # [W*Q] vec3: the triangle's outward unit normal at the substep start
     point_stiffness: wp.array   # [W*Q] float, N/m: penalty stiffness of the point's contact
+    point_allowed: wp.array     # [W*Q] float, m: depth the point may keep this substep (its start depth or the skin)
 
     @classmethod
     def from_model(cls, model: Model) -> "EdgeContactScratch":
@@ -48,7 +49,7 @@ class EdgeContactScratch:
             best_dist=wp.zeros(slots, dtype=float, device=d), best_tri=wp.zeros(slots, dtype=int, device=d),
             point_tri=wp.full(slots, -1, dtype=int, device=d), point_bary=wp.zeros(slots, dtype=wp.vec3, device=d),
             point_normal=wp.zeros(slots, dtype=wp.vec3, device=d),
-            point_stiffness=wp.zeros(slots, dtype=float, device=d))
+            point_stiffness=wp.zeros(slots, dtype=float, device=d), point_allowed=wp.zeros(slots, dtype=float, device=d))
 
     @property
     def points_per_world(self) -> int:
