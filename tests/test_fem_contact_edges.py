@@ -47,6 +47,33 @@ def axis_quat(axis, angle: float) -> np.ndarray:
     return np.concatenate([np.sin(angle / 2) * axis, [np.cos(angle / 2)]])
 
 
+def press(mesh, e: float, edges: bool, centre: np.ndarray, quat, travel: float) -> tuple[float, float]:
+    """Drive a pad box (``HALF``, orientation ``quat``) from ``centre`` down by ``travel`` (m) at
+    0.2 m/s in 5 ms steps into ``mesh`` (E = ``e``, resting on the ground), then hold it 10 steps;
+    returns the deepest surface sample inside the pad over the run (m) and the object's upward
+    force on the pad at the end (N)."""
+    model = build_model([mesh], [Material(youngs_modulus=e)], pad_half_extents=[HALF],
+                        contact=ContactParams(edge_contact=edges), device="cpu")
+    state, control = State.from_model(model), Control.from_model(model)
+    solver = ImplicitSolver(model, SolverConfig(substeps=1))
+    state.pad_positions.assign(centre[None].astype(np.float32))
+    state.pad_orientations.assign(np.asarray(quat)[None].astype(np.float32))
+    control.pad_target_orientations.assign(np.asarray(quat)[None].astype(np.float32))
+    h, speed = 0.005, 0.2
+    tris = np.asarray(mesh.surface)
+    moves = int(round(travel / (speed * h)))
+    deepest = 0.0
+    for k in range(moves + 10):  # drive down, then hold
+        if k < moves:
+            centre = centre - np.array([0.0, speed * h, 0.0])
+        control.pad_target_positions.assign(centre[None].astype(np.float32))
+        stats = solver.step(state, state, control, h)
+        assert not stats.diverged.any()
+        x = state.positions.numpy().astype(np.float64)
+        deepest = max(deepest, box_depth(surface_samples(x, tris), centre, quat))
+    return deepest, float(state.pad_force.numpy()[0, 1])
+
+
 @pytest.mark.parametrize("size, resolution, e, quat, corner", [
     # edge along z (pad turned 45 deg about z), cuboid of the env (40 mm, 8 mm node rows), E = 1e7
     ((0.04, 0.04, 0.04), 0.010, 1e7, axis_quat((0, 0, 1), np.pi / 4), (-1, -1, 0)),
@@ -72,27 +99,7 @@ def test_pad_edge_pressed_between_surface_nodes_does_not_sink_in(size, resolutio
     assert np.isclose(tip_offset[1], quat_rotate(np.repeat(np.asarray(quat)[None], 8, 0), corners)[:, 1].min())
     between = 0.5 * (rows[len(rows) // 2 - 1] + rows[len(rows) // 2])  # half way between two rows
     target = np.array([between, top + 0.001, 0.0]) if corner[2] == 0 else np.array([0.0, top + 0.001, between])
-    model = build_model([mesh], [Material(youngs_modulus=e)], pad_half_extents=[HALF],
-                        contact=ContactParams(edge_contact=edges), device="cpu")
-    state, control = State.from_model(model), Control.from_model(model)
-    solver = ImplicitSolver(model, SolverConfig(substeps=1))
-    centre = target - tip_offset
-    state.pad_positions.assign(centre[None].astype(np.float32))
-    state.pad_orientations.assign(np.asarray(quat)[None].astype(np.float32))
-    control.pad_target_orientations.assign(np.asarray(quat)[None].astype(np.float32))
-    h, speed, depth_goal = 0.005, 0.2, 0.0035
-    tris = np.asarray(mesh.surface)
-    moves = int(round((0.001 + depth_goal) / (speed * h)))
-    deepest, force = 0.0, 0.0
-    for k in range(moves + 10):  # drive down, then hold
-        if k < moves:
-            centre = centre - np.array([0.0, speed * h, 0.0])
-        control.pad_target_positions.assign(centre[None].astype(np.float32))
-        stats = solver.step(state, state, control, h)
-        assert not stats.diverged.any()
-        x = state.positions.numpy().astype(np.float64)
-        deepest = max(deepest, box_depth(surface_samples(x, tris), centre, quat))
-        force = float(state.pad_force.numpy()[0, 1])  # upward force of the object on the pad, N
+    deepest, force = press(mesh, e, edges, target - tip_offset, quat, 0.001 + 0.0035)
     if not edges:  # node-vs-box contact alone (the default): the gap this test is about
         assert deepest > 1.5 * BOUND, deepest
         return
@@ -120,26 +127,7 @@ def test_pad_corner_pressed_into_a_sphere_between_its_nodes_does_not_sink_in(edg
     corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * HALF
     world = quat_rotate(np.repeat(np.asarray(quat)[None], 8, 0), corners)
     tip_offset = world[np.argmin(world[:, 1])]
-    model = build_model([mesh], [Material(youngs_modulus=1e6)], pad_half_extents=[HALF],
-                        contact=ContactParams(edge_contact=edges), device="cpu")
-    state, control = State.from_model(model), Control.from_model(model)
-    solver = ImplicitSolver(model, SolverConfig(substeps=1))
-    centre = top + np.array([0.0, 0.001, 0.0]) - tip_offset
-    state.pad_positions.assign(centre[None].astype(np.float32))
-    state.pad_orientations.assign(np.asarray(quat)[None].astype(np.float32))
-    control.pad_target_orientations.assign(np.asarray(quat)[None].astype(np.float32))
-    h, speed = 0.005, 0.2
-    moves = int(round(0.004 / (speed * h)))
-    deepest = 0.0
-    for k in range(moves + 10):
-        if k < moves:
-            centre = centre - np.array([0.0, speed * h, 0.0])
-        control.pad_target_positions.assign(centre[None].astype(np.float32))
-        stats = solver.step(state, state, control, h)
-        assert not stats.diverged.any()
-        x = state.positions.numpy().astype(np.float64)
-        deepest = max(deepest, box_depth(surface_samples(x, tris), centre, quat))
-    force = float(state.pad_force.numpy()[0, 1])
+    deepest, force = press(mesh, 1e6, edges, top + np.array([0.0, 0.001, 0.0]) - tip_offset, quat, 0.004)
     if not edges:
         assert deepest > 1.5 * BOUND, deepest
         return
