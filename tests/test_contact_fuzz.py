@@ -33,18 +33,11 @@ STEPS = 5
 @pytest.mark.parametrize("e", MODULI)
 @pytest.mark.parametrize("name", list(OBJECT_SHAPES))
 def test_adversarial_actions(name, e):
-    r = run_cell(name, e, STEPS)
-    assert r["crossed"] == 0
-    assert r["diverged"] == 0
-    assert r["unflagged"] == 0
-    assert r["deepest"] < 1e-3, r["deepest"]
-    grip = GripperConfig().grip_force_limit
-    assert r["substeps"] > 0, r  # the monitor saw the solves
-    assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
-    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
+    _within_bounds(run_cell(name, e, STEPS))
 
 
 def _within_bounds(r) -> None:
+    """Every bound of ``test_adversarial_actions``."""
     grip = GripperConfig().grip_force_limit
     assert r["crossed"] == 0 and r["diverged"] == 0 and r["unflagged"] == 0, r
     assert r["deepest"] < 1e-3, r["deepest"]
@@ -54,18 +47,12 @@ def _within_bounds(r) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name, e", [("cuboid", 1e5), ("sphere", 1e4), ("torus", 1e6), ("cylinder", 1e5)])
+@pytest.mark.parametrize("name, e", [("cuboid", 1e5), ("sphere", 1e4), ("sphere", 1e6), ("cuboid", 1e7),
+                                     ("torus", 1e6), ("cylinder", 1e5)])
 def test_adversarial_actions_with_pad_edge_contact(name, e):
     """The same fuzz with the pads' box edges held out of the object (``edge_contact=True``), on the
-    cells where earlier versions of that contact diverged or read kN (the soft cuboid and sphere
-    swept at 2 m/s: a pad edge thrown out of a soft object, or pushed out through a face that
-    fought the ground or the node contacts) and two cells not used to tune it: every bound holds."""
-    _within_bounds(run_cell(name, e, STEPS, edge_contact=True))
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="known gap: with edge contact a pad swept at 2 m/s into a stiff object "
-                                       "reads a pad normal force above grip + wrist limit + impact (README)")
-@pytest.mark.parametrize("name, e", [("sphere", 1e6), ("cuboid", 1e7)])
-def test_pad_edge_contact_tip_force_on_stiff_objects(name, e):
+    cells where earlier versions of that contact diverged, read kN (the soft cuboid and sphere swept
+    at 2 m/s) or read pad normal forces up to 394 N (the stiff sphere and cuboid, before the
+    initial guess left the nodes touching a pad where the nodes' own fix put them), and two cells
+    not used to tune it: every bound holds."""
     _within_bounds(run_cell(name, e, STEPS, edge_contact=True))

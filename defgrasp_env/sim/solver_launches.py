@@ -140,13 +140,16 @@ def _edge_search(c: _Context, x) -> list:
 
 
 def _keep_edge_depth(c: _Context, x) -> list:
-    """The initial guess's fix for the pad edge points (after the nodes')."""
+    """The initial guess's fix for the pad edge points (after the nodes'): two passes."""
     m, s, e = c.model, c.scratch, c.scratch.edges
     if not e.active:
         return []
-    return [c.rec(kpe.keep_edge_point_depth, m.num_worlds * e.points_per_world, e.triangles, s.solve_worlds,
-                  m.free_axes, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points, e.point_pad,
-                  e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_allowed, x)]
+    return [c.rec(kpe.clear_triangle_push, e.triangles.shape[0], e.push),
+            c.rec(kpe.edge_point_push, m.num_worlds * e.points_per_world, e.triangles, s.solve_worlds, s.pad_pos1,
+                  s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points, e.point_pad, e.points_per_world,
+                  e.point_tri, e.point_bary, e.point_normal, e.point_allowed, x, e.push, e.push_normal),
+            c.rec(kpe.push_triangles, e.triangles.shape[0], e.triangles, e.triangle_world, s.solve_worlds,
+                  m.free_axes, s.lag_normal_force, m.pads_per_world, e.push, e.push_normal, x)]
 
 
 def _tets(c: _Context, x, active, energy=None):

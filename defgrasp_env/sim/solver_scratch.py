@@ -29,9 +29,11 @@ class EdgeContactScratch:
     best_tri: wp.array          # [W*Q] int: search: lowest id of the triangles at that distance
     point_tri: wp.array         # [W*Q] int: triangle the point meets this substep (-1: none)
     point_bary: wp.array        # [W*Q] vec3: barycentric weights of the triangle's surface point
-    point_normal: wp.array      # [W*Q] vec3: the triangle's outward unit normal at the substep start
+    point_normal: wp.array      # [W*Q] vec3: the triangle's outward unit normal at the initial guess
     point_stiffness: wp.array   # [W*Q] float, N/m: penalty stiffness of the point's contact
     point_allowed: wp.array     # [W*Q] float, m: depth the point may keep this substep (its start depth or the skin)
+    push: wp.array              # [T] float, m: initial guess: how far each triangle moves out of its points' way
+    push_normal: wp.array       # [T] vec3: that triangle's outward unit normal
 
     @classmethod
     def from_model(cls, model: Model) -> "EdgeContactScratch":
@@ -49,7 +51,8 @@ class EdgeContactScratch:
             best_dist=wp.zeros(slots, dtype=float, device=d), best_tri=wp.zeros(slots, dtype=int, device=d),
             point_tri=wp.full(slots, -1, dtype=int, device=d), point_bary=wp.zeros(slots, dtype=wp.vec3, device=d),
             point_normal=wp.zeros(slots, dtype=wp.vec3, device=d),
-            point_stiffness=wp.zeros(slots, dtype=float, device=d), point_allowed=wp.zeros(slots, dtype=float, device=d))
+            point_stiffness=wp.zeros(slots, dtype=float, device=d), point_allowed=wp.zeros(slots, dtype=float, device=d),
+            push=wp.zeros(len(tris), dtype=float, device=d), push_normal=wp.zeros(len(tris), dtype=wp.vec3, device=d))
 
     @property
     def points_per_world(self) -> int:

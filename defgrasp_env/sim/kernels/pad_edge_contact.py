@@ -35,8 +35,9 @@ meets the object's surface through one triangle per substep, lagged like a node'
 - stiffness: the triangle's nodes' penalty stiffness (barycentric mean) times the point's share
   of its edge over the triangle's mean edge length, so a pad edge pressed along a face is about as
   stiff as a row of the face's nodes, whatever the sampling.
-- initial guess (``keep_edge_point_depth``): where the pad's motion takes a point deeper than g_a,
-  the triangle's nodes move out by the excess, as nodes touching a pad face are put on it.
+- initial guess (``edge_point_push``, ``push_triangles``): where the pad's motion takes a point
+  deeper than g_a, its triangle's nodes that touch no pad move out by the largest such excess of
+  its points, as nodes touching a pad face are put on it.
 
 The reported penetration (``SolveStats.penetration``) includes a point's depth beyond the skin.
 
@@ -282,10 +283,15 @@ def edge_point_end(q: int, w: int, pads_per_world: int, points: wp.array(dtype=w
 
 
 @wp.kernel
-def keep_edge_point_depth(
+def clear_triangle_push(push: wp.array(dtype=float)):
+    """Start the initial guess's fix: no triangle needs a push yet."""
+    push[wp.tid()] = 0.0
+
+
+@wp.kernel
+def edge_point_push(
     triangles: wp.array(dtype=wp.vec3i),
     solve: wp.array(dtype=int),
-    free: wp.array(dtype=wp.vec3),
     pad_pos1: wp.array(dtype=wp.vec3),
     pad_rot1: wp.array(dtype=wp.quat),
     pad_half: wp.array(dtype=wp.vec3),
@@ -298,30 +304,58 @@ def keep_edge_point_depth(
     point_normal: wp.array(dtype=wp.vec3),
     point_allowed: wp.array(dtype=float),
     x: wp.array(dtype=wp.vec3),
+    push: wp.array(dtype=float),
+    push_normal: wp.array(dtype=wp.vec3),
 ):
-    """Initial Newton guess (after ``contact.keep_pad_depth``): where the pad's motion over the
-    substep takes an edge point deeper behind its triangle than it may be (``point_allowed``), move the triangle's nodes along -n by the excess (free axes only), as
-    nodes are put on the pad face they touch. Without it a pad corner driven at 2 m/s into a stiff
-    cuboid starts Newton ~6 mm deep, the cubic penalty's ~70 kN throws the object, and the solve
-    diverges (the contact fuzz's E = 1e7 sweep). Only worlds with ``solve`` set are moved; the
-    triangle's nodes touch no pad (``lag_edge_points``), so no node contact is undone; on the GPU
-    points sharing a triangle may each move it (a guess only)."""
+    """Initial Newton guess, pass 1 (after ``contact.keep_pad_depth``): how far (m) each triangle
+    must move along -n so that none of its edge points ends the pad's motion deeper than it may be
+    (``point_allowed``): the largest excess of its points (atomic maximum), and its normal (every
+    point of a triangle holds the same one)."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
     if t < 0 or solve[w] == 0:
         return
     q = slot % points_per_world
-    ids = triangles[t]
-    bary = point_bary[slot]
     n = point_normal[slot]
-    pad = w * pads_per_world + point_pad[q]
-    local = wp.cw_mul(points[q], pad_half[pad])
-    q1 = pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], local)
-    excess = edge_point_depth(x, ids, bary, n, q1) - point_allowed[slot]
+    q1 = edge_point_end(q, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1, pad_half)
+    excess = edge_point_depth(x, triangles[t], point_bary[slot], n, q1) - point_allowed[slot]
     if excess > 0.0:
-        for j in range(3):
-            wp.atomic_add(x, ids[j], -excess * wp.cw_mul(free[ids[j]], n))
+        wp.atomic_max(push, t, excess)
+        push_normal[t] = n
+
+
+@wp.kernel
+def push_triangles(
+    triangles: wp.array(dtype=wp.vec3i),
+    triangle_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
+    free: wp.array(dtype=wp.vec3),
+    lag_normal_force: wp.array(dtype=float),
+    pads_per_world: int,
+    push: wp.array(dtype=float),
+    push_normal: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=wp.vec3),
+):
+    """Initial Newton guess, pass 2: move each pushed triangle's nodes along -n by its push (free
+    axes only), as nodes touching a pad face are put on it; a node that touches a pad or the ground
+    at the substep start stays where ``contact.keep_pad_depth`` put it. Without this a pad corner
+    driven at 2 m/s into a stiff cuboid starts Newton ~6 mm deep and the cubic penalty's force
+    throws the object. A node shared by pushed triangles moves by the sum of their pushes (the
+    same on every device: a guess only)."""
+    t = wp.tid()
+    d = push[t]
+    if d <= 0.0 or solve[triangle_world[t]] == 0:
+        return
+    ids = triangles[t]
+    slots = pads_per_world + 1
+    for j in range(3):
+        touching = int(0)
+        for k in range(slots):
+            if lag_normal_force[ids[j] * slots + k] > 0.0:
+                touching = 1
+        if touching == 0:
+            wp.atomic_add(x, ids[j], -d * wp.cw_mul(free[ids[j]], push_normal[t]))
 
 
 @wp.kernel
