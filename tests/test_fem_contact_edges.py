@@ -1,8 +1,9 @@
-"""FEM core, edge contact: a pad box edge must not pass between the surface nodes of a coarse stiff
-object (``kernels/edge_contact.py``). With node-vs-box contact alone, a pad edge pressed into a face
-between two node rows sinks in freely until the rows touch the edge's two faces (a 90-degree edge
-between rows 8 mm apart: 4 mm), and the object then clamps the pad from both faces; that is how a
-pad ended up embedded in the E = 1e7 cuboid in the contact fuzz's sideways sweep.
+"""FEM core, edge contact: a pad box edge or corner must not pass between the surface nodes of a
+coarse object (``kernels/pad_edge_contact.py``). With node-vs-box contact alone, a pad edge pressed
+into a face between two node rows sinks in freely until the rows touch the edge's two faces (a
+90-degree edge between rows 8 mm apart could sink 4 mm; measured 2.1 mm), and the object then
+clamps the pad from both faces; that is how a pad ended up embedded in the E = 1e7 cuboid in the
+contact fuzz's sideways sweep.
 
 The check is independent of the solver's contact model: the object's surface is sampled densely
 (a barycentric grid on every boundary triangle, ``surface_samples``) and no sample may lie deeper
@@ -13,7 +14,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import warp as wp
 
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.meshing import make_object_mesh

@@ -125,7 +125,7 @@ def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
     radius (2 mm, nothing moves) of a triangle that faces its pad's centre gets a triangle of its
     own world at the brute-force nearest distance among those (float32) and that triangle's
     outward normal; points farther away get none."""
-    mesh, model = _model()
+    _, model = _model()
     edges = EdgeContactScratch.from_model(model)
     tris, tri_world = surface_triangles(model)
     x = model.rest_positions.numpy().astype(np.float64)
@@ -188,7 +188,7 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
     higher), so its edge points lie at depths past the skin and the cubic knee: the force the evaluate kernel adds to the nodes
     equals minus the central-difference gradient of the energy kernel (float64 sums; step 1e-6 m),
     and the force on the pad balances the nodes' forces."""
-    mesh, model = _model(e=1e6)
+    _, model = _model(e=1e6)
     edges = EdgeContactScratch.from_model(model)
     x = model.rest_positions.numpy().astype(np.float64)
     top = x[:, 1].max()

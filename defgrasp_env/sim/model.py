@@ -44,8 +44,8 @@ class ContactParams:
         stiffening_depth: depth (m) beyond which the penalty force grows cubically.
         edge_contact: also hold the pads' box edges and corners out of the object's surface
             (``sim/kernels/pad_edge_contact.py``: points every <= 1.5 mm along each pad box edge
-            against the surface triangle nearest to each at the substep start, frictionless, the
-            first 0.5 mm free), so a pad edge cannot sink in between surface nodes. Off by
+            against the surface triangle nearest to each where the substep takes them,
+            frictionless, the first 0.5 mm free), so a pad edge cannot sink in between surface nodes. Off by
             default: in the 2 m/s contact fuzz it reads pad normal forces up to ~400 N on stiff
             objects (E >= 1e6) where the force limits allow ~260 N (README, known gaps).
     """

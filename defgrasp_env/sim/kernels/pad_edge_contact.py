@@ -2,8 +2,8 @@
 
 Node-vs-box contact (``kernels.contact``) holds the object's nodes out of the pads, but not the
 pads out of the object: a pad's box edge or corner pressed into a face of a coarse mesh sinks in
-between the surface nodes (a 90-degree edge between node rows 8 mm apart: 2 mm), where the nodes'
-own contacts then clamp the pad from its two faces. Here the 12 edges of every pad box are sampled
+between the surface nodes (a 90-degree edge between node rows 8 mm apart: 2.1 mm), where the
+nodes' own contacts then clamp the pad from its two faces. Here the 12 edges of every pad box are sampled
 at most ``pad_edge_points.EDGE_POINT_SPACING`` apart (corners once each), and each such point q
 meets the object's surface through one triangle per substep, lagged like a node's contact face:
 
@@ -39,7 +39,10 @@ meets the object's surface through one triangle per substep, lagged like a node'
   deeper than g_a, its triangle's nodes that touch no pad move out by the largest such excess of
   its points, as nodes touching a pad face are put on it.
 
-The reported penetration (``SolveStats.penetration``) includes a point's depth beyond the skin.
+The reported penetration (``SolveStats.penetration``) includes the depth beyond the skin of every
+point deeper than it may be. Edge points do not take part in the extra Newton iterations or the
+depth clamp of the nodes (``contact.deepest_contact``, ``clamp_depth``): a point beyond its kept
+depth is pushed back by its penalty over the following substeps, a knee per substep at most.
 
 Arrays (``solver_scratch.EdgeContactScratch``): triangles [T] vec3i global node ids and their world
 [T]; points [Q] vec3 in unit box coordinates, their pad index in the world [Q], their share of an
@@ -158,7 +161,8 @@ def nearest_surface_triangles(
     half = pad_half[pad]
     # the most any point of the pad box moved over the substep (translation + rotation): a point
     # that the pad carried through the surface is that far from the triangle it crossed
-    turn = wp.length(wp.quat_rotate_inv(rot1, wp.quat_rotate(pad_rot0[pad], half)) - half)
+    turn_quat = wp.mul(wp.quat_inverse(rot1), pad_rot0[pad])  # |sin(angle / 2)| is its vector part's length
+    turn = 2.0 * wp.length(wp.vec3(turn_quat[0], turn_quat[1], turn_quat[2])) * wp.length(half)
     radius = SEARCH_MARGIN + motion + wp.length(pos1 - pad_pos0[pad]) + turn
     lo = wp.min(a, wp.min(b, c))
     hi = wp.max(a, wp.max(b, c))
