@@ -84,15 +84,19 @@ def _model(name="cuboid", e=1e6):
                              contact=ContactParams(edge_contact=True), device="cpu")
 
 
-def _search(model, edges, x, pos, rot, start=None):
+def _search(model, edges, x, pos, rot, start=None, lag=None):
     """Run the search and lag kernels with the nodes still at x and the pads at (pos, rot) at the
-    substep's end, at (start, rot) at its start (default: pos)."""
+    substep's end, at (start, rot) at its start (default: pos); ``lag``: the nodes' pad contacts
+    (lag_normal_force [N*(P+1)], lag_normal [N*(P+1), 3]; default none)."""
     xw = wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu")
     pw = wp.array(pos.astype(np.float32), dtype=wp.vec3, device="cpu")
     qw = wp.array(rot.astype(np.float32), dtype=wp.quat, device="cpu")
     p0 = pw if start is None else wp.array(start.astype(np.float32), dtype=wp.vec3, device="cpu")
     pads = (p0, qw, pw, qw)
     slots = model.num_worlds * edges.points_per_world
+    contacts = model.num_nodes * (model.pads_per_world + 1)
+    force, normal = lag if lag is not None else (np.zeros(contacts, np.float32), np.zeros((contacts, 3), np.float32))
+    lag_arrays = (wp.array(force, dtype=float, device="cpu"), wp.array(normal, dtype=wp.vec3, device="cpu"))
     args = (xw, xw, edges.triangles, edges.triangle_world, *pads, model.pad_half_extents, model.pads_per_world,
             edges.points, edges.point_first, edges.points_per_world)
     wp.launch(kpe.clear_edge_search, slots, [edges.best_dist, edges.best_tri], device="cpu")
@@ -102,8 +106,7 @@ def _search(model, edges, x, pos, rot, start=None):
     wp.launch(kpe.lag_edge_points, slots, [xw, xw, edges.triangles, *pads, model.pad_half_extents,
                                            model.pads_per_world, edges.points, edges.point_pad, edges.point_share,
                                            edges.points_per_world, model.node_contact_stiffness,
-                                           wp.zeros(model.num_nodes * 3, dtype=float, device="cpu"),
-                                           wp.zeros(model.num_nodes * 3, dtype=wp.vec3, device="cpu"),
+                                           *lag_arrays,
                                            edges.best_tri, edges.point_tri, edges.point_bary, edges.point_normal,
                                            edges.point_stiffness, edges.point_allowed, KNEE], device="cpu")
     return xw, pads
@@ -232,3 +235,77 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
             xm[i, j] -= eps
             fd = -(energy(xp) - energy(xm)) / (2 * eps)
             assert abs(fd - f[i, j]) < 0.02 * np.abs(f[i]).max() + 1e-3, (i, j, fd, f[i, j])
+
+
+def _one_triangle_model():
+    """A model of one cuboid world with one pad, its scratch, and the pad 1 mm above the top face
+    at the substep start and 2.5 mm lower at its end (its bottom face's edges driven 1.5 mm into
+    the face): (model, edges, x, start, end) with x the rest positions."""
+    mesh = make_object_mesh("cuboid")
+    model = build_model([mesh], [Material(youngs_modulus=1e6)], pad_half_extents=[HALF],
+                        contact=ContactParams(edge_contact=True), device="cpu")
+    x = model.rest_positions.numpy().astype(np.float64)
+    top = x[:, 1].max()
+    start = np.array([[0.001, top + HALF[1] + 0.001, 0.002]])
+    return model, EdgeContactScratch.from_model(model), x, start, start - np.array([[0.0, 0.0025, 0.0]])
+
+
+def test_initial_guess_moves_a_triangle_out_of_its_points_way_but_not_nodes_touching_a_pad():
+    """``edge_point_push`` and ``push_triangles`` against the geometry worked by hand: the pad's
+    bottom edges end 1.5 mm below the top face, 1 mm deeper than the 0.5 mm skin they may keep, so
+    every triangle under them moves down by that excess; a node marked as touching the pad stays put."""
+    model, edges, x, start, end = _one_triangle_model()
+    rot = np.array([[0.0, 0.0, 0.0, 1.0]])
+    xw, pads = _search(model, edges, x, end, rot, start=start)
+    tri = edges.point_tri.numpy()
+    hit = sorted(set(tri[tri >= 0].tolist()))
+    assert hit, "no edge point met a triangle"
+    tris = edges.triangles.numpy()
+    touching = int(tris[hit[0]][0])
+    lag_force = np.zeros(model.num_nodes * 2, np.float32)
+    lag_force[touching * 2 + 1] = 1.0  # that node touches the pad (slot 1 + k, k = 0)
+    lag = wp.array(lag_force, dtype=float, device="cpu")
+    wp.launch(kpe.clear_triangle_push, len(tris), [edges.push], device="cpu")
+    wp.launch(kpe.edge_point_push, model.num_worlds * edges.points_per_world,
+              [edges.triangles, wp.ones(1, dtype=int, device="cpu"), pads[2], pads[3], model.pad_half_extents,
+               model.pads_per_world, edges.points, edges.point_pad, edges.points_per_world, edges.point_tri,
+               edges.point_bary, edges.point_normal, edges.point_allowed, xw, edges.push, edges.push_normal],
+              device="cpu")
+    push = edges.push.numpy()
+    np.testing.assert_allclose(push[hit], 0.0015 - 2 * KNEE, atol=2e-6)  # 1.5 mm deep, 0.5 mm kept
+    assert np.all(push[np.setdiff1d(np.arange(len(tris)), hit)] == 0.0)
+    wp.launch(kpe.push_triangles, len(tris), [edges.triangles, edges.triangle_world, wp.ones(1, dtype=int, device="cpu"),
+                                              model.free_axes, lag, model.pads_per_world, edges.push,
+                                              edges.push_normal, xw], device="cpu")
+    moved = xw.numpy().astype(np.float64) - x
+    assert np.all(moved[touching] == 0.0)
+    counts = np.zeros(model.num_nodes)
+    for t in hit:
+        counts[tris[t]] += 1
+    counts[touching] = 0
+    # each free node of a pushed top-face triangle moves down by the excess once per such triangle
+    np.testing.assert_allclose(moved[:, 1], -counts * (0.0015 - 2 * KNEE), atol=1e-6)
+    np.testing.assert_allclose(moved[:, [0, 2]], 0.0, atol=1e-7)
+
+
+def test_no_edge_contact_where_the_object_wraps_the_pad():
+    """``lag_edge_points`` drops a point whose triangle has nodes touching its pad on two different
+    faces, or on a face the triangle does not face; one node on a face the triangle faces keeps it."""
+    model, edges, x, start, end = _one_triangle_model()
+    rot = np.array([[0.0, 0.0, 0.0, 1.0]])
+    _search(model, edges, x, end, rot, start=start)
+    base = edges.point_tri.numpy().copy()
+    slot = int(np.flatnonzero(base >= 0)[0])
+    a, b, _ = edges.triangles.numpy()[base[slot]]
+    cases = {  # node: pad face normal (pad frame) it touches; the triangle's normal is +y
+        "faced": ({a: (0.0, -1.0, 0.0)}, True),                       # the pad's bottom face, facing the top face
+        "not faced": ({a: (0.0, 1.0, 0.0)}, False),                   # the pad's top face
+        "two faces": ({a: (0.0, -1.0, 0.0), b: (1.0, 0.0, 0.0)}, False),
+    }
+    for name, (touch, kept) in cases.items():
+        force = np.zeros(model.num_nodes * 2, np.float32)
+        normal = np.zeros((model.num_nodes * 2, 3), np.float32)
+        for node, face in touch.items():
+            force[node * 2 + 1], normal[node * 2 + 1] = 1.0, face
+        _search(model, edges, x, end, rot, start=start, lag=(force, normal))
+        assert bool(edges.point_tri.numpy()[slot] >= 0) is kept, name
