@@ -231,8 +231,7 @@ def lag_edge_points(
     pad pose 0) less one penalty knee, or the free skin, whichever is larger; all held for the
     substep. A point deeper than the skin at the start (it met a triangle that a node touching the
     pad kept from it, or a solve stopped unconverged) is pushed out by at most a knee per substep,
-    not thrown out at once: pushed out at once, the object's elastic rebound read 1 kN on a pad of a
-    soft cuboid swept at 2 m/s, which the wrist's force limiter cannot take back within the substep."""
+    not at once (pushed out at once, a pad swept at 2 m/s into a soft cuboid read 1 kN)."""
     slot = wp.tid()
     w = slot // points_per_world
     q = slot % points_per_world
