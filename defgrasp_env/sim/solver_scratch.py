@@ -31,7 +31,7 @@ class EdgeContactScratch:
     point_bary: wp.array        # [W*Q] vec3: barycentric weights of the triangle's surface point
     point_normal: wp.array      # [W*Q] vec3: the triangle's outward unit normal at the initial guess
     point_stiffness: wp.array   # [W*Q] float, N/m: penalty stiffness of the point's contact
-    point_allowed: wp.array     # [W*Q] float, m: depth the point may keep this substep (its start depth or the skin)
+    point_allowed: wp.array     # [W*Q] float, m: depth the point may keep this substep (start depth - a knee, or the skin)
     push: wp.array              # [T] float, m: initial guess: how far each triangle moves out of its points' way
     push_normal: wp.array       # [T] vec3: that triangle's outward unit normal
 

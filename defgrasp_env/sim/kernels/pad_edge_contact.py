@@ -196,6 +196,15 @@ def edge_point_depth(x: wp.array(dtype=wp.vec3), ids: wp.vec3i, bary: wp.vec3, n
     return wp.dot(n, surface - q1)
 
 
+@wp.func
+def edge_point_end(q: int, w: int, pads_per_world: int, points: wp.array(dtype=wp.vec3),
+                   point_pad: wp.array(dtype=int), pad_pos1: wp.array(dtype=wp.vec3),
+                   pad_rot1: wp.array(dtype=wp.quat), pad_half: wp.array(dtype=wp.vec3)):
+    """The edge point at the pad's substep-end pose (world frame, m)."""
+    pad = w * pads_per_world + point_pad[q]
+    return pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], wp.cw_mul(points[q], pad_half[pad]))
+
+
 @wp.kernel
 def lag_edge_points(
     x_start: wp.array(dtype=wp.vec3),
@@ -245,7 +254,7 @@ def lag_edge_points(
     xa = x_guess[ids[0]]
     xb = x_guess[ids[1]]
     xc = x_guess[ids[2]]
-    p = pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], wp.cw_mul(points[q], pad_half[pad]))
+    p = edge_point_end(q, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1, pad_half)
     bary = closest_point_barycentric(xa, xb, xc, p)
     cross = wp.cross(xb - xa, xc - xa)
     area2 = wp.length(cross)
@@ -274,15 +283,6 @@ def lag_edge_points(
     point_stiffness[slot] = k * point_share[q] / mean_edge
     q0 = pad_pos0[pad] + wp.quat_rotate(pad_rot0[pad], wp.cw_mul(points[q], pad_half[pad]))
     point_allowed[slot] = wp.max(edge_point_depth(x_start, ids, bary, n, q0) - RECOVERY_KNEES * knee, SKIN_KNEES * knee)
-
-
-@wp.func
-def edge_point_end(q: int, w: int, pads_per_world: int, points: wp.array(dtype=wp.vec3),
-                   point_pad: wp.array(dtype=int), pad_pos1: wp.array(dtype=wp.vec3),
-                   pad_rot1: wp.array(dtype=wp.quat), pad_half: wp.array(dtype=wp.vec3)):
-    """The edge point at the pad's substep-end pose (world frame, m)."""
-    pad = w * pads_per_world + point_pad[q]
-    return pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], wp.cw_mul(points[q], pad_half[pad]))
 
 
 @wp.kernel
