@@ -217,7 +217,8 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
         return float(out.numpy().sum())
 
     zeros = lambda dtype: wp.zeros(n, dtype=dtype, device="cpu")  # noqa: E731
-    residual, diag, hess, force = zeros(wp.vec3), zeros(wp.mat33), zeros(wp.mat33), zeros(wp.vec3)
+    residual, diag, force = zeros(wp.vec3), zeros(wp.mat33), zeros(wp.vec3)
+    hess = wp.zeros(slots, dtype=float, device="cpu")
     pad_fn = wp.zeros(4, dtype=float, device="cpu")
     pad_f = wp.zeros(4, dtype=wp.vec3, device="cpu")
     pen = wp.zeros(2, dtype=float, device="cpu")
@@ -237,6 +238,80 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
             assert abs(fd - f[i, j]) < 0.02 * np.abs(f[i]).max() + 1e-3, (i, j, fd, f[i, j])
 
 
+def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_product():
+    """The pressed points of the tilted pad above (depths past the knee): (a) the Hessian product
+    ``edge_point_product`` equals the central difference of minus the force along random
+    directions (the depth is affine in the nodes, the penalty C1 beyond g = 0, so this is exact to
+    float32 rounding of the 1e-6 m steps: 2 % of the product's largest entry); (b) ``coarse_assemble_edge_points`` gives
+    T^T H T for node aggregates (T: unit translations of each aggregate, some axes fixed), built
+    column by column from the product."""
+    _, model = _model(e=1e6)
+    edges = EdgeContactScratch.from_model(model)
+    x = model.rest_positions.numpy().astype(np.float64)
+    top = x[:, 1].max()
+    axis = np.array([1.0, 0.0, 0.3])
+    rot = np.repeat(axis_angle_to_quat(0.5 * axis / np.linalg.norm(axis))[None], 4, 0)
+    pos = np.array([[0.003, 0.0, 0.002], [0.3, 1.0, 0.0], [0.3, 1.0, 0.0], [0.3, 1.0, 0.0]])
+    lowest = (quat_rotate(rot[:1], (np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * HALF))[:, 1]
+              .min())
+    pos[0, 1] = top - lowest - 0.0012
+    xw, pads = _search(model, edges, x, pos, rot, start=pos + np.array([0.0, 0.003, 0.0]))
+    n, slots = model.num_nodes, model.num_worlds * edges.points_per_world
+    active = wp.ones(model.num_worlds, dtype=int, device="cpu")
+    args = (edges.triangles, active, pads[2], pads[3], model.pad_half_extents, model.pads_per_world, edges.points,
+            edges.point_pad, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
+            edges.point_stiffness, edges.point_allowed, KNEE)
+
+    def force(xx):
+        out = wp.zeros(n, dtype=wp.vec3, device="cpu")
+        wp.launch(kpe.evaluate_edge_points, slots,
+                  [wp.array(xx.astype(np.float32), dtype=wp.vec3, device="cpu"), *args, 0, out,
+                   wp.zeros(n, dtype=wp.mat33, device="cpu"), edges.point_hessian, wp.zeros(n, dtype=wp.vec3, device="cpu"),
+                   wp.zeros(4, dtype=float, device="cpu"), wp.zeros(4, dtype=wp.vec3, device="cpu"),
+                   wp.zeros(2, dtype=float, device="cpu")], device="cpu")
+        return out.numpy().astype(np.float64)
+
+    def product(direction):
+        out = wp.zeros(n, dtype=wp.vec3, device="cpu")
+        wp.launch(kpe.edge_point_product, slots,
+                  [wp.array(direction.astype(np.float32), dtype=wp.vec3, device="cpu"), edges.triangles, active,
+                   edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal, edges.point_hessian,
+                   out], device="cpu")
+        return out.numpy().astype(np.float64)
+
+    f0 = force(x)  # sets point_hessian at x
+    touched = np.abs(f0).sum(1) > 0
+    assert touched.sum() >= 3 and (edges.point_hessian.numpy() > 0).sum() >= 1
+    rng = np.random.default_rng(3)
+    eps = 1e-6
+    for _ in range(3):
+        direction = np.where(touched[:, None], rng.normal(size=(n, 3)), 0.0)
+        hp = product(direction)
+        fd = -(force(x + eps * direction) - force(x - eps * direction)) / (2 * eps)
+        force(x)  # back to the curvature at x
+        assert np.abs(hp).max() > 0
+        np.testing.assert_allclose(hp, fd, atol=0.02 * np.abs(hp).max())
+    # (b) coarse block: 3 aggregates by node id, axis z fixed on every 5th node
+    aggregate = np.arange(n) % 3
+    free = np.ones((n, 3), np.float32)
+    free[::5, 2] = 0.0
+    size = 3 * 3
+    matrix = wp.zeros((model.num_worlds, size, size), dtype=wp.float64, device="cpu")
+    world = model.node_world.numpy()
+    wp.launch(kpe.coarse_assemble_edge_points, slots,
+              [edges.triangles, active, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
+               edges.point_hessian, wp.array(free, dtype=wp.vec3, device="cpu"),
+               wp.array(aggregate.astype(np.int32), dtype=int, device="cpu"), matrix], device="cpu")
+    got = matrix.numpy()[0]
+    columns = np.zeros((size, n, 3))
+    for a in range(3):
+        for k in range(3):
+            columns[3 * a + k, (aggregate == a) & (world == 0), k] = free[(aggregate == a) & (world == 0), k]
+    expected = np.einsum("inj,knj->ik", columns, np.stack([product(c) for c in columns]) * free[None])
+    assert np.abs(expected).max() > 0
+    np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
+
+
 def _one_triangle_model():
     """A model of one cuboid world with one pad, its scratch, and the pad 1 mm above the top face
     at the substep start and 2.5 mm lower at its end (its bottom face's edges driven 1.5 mm into
@@ -248,6 +323,38 @@ def _one_triangle_model():
     top = x[:, 1].max()
     start = np.array([[0.001, top + HALF[1] + 0.001, 0.002]])
     return model, EdgeContactScratch.from_model(model), x, start, start - np.array([[0.0, 0.0025, 0.0]])
+
+
+def _push(model, edges, x_start, pads, x):
+    """``edge_point_push`` from nodes at ``x_start`` (substep start) and the guess ``x``: each triangle's push (m)."""
+    wp.launch(kpe.clear_triangle_push, edges.triangles.shape[0], [edges.push], device="cpu")
+    wp.launch(kpe.edge_point_push, model.num_worlds * edges.points_per_world,
+              [wp.array(x_start.astype(np.float32), dtype=wp.vec3, device="cpu"), edges.triangles,
+               wp.ones(1, dtype=int, device="cpu"), *pads, model.pad_half_extents, model.pads_per_world, edges.points,
+               edges.point_pad, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
+               edges.point_allowed, x, edges.push, edges.push_normal], device="cpu")
+    return edges.push.numpy()
+
+
+@pytest.mark.parametrize("start_depth", [0.0012, 0.0015])
+def test_initial_guess_keeps_the_depth_a_point_had_at_the_substep_start(start_depth):
+    """A pad edge already pressed into the face at the substep start (1.2 or 1.5 mm, past the 0.5 mm
+    skin) and ending 1.5 mm deep: only the depth the pad's motion adds is pushed out (0.3 mm or
+    none), as a node touching a pad keeps its start depth; pushing a held point out to its kept
+    depth in every substep cost three extra Newton iterations per held grasp substep."""
+    model, edges, x, start, end = _one_triangle_model()
+    rot = np.array([[0.0, 0.0, 0.0, 1.0]])
+    start = end + np.array([[0.0, 0.0015 - start_depth, 0.0]])
+    xw, pads = _search(model, edges, x, end, rot, start=start)
+    tri = edges.point_tri.numpy()
+    hit = sorted(set(tri[tri >= 0].tolist()))
+    assert hit, "no edge point met a triangle"
+    allowed = edges.point_allowed.numpy()[tri >= 0]
+    pressed = allowed > 2 * KNEE + 1e-6  # the bottom edges' points (those above the face keep the skin)
+    assert pressed.sum() >= 8
+    np.testing.assert_allclose(allowed[pressed], start_depth - KNEE, atol=2e-6)
+    push = _push(model, edges, x, pads, xw)
+    np.testing.assert_allclose(push[hit], 0.0015 - start_depth, atol=2e-6)
 
 
 def test_initial_guess_moves_a_triangle_out_of_its_points_way_but_not_nodes_touching_a_pad():
@@ -265,13 +372,7 @@ def test_initial_guess_moves_a_triangle_out_of_its_points_way_but_not_nodes_touc
     lag_force = np.zeros(model.num_nodes * 2, np.float32)
     lag_force[touching * 2 + 1] = 1.0  # that node touches the pad (slot 1 + k, k = 0)
     lag = wp.array(lag_force, dtype=float, device="cpu")
-    wp.launch(kpe.clear_triangle_push, len(tris), [edges.push], device="cpu")
-    wp.launch(kpe.edge_point_push, model.num_worlds * edges.points_per_world,
-              [edges.triangles, wp.ones(1, dtype=int, device="cpu"), pads[2], pads[3], model.pad_half_extents,
-               model.pads_per_world, edges.points, edges.point_pad, edges.points_per_world, edges.point_tri,
-               edges.point_bary, edges.point_normal, edges.point_allowed, xw, edges.push, edges.push_normal],
-              device="cpu")
-    push = edges.push.numpy()
+    push = _push(model, edges, x, pads, xw)
     np.testing.assert_allclose(push[hit], 0.0015 - 2 * KNEE, atol=2e-6)  # 1.5 mm deep, 0.5 mm kept
     assert np.all(push[np.setdiff1d(np.arange(len(tris)), hit)] == 0.0)
     wp.launch(kpe.push_triangles, len(tris), [edges.triangles, edges.triangle_world, wp.ones(1, dtype=int, device="cpu"),

@@ -117,8 +117,17 @@ def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
                   s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force, work.pad_normal_force,
                   work.pad_force, s.penetration),
             *([c.rec(kpe.evaluate_edge_points, slots, *points, record_pads, s.residual, s.diag_block,
-                     s.contact_hessian, work.contact_force, work.pad_normal_force, work.pad_force, s.penetration)]
+                     e.point_hessian, work.contact_force, work.pad_normal_force, work.pad_force, s.penetration)]
               if slots else [])]
+
+
+def _edge_product(c: _Context, p, active) -> list:
+    """ap += the pressed edge points' Hessians times ``p`` (none without edge contact)."""
+    m, s, e = c.model, c.scratch, c.scratch.edges
+    if not e.active:
+        return []
+    return [c.rec(kpe.edge_point_product, m.num_worlds * e.points_per_world, p, e.triangles, active,
+                  e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_hessian, s.ap)]
 
 
 def _edge_search(c: _Context, x) -> list:
@@ -145,8 +154,8 @@ def _keep_edge_depth(c: _Context, x) -> list:
     if not e.active:
         return []
     return [c.rec(kpe.clear_triangle_push, e.triangles.shape[0], e.push),
-            c.rec(kpe.edge_point_push, m.num_worlds * e.points_per_world, e.triangles, s.solve_worlds, s.pad_pos1,
-                  s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points, e.point_pad, e.points_per_world,
+            c.rec(kpe.edge_point_push, m.num_worlds * e.points_per_world, s.x_start, e.triangles, s.solve_worlds,
+                  *s.pads, m.pad_half_extents, m.pads_per_world, e.points, e.point_pad, e.points_per_world,
                   e.point_tri, e.point_bary, e.point_normal, e.point_allowed, x, e.push, e.push_normal),
             c.rec(kpe.push_triangles, e.triangles.shape[0], e.triangles, e.triangle_world, s.solve_worlds,
                   m.free_axes, s.lag_normal_force, m.pads_per_world, e.push, e.push_normal, x)]
@@ -172,19 +181,23 @@ def _begin_solve(c: _Context, active):
 def _coarse_before(c: _Context, active) -> list:
     """Coarse solve before CG: assemble and invert T^T A T, start CG from dx = T (T^T A T)^-1 T^T r
     with the residual and CG vectors that follow (kernels/coarse_space.py)."""
-    m, s, n = c.model, c.scratch, c.model.num_nodes
+    m, s, e, n = c.model, c.scratch, c.scratch.edges, c.model.num_nodes
     return [
         c.rec(kcs.coarse_assemble_nodes, n, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
               s.node_aggregate, active, 1.0 / (c.h * c.h), s.residual, s.coarse_matrix, s.coarse_rhs),
         c.rec(kcs.coarse_assemble_tets, m.num_tets, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
               m.tet_lambda, s.cofactor, s.tet_r, s.tet_twist, m.tet_world, active, m.free_axes, s.node_aggregate,
               s.coarse_matrix),
+        *([c.rec(kpe.coarse_assemble_edge_points, m.num_worlds * e.points_per_world, e.triangles, active,
+                 e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_hessian, m.free_axes,
+                 s.node_aggregate, s.coarse_matrix)] if e.active else []),
         c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_size, s.coarse_matrix, s.coarse_lower_inv,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),
         c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx,
               s.coarse_guess),
         c.rec(ke.hessian_product_tets, m.num_tets, s.coarse_guess, m.tets, m.tet_rest_inv, m.tet_rest_volume,
               m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
+        *_edge_product(c, s.coarse_guess, active),
         c.rec(klin.cg_node_product, n, s.coarse_guess, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
               active, 1.0 / (c.h * c.h), s.ap, s.coarse_scratch),
         c.rec(kcs.coarse_start_cg, n, s.precond, m.free_axes, m.node_world, active, s.residual, s.ap, s.z, s.p,
@@ -242,6 +255,7 @@ def _cg(c: _Context, config) -> list:
     return [
         c.rec(ke.hessian_product_tets, m.num_tets, s.p, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
               m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
+        *_edge_product(c, s.p, active),
         c.rec(klin.cg_node_product, n, s.p, m.node_mass, s.contact_hessian, m.free_axes, m.node_world, active,
               1.0 / (c.h * c.h), s.ap, s.p_ap),
         c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate, active,

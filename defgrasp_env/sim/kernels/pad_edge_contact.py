@@ -293,8 +293,11 @@ def clear_triangle_push(push: wp.array(dtype=float)):
 
 @wp.kernel
 def edge_point_push(
+    x_start: wp.array(dtype=wp.vec3),
     triangles: wp.array(dtype=wp.vec3i),
     solve: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
     pad_pos1: wp.array(dtype=wp.vec3),
     pad_rot1: wp.array(dtype=wp.quat),
     pad_half: wp.array(dtype=wp.vec3),
@@ -312,8 +315,12 @@ def edge_point_push(
 ):
     """Initial Newton guess, pass 1 (after ``contact.keep_pad_depth``): how far (m) each triangle
     must move along -n so that none of its edge points ends the pad's motion deeper than it may be
-    (``point_allowed``): the largest excess of its points (atomic maximum), and its normal (every
-    point of a triangle holds the same one)."""
+    (``point_allowed``) or than it was at the substep start (nodes at ``x_start``, pad pose 0),
+    whichever is deeper: the largest excess of its points (atomic maximum), and its normal (every
+    point of a triangle holds the same one). A point pressed at the start keeps its depth, as a
+    node touching a pad does (``keep_pad_depth``): pushed out to its kept depth, a held grasp's
+    triangles were pushed out by their points' load depth in every substep and Newton needed four
+    iterations to press them back."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
@@ -321,8 +328,13 @@ def edge_point_push(
         return
     q = slot % points_per_world
     n = point_normal[slot]
+    ids = triangles[t]
+    bary = point_bary[slot]
     q1 = edge_point_end(q, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1, pad_half)
-    excess = edge_point_depth(x, triangles[t], point_bary[slot], n, q1) - point_allowed[slot]
+    pad = w * pads_per_world + point_pad[q]
+    q0 = pad_pos0[pad] + wp.quat_rotate(pad_rot0[pad], wp.cw_mul(points[q], pad_half[pad]))
+    keep = wp.max(point_allowed[slot], edge_point_depth(x_start, ids, bary, n, q0))
+    excess = edge_point_depth(x, ids, bary, n, q1) - keep
     if excess > 0.0:
         wp.atomic_max(push, t, excess)
         push_normal[t] = n
@@ -380,24 +392,27 @@ def evaluate_edge_points(
     point_allowed: wp.array(dtype=float),
     knee: float,
     record_pads: int,
-    # outputs, accumulated onto those of ``contact.evaluate_nodes``
+    # outputs, accumulated onto those of ``contact.evaluate_nodes`` (``point_hessian``: set)
     residual: wp.array(dtype=wp.vec3),
     diag_block: wp.array(dtype=wp.mat33),
-    contact_hessian: wp.array(dtype=wp.mat33),
+    point_hessian: wp.array(dtype=float),
     contact_force: wp.array(dtype=wp.vec3),
     pad_normal_force: wp.array(dtype=float),
     pad_force: wp.array(dtype=wp.vec3),
     penetration: wp.array(dtype=float),
 ):
     """Add each edge point's penalty force (N) to the residual and contact force of its triangle's
-    nodes and the block-diagonal majorant of its Hessian (N/m) to their diagonal and contact
-    blocks; at the returned state (``record_pads``) also the pad's normal force (N), the force on
-    the pad (N) and the point's depth behind the surface (m)."""
+    nodes and the diagonal blocks of its Hessian (N/m) to their diagonal blocks (the block-Jacobi
+    preconditioner's), and keep the penalty's curvature s (N/m; 0 where the point is not pressed)
+    for the whole Hessian's products (``edge_point_product``, ``coarse_assemble_edge_points``); at
+    the returned state (``record_pads``) also the pad's normal force (N), the force on the pad (N)
+    and the point's depth behind the surface (m)."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
     if t < 0 or world_active[w] == 0:
         return
+    point_hessian[slot] = 0.0
     q = slot % points_per_world
     ids = triangles[t]
     bary = point_bary[slot]
@@ -409,12 +424,13 @@ def evaluate_edge_points(
         return
     k = point_stiffness[slot]
     f = penalty_force(k, g, knee)
-    h = penalty_stiffness(k, g, knee) * wp.outer(n, n)
+    s = penalty_stiffness(k, g, knee)
+    point_hessian[slot] = s
+    h = s * wp.outer(n, n)
     for j in range(3):
         wp.atomic_add(residual, ids[j], -f * bary[j] * n)
         wp.atomic_add(contact_force, ids[j], -f * bary[j] * n)
-        wp.atomic_add(diag_block, ids[j], bary[j] * h)
-        wp.atomic_add(contact_hessian, ids[j], bary[j] * h)
+        wp.atomic_add(diag_block, ids[j], (bary[j] * bary[j]) * h)
     if record_pads != 0:
         pad = w * pads_per_world + point_pad[q]
         wp.atomic_max(penetration, w, depth - SKIN_KNEES * knee)
@@ -453,3 +469,70 @@ def edge_point_energy(
     g = edge_point_depth(x, triangles[t], point_bary[slot], point_normal[slot], q1) - point_allowed[slot]
     if g > 0.0:
         wp.atomic_add(energy, w, wp.float64(penalty_energy(point_stiffness[slot], g, knee)))
+
+
+@wp.kernel
+def edge_point_product(
+    p: wp.array(dtype=wp.vec3),
+    triangles: wp.array(dtype=wp.vec3i),
+    cg_active: wp.array(dtype=int),
+    points_per_world: int,
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_normal: wp.array(dtype=wp.vec3),
+    point_hessian: wp.array(dtype=float),
+    ap: wp.array(dtype=wp.vec3),
+):
+    """ap += H p for the pressed edge points' Hessians H = s (w w^T) x (n n^T) (the depth is affine
+    in the triangle's nodes: its Gauss-Newton term is the exact Hessian), before
+    ``linear_solve.cg_node_product`` masks ap and adds the node terms."""
+    slot = wp.tid()
+    t = point_tri[slot]
+    if t < 0 or cg_active[slot // points_per_world] == 0:
+        return
+    s = point_hessian[slot]
+    if s <= 0.0:
+        return
+    ids = triangles[t]
+    bary = point_bary[slot]
+    n = point_normal[slot]
+    along = s * wp.dot(n, bary[0] * p[ids[0]] + bary[1] * p[ids[1]] + bary[2] * p[ids[2]])
+    for j in range(3):
+        wp.atomic_add(ap, ids[j], (bary[j] * along) * n)
+
+
+@wp.kernel
+def coarse_assemble_edge_points(
+    triangles: wp.array(dtype=wp.vec3i),
+    world_active: wp.array(dtype=int),
+    points_per_world: int,
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_normal: wp.array(dtype=wp.vec3),
+    point_hessian: wp.array(dtype=float),
+    free: wp.array(dtype=wp.vec3),
+    node_aggregate: wp.array(dtype=int),
+    matrix: wp.array3d(dtype=wp.float64),
+):
+    """E += T^T H T for the pressed edge points' Hessians (``edge_point_product``): block
+    s w_j w_k (F_j n)(F_k n)^T between the aggregates of nodes j and k (F: free axes)."""
+    slot = wp.tid()
+    w = slot // points_per_world
+    t = point_tri[slot]
+    if t < 0 or world_active[w] == 0:
+        return
+    s = point_hessian[slot]
+    if s <= 0.0:
+        return
+    ids = triangles[t]
+    bary = point_bary[slot]
+    n = point_normal[slot]
+    for j in range(3):
+        nj = bary[j] * wp.cw_mul(free[ids[j]], n)
+        aj = node_aggregate[ids[j]]
+        for k in range(3):
+            nk = (s * bary[k]) * wp.cw_mul(free[ids[k]], n)
+            ak = node_aggregate[ids[k]]
+            for r in range(3):
+                for c in range(3):
+                    wp.atomic_add(matrix, w, 3 * aj + r, 3 * ak + c, wp.float64(nj[r] * nk[c]))
