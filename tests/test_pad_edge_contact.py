@@ -20,6 +20,8 @@ from defgrasp_env.transforms import axis_angle_to_quat, quat_rotate
 
 HALF = np.array([0.008175, 0.01875, 0.011])  # the env's pad collision box (m)
 KNEE = ContactParams().stiffening_depth
+MU = ContactParams().pad_friction
+EPS = 2e-5  # the friction's stick slip (m): 20 x the 1e-6 m finite-difference steps (the env's is ~1e-6 m)
 
 
 @wp.kernel
@@ -108,7 +110,8 @@ def _search(model, edges, x, pos, rot, start=None, lag=None):
                                            edges.points_per_world, model.node_contact_stiffness,
                                            *lag_arrays,
                                            edges.best_tri, edges.point_tri, edges.point_bary, edges.point_normal,
-                                           edges.point_stiffness, edges.point_allowed, KNEE], device="cpu")
+                                           edges.point_stiffness, edges.point_allowed, edges.point_friction, KNEE],
+              device="cpu")
     return xw, pads
 
 
@@ -186,11 +189,14 @@ def _point_triangle_distances(p, tri):
     return np.where(inside, np.abs(height), best)
 
 
-def test_edge_point_force_is_minus_the_gradient_of_its_energy():
+@pytest.mark.parametrize("slip", [None, 0.5, 3.0])
+def test_edge_point_force_is_minus_the_gradient_of_its_energy(slip):
     """A pad pressed 1.2 mm into the cuboid's top face at a tilt over the substep (from 3 mm
     higher), so its edge points lie at depths past the skin and the cubic knee: the force the evaluate kernel adds to the nodes
     equals minus the central-difference gradient of the energy kernel (float64 sums; step 1e-6 m),
-    and the force on the pad balances the nodes' forces."""
+    and the force on the pad balances the nodes' forces. ``slip``: without friction, or with a
+    lagged normal force of 2 N on every point and the nodes slid sideways by that many stick slips
+    since the substep start (0.5: the smoothed law's sticking part; 3: sliding)."""
     _, model = _model(e=1e6)
     edges = EdgeContactScratch.from_model(model)
     x = model.rest_positions.numpy().astype(np.float64)
@@ -205,9 +211,13 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
     n = model.num_nodes
     active = wp.ones(model.num_worlds, dtype=int, device="cpu")
     slots = model.num_worlds * edges.points_per_world
-    args = (edges.triangles, active, pads[2], pads[3], model.pad_half_extents, model.pads_per_world, edges.points,
+    shift = 0.0 if slip is None else slip * EPS
+    x_start = wp.array((x - shift * np.array([0.6, 0.0, 0.8])).astype(np.float32), dtype=wp.vec3, device="cpu")
+    if slip is not None:
+        edges.point_friction.assign(np.where(edges.point_tri.numpy() >= 0, 2.0, 0.0).astype(np.float32))
+    args = (x_start, edges.triangles, active, *pads, model.pad_half_extents, model.pads_per_world, edges.points,
             edges.point_pad, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
-            edges.point_stiffness, edges.point_allowed, KNEE)
+            edges.point_stiffness, edges.point_allowed, edges.point_friction, KNEE, MU, EPS)
 
     def energy(xx):
         out = wp.zeros(model.num_worlds, dtype=wp.float64, device="cpu")
@@ -218,7 +228,7 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
 
     zeros = lambda dtype: wp.zeros(n, dtype=dtype, device="cpu")  # noqa: E731
     residual, diag, force = zeros(wp.vec3), zeros(wp.mat33), zeros(wp.vec3)
-    hess = wp.zeros(slots, dtype=float, device="cpu")
+    hess = edges.point_block
     pad_fn = wp.zeros(4, dtype=float, device="cpu")
     pad_f = wp.zeros(4, dtype=wp.vec3, device="cpu")
     pen = wp.zeros(2, dtype=float, device="cpu")
@@ -238,13 +248,17 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy():
             assert abs(fd - f[i, j]) < 0.02 * np.abs(f[i]).max() + 1e-3, (i, j, fd, f[i, j])
 
 
-def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_product():
+@pytest.mark.parametrize("friction", [False, True])
+def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_product(friction):
     """The pressed points of the tilted pad above (depths past the knee): (a) the Hessian product
     ``edge_point_product`` equals the central difference of minus the force along random
     directions (the depth is affine in the nodes, the penalty C1 beyond g = 0, so this is exact to
-    float32 rounding of the 1e-6 m steps: 2 % of the product's largest entry); (b) ``coarse_assemble_edge_points`` gives
-    T^T H T for node aggregates (T: unit translations of each aggregate, some axes fixed), built
-    column by column from the product."""
+    float32 rounding of the 1e-6 m steps: 2 % of the product's largest entry); with friction (2 N
+    lagged, sliding 3 stick slips sideways) along random normal directions, which leave the
+    tangential slip and so the friction force as they are (the friction block is the usual lagged
+    approximation c (I - n n^T), not the exact Jacobian of a sliding force); (b)
+    ``coarse_assemble_edge_points`` gives T^T H T for node aggregates (T: unit translations of each
+    aggregate, some axes fixed), built column by column from the product, friction included."""
     _, model = _model(e=1e6)
     edges = EdgeContactScratch.from_model(model)
     x = model.rest_positions.numpy().astype(np.float64)
@@ -258,15 +272,19 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
     xw, pads = _search(model, edges, x, pos, rot, start=pos + np.array([0.0, 0.003, 0.0]))
     n, slots = model.num_nodes, model.num_worlds * edges.points_per_world
     active = wp.ones(model.num_worlds, dtype=int, device="cpu")
-    args = (edges.triangles, active, pads[2], pads[3], model.pad_half_extents, model.pads_per_world, edges.points,
+    shift = 3.0 * EPS if friction else 0.0
+    x_start = wp.array((x - shift * np.array([0.6, 0.0, 0.8])).astype(np.float32), dtype=wp.vec3, device="cpu")
+    if friction:
+        edges.point_friction.assign(np.where(edges.point_tri.numpy() >= 0, 2.0, 0.0).astype(np.float32))
+    args = (x_start, edges.triangles, active, *pads, model.pad_half_extents, model.pads_per_world, edges.points,
             edges.point_pad, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
-            edges.point_stiffness, edges.point_allowed, KNEE)
+            edges.point_stiffness, edges.point_allowed, edges.point_friction, KNEE, MU, EPS)
 
     def force(xx):
         out = wp.zeros(n, dtype=wp.vec3, device="cpu")
         wp.launch(kpe.evaluate_edge_points, slots,
                   [wp.array(xx.astype(np.float32), dtype=wp.vec3, device="cpu"), *args, 0, out,
-                   wp.zeros(n, dtype=wp.mat33, device="cpu"), edges.point_hessian, wp.zeros(n, dtype=wp.vec3, device="cpu"),
+                   wp.zeros(n, dtype=wp.mat33, device="cpu"), edges.point_block, wp.zeros(n, dtype=wp.vec3, device="cpu"),
                    wp.zeros(4, dtype=float, device="cpu"), wp.zeros(4, dtype=wp.vec3, device="cpu"),
                    wp.zeros(2, dtype=float, device="cpu")], device="cpu")
         return out.numpy().astype(np.float64)
@@ -275,17 +293,19 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
         out = wp.zeros(n, dtype=wp.vec3, device="cpu")
         wp.launch(kpe.edge_point_product, slots,
                   [wp.array(direction.astype(np.float32), dtype=wp.vec3, device="cpu"), edges.triangles, active,
-                   edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal, edges.point_hessian,
+                   edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal, edges.point_block,
                    out], device="cpu")
         return out.numpy().astype(np.float64)
 
     f0 = force(x)  # sets point_hessian at x
     touched = np.abs(f0).sum(1) > 0
-    assert touched.sum() >= 3 and (edges.point_hessian.numpy() > 0).sum() >= 1
+    assert touched.sum() >= 3 and (edges.point_block.numpy() > 0).sum() >= 1
     rng = np.random.default_rng(3)
     eps = 1e-6
     for _ in range(3):
         direction = np.where(touched[:, None], rng.normal(size=(n, 3)), 0.0)
+        if friction:  # the top face's normal, +y
+            direction[:, [0, 2]] = 0.0
         hp = product(direction)
         fd = -(force(x + eps * direction) - force(x - eps * direction)) / (2 * eps)
         force(x)  # back to the curvature at x
@@ -300,7 +320,7 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
     world = model.node_world.numpy()
     wp.launch(kpe.coarse_assemble_edge_points, slots,
               [edges.triangles, active, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
-               edges.point_hessian, wp.array(free, dtype=wp.vec3, device="cpu"),
+               edges.point_block, wp.array(free, dtype=wp.vec3, device="cpu"),
                wp.array(aggregate.astype(np.int32), dtype=int, device="cpu"), matrix], device="cpu")
     got = matrix.numpy()[0]
     columns = np.zeros((size, n, 3))
@@ -353,6 +373,10 @@ def test_initial_guess_keeps_the_depth_a_point_had_at_the_substep_start(start_de
     pressed = allowed > 2 * KNEE + 1e-6  # the bottom edges' points (those above the face keep the skin)
     assert pressed.sum() >= 8
     np.testing.assert_allclose(allowed[pressed], start_depth - KNEE, atol=2e-6)
+    # the friction's lagged normal force: the penalty of the start depth beyond the kept one (a knee)
+    stiffness = edges.point_stiffness.numpy()[tri >= 0]
+    np.testing.assert_allclose(edges.point_friction.numpy()[tri >= 0][pressed], stiffness[pressed] * KNEE, rtol=0.02)
+    assert np.all(edges.point_friction.numpy()[tri >= 0][~pressed] == 0.0)  # above the face at the start
     push = _push(model, edges, x, pads, xw)
     np.testing.assert_allclose(push[hit], 0.0015 - start_depth, atol=2e-6)
 

@@ -106,9 +106,10 @@ def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
               m.contact.stiffening_depth, m.contact.ground_friction, m.contact.pad_friction,
               m.contact.stick_velocity)
     e = s.edges
-    points = (x, e.triangles, active, s.pad_pos1, s.pad_rot1, m.pad_half_extents, m.pads_per_world, e.points,
+    points = (x, s.x_start, e.triangles, active, *s.pads, m.pad_half_extents, m.pads_per_world, e.points,
               e.point_pad, e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_stiffness,
-              e.point_allowed, m.contact.stiffening_depth)
+              e.point_allowed, e.point_friction, m.contact.stiffening_depth, m.contact.pad_friction,
+              m.contact.stick_velocity * c.h)
     slots = m.num_worlds * e.points_per_world if e.active else 0
     if energy is not None:
         return [c.rec(kenergy.node_energy, m.num_nodes, x, s.x_start, work.velocities, *common, energy),
@@ -117,7 +118,7 @@ def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
                   s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force, work.pad_normal_force,
                   work.pad_force, s.penetration),
             *([c.rec(kpe.evaluate_edge_points, slots, *points, record_pads, s.residual, s.diag_block,
-                     e.point_hessian, work.contact_force, work.pad_normal_force, work.pad_force, s.penetration)]
+                     e.point_block, work.contact_force, work.pad_normal_force, work.pad_force, s.penetration)]
               if slots else [])]
 
 
@@ -127,7 +128,7 @@ def _edge_product(c: _Context, p, active) -> list:
     if not e.active:
         return []
     return [c.rec(kpe.edge_point_product, m.num_worlds * e.points_per_world, p, e.triangles, active,
-                  e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_hessian, s.ap)]
+                  e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_block, s.ap)]
 
 
 def _edge_search(c: _Context, x) -> list:
@@ -145,7 +146,7 @@ def _edge_search(c: _Context, x) -> list:
                   m.pads_per_world, e.points, e.point_pad, e.point_share, e.points_per_world,
                   m.node_contact_stiffness, s.lag_normal_force, s.lag_normal, e.best_tri, e.point_tri, e.point_bary,
                   e.point_normal,
-                  e.point_stiffness, e.point_allowed, m.contact.stiffening_depth)]
+                  e.point_stiffness, e.point_allowed, e.point_friction, m.contact.stiffening_depth)]
 
 
 def _keep_edge_depth(c: _Context, x) -> list:
@@ -189,7 +190,7 @@ def _coarse_before(c: _Context, active) -> list:
               m.tet_lambda, s.cofactor, s.tet_r, s.tet_twist, m.tet_world, active, m.free_axes, s.node_aggregate,
               s.coarse_matrix),
         *([c.rec(kpe.coarse_assemble_edge_points, m.num_worlds * e.points_per_world, e.triangles, active,
-                 e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_hessian, m.free_axes,
+                 e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_block, m.free_axes,
                  s.node_aggregate, s.coarse_matrix)] if e.active else []),
         c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_size, s.coarse_matrix, s.coarse_lower_inv,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),

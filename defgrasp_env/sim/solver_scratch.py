@@ -32,7 +32,8 @@ class EdgeContactScratch:
     point_normal: wp.array      # [W*Q] vec3: the triangle's outward unit normal at the initial guess
     point_stiffness: wp.array   # [W*Q] float, N/m: penalty stiffness of the point's contact
     point_allowed: wp.array     # [W*Q] float, m: depth the point may keep this substep (start depth - a knee, or the skin)
-    point_hessian: wp.array     # [W*Q] float, N/m: the penalty's curvature at the last evaluation (0: not pressed)
+    point_friction: wp.array    # [W*Q] float, N: the normal force the point's friction is lagged on this substep
+    point_block: wp.array       # [W*Q] mat33, N/m: the point's Hessian (penalty + friction) at the last evaluation
     push: wp.array              # [T] float, m: initial guess: how far each triangle moves out of its points' way
     push_normal: wp.array       # [T] vec3: that triangle's outward unit normal
 
@@ -53,7 +54,7 @@ class EdgeContactScratch:
             point_tri=wp.full(slots, -1, dtype=int, device=d), point_bary=wp.zeros(slots, dtype=wp.vec3, device=d),
             point_normal=wp.zeros(slots, dtype=wp.vec3, device=d),
             point_stiffness=wp.zeros(slots, dtype=float, device=d), point_allowed=wp.zeros(slots, dtype=float, device=d),
-            point_hessian=wp.zeros(slots, dtype=float, device=d),
+            point_friction=wp.zeros(slots, dtype=float, device=d), point_block=wp.zeros(slots, dtype=wp.mat33, device=d),
             push=wp.zeros(len(tris), dtype=float, device=d), push_normal=wp.zeros(len(tris), dtype=wp.vec3, device=d))
 
     @property

@@ -53,7 +53,8 @@ distance and triangle.
 
 import warp as wp
 
-from .contact import penalty_energy, penalty_force, penalty_stiffness
+from .contact import friction_force, pad_slip, penalty_energy, penalty_force, penalty_stiffness
+from .energy import friction_potential
 
 #: Free depth of a pad edge point behind the surface, in penalty knees (2 x 0.25 mm = 0.5 mm).
 SKIN_KNEES = 2.0
@@ -229,6 +230,7 @@ def lag_edge_points(
     point_normal: wp.array(dtype=wp.vec3),
     point_stiffness: wp.array(dtype=float),
     point_allowed: wp.array(dtype=float),
+    point_friction: wp.array(dtype=float),
     knee: float,
 ):
     """For each (world, point): the triangle the search chose (-1: none, or where the object wraps
@@ -240,7 +242,9 @@ def lag_edge_points(
     pad pose 0) less one penalty knee, or the free skin, whichever is larger; all held for the
     substep. A point deeper than the skin at the start (it met a triangle that a node touching the
     pad kept from it, or a solve stopped unconverged) is pushed out by at most a knee per substep,
-    not at once (pushed out at once, a pad swept at 2 m/s into a soft cuboid read 1 kN)."""
+    not at once (pushed out at once, a pad swept at 2 m/s into a soft cuboid read 1 kN). Also the
+    normal force (N) its friction is lagged on: the penalty force of its start depth beyond the
+    depth it may keep (a held point's load: its start depth is its kept depth plus its load depth)."""
     slot = wp.tid()
     w = slot // points_per_world
     q = slot % points_per_world
@@ -282,7 +286,12 @@ def lag_edge_points(
     point_normal[slot] = n
     point_stiffness[slot] = k * point_share[q] / mean_edge
     q0 = pad_pos0[pad] + wp.quat_rotate(pad_rot0[pad], wp.cw_mul(points[q], pad_half[pad]))
-    point_allowed[slot] = wp.max(edge_point_depth(x_start, ids, bary, n, q0) - RECOVERY_KNEES * knee, SKIN_KNEES * knee)
+    start = edge_point_depth(x_start, ids, bary, n, q0)
+    allowed = wp.max(start - RECOVERY_KNEES * knee, SKIN_KNEES * knee)
+    point_allowed[slot] = allowed
+    point_friction[slot] = 0.0
+    if start > allowed:
+        point_friction[slot] = penalty_force(point_stiffness[slot], start - allowed, knee)
 
 
 @wp.kernel
@@ -373,11 +382,37 @@ def push_triangles(
             wp.atomic_add(x, ids[j], -d * wp.cw_mul(free[ids[j]], push_normal[t]))
 
 
+@wp.func
+def edge_point_terms(slot: int, w: int, t: int, x: wp.array(dtype=wp.vec3), x_start: wp.array(dtype=wp.vec3),
+                     triangles: wp.array(dtype=wp.vec3i), pad_pos0: wp.array(dtype=wp.vec3),
+                     pad_rot0: wp.array(dtype=wp.quat), pad_pos1: wp.array(dtype=wp.vec3),
+                     pad_rot1: wp.array(dtype=wp.quat), pad_half: wp.array(dtype=wp.vec3), pads_per_world: int,
+                     points: wp.array(dtype=wp.vec3), point_pad: wp.array(dtype=int), points_per_world: int,
+                     point_bary: wp.array(dtype=wp.vec3), point_normal: wp.array(dtype=wp.vec3),
+                     point_allowed: wp.array(dtype=float)):
+    """(depth beyond the kept depth g (m), depth behind the plane (m), slip (m)) of a point: the
+    slip is that of its triangle's surface point relative to the pad's material point that held it
+    at the substep start (``contact.pad_slip``)."""
+    q = slot % points_per_world
+    ids = triangles[t]
+    bary = point_bary[slot]
+    q1 = edge_point_end(q, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1, pad_half)
+    depth = edge_point_depth(x, ids, bary, point_normal[slot], q1)
+    pad = w * pads_per_world + point_pad[q]
+    surface = bary[0] * x[ids[0]] + bary[1] * x[ids[1]] + bary[2] * x[ids[2]]
+    surface0 = bary[0] * x_start[ids[0]] + bary[1] * x_start[ids[1]] + bary[2] * x_start[ids[2]]
+    slip = pad_slip(surface, surface0, pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], pad_rot1[pad])
+    return depth - point_allowed[slot], depth, slip
+
+
 @wp.kernel
 def evaluate_edge_points(
     x: wp.array(dtype=wp.vec3),
+    x_start: wp.array(dtype=wp.vec3),
     triangles: wp.array(dtype=wp.vec3i),
     world_active: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
     pad_pos1: wp.array(dtype=wp.vec3),
     pad_rot1: wp.array(dtype=wp.quat),
     pad_half: wp.array(dtype=wp.vec3),
@@ -390,59 +425,76 @@ def evaluate_edge_points(
     point_normal: wp.array(dtype=wp.vec3),
     point_stiffness: wp.array(dtype=float),
     point_allowed: wp.array(dtype=float),
+    point_friction: wp.array(dtype=float),
     knee: float,
+    mu: float,
+    eps: float,
     record_pads: int,
-    # outputs, accumulated onto those of ``contact.evaluate_nodes`` (``point_hessian``: set)
+    # outputs, accumulated onto those of ``contact.evaluate_nodes`` (``point_block``: set)
     residual: wp.array(dtype=wp.vec3),
     diag_block: wp.array(dtype=wp.mat33),
-    point_hessian: wp.array(dtype=float),
+    point_block: wp.array(dtype=wp.mat33),
     contact_force: wp.array(dtype=wp.vec3),
     pad_normal_force: wp.array(dtype=float),
     pad_force: wp.array(dtype=wp.vec3),
     penetration: wp.array(dtype=float),
 ):
-    """Add each edge point's penalty force (N) to the residual and contact force of its triangle's
-    nodes and the diagonal blocks of its Hessian (N/m) to their diagonal blocks (the block-Jacobi
-    preconditioner's), and keep the penalty's curvature s (N/m; 0 where the point is not pressed)
-    for the whole Hessian's products (``edge_point_product``, ``coarse_assemble_edge_points``); at
-    the returned state (``record_pads``) also the pad's normal force (N), the force on the pad (N)
-    and the point's depth behind the surface (m)."""
+    """Add each edge point's penalty and friction force (N, on its triangle's surface point) to the
+    residual and contact force of the triangle's nodes (weights w_j), and the diagonal blocks of its
+    Hessian (N/m) to their diagonal blocks (the block-Jacobi preconditioner's); keep the point's
+    3x3 Hessian B (N/m: s n n^T of the penalty where pressed, c (I - n n^T) of the smoothed Coulomb
+    law with the lagged normal force ``point_friction``, ``mu`` the pads' friction coefficient,
+    ``eps`` its stick slip (m)) for the whole Hessian's products (node blocks w_j w_k B:
+    ``edge_point_product``, ``coarse_assemble_edge_points``); at the returned state (``record_pads``)
+    also the pad's normal force (N), the force on the pad (N) and the point's depth behind the
+    surface (m)."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
     if t < 0 or world_active[w] == 0:
         return
-    point_hessian[slot] = 0.0
-    q = slot % points_per_world
+    g, depth, slip = edge_point_terms(slot, w, t, x, x_start, triangles, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
+                                      pad_half, pads_per_world, points, point_pad, points_per_world, point_bary,
+                                      point_normal, point_allowed)
+    n = point_normal[slot]
+    block = wp.mat33(0.0)
+    force = wp.vec3(0.0)
+    f = float(0.0)
+    if g > 0.0:
+        k = point_stiffness[slot]
+        f = penalty_force(k, g, knee)
+        force = -f * n
+        block = penalty_stiffness(k, g, knee) * wp.outer(n, n)
+    lag_fn = point_friction[slot]
+    if lag_fn > 0.0:
+        f_fric, h_fric = friction_force(mu, lag_fn, slip, n, eps)
+        force += f_fric
+        block += h_fric
+    point_block[slot] = block
+    if f == 0.0 and lag_fn <= 0.0:
+        return
     ids = triangles[t]
     bary = point_bary[slot]
-    n = point_normal[slot]
-    q1 = edge_point_end(q, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1, pad_half)
-    depth = edge_point_depth(x, ids, bary, n, q1)
-    g = depth - point_allowed[slot]
-    if g <= 0.0:
-        return
-    k = point_stiffness[slot]
-    f = penalty_force(k, g, knee)
-    s = penalty_stiffness(k, g, knee)
-    point_hessian[slot] = s
-    h = s * wp.outer(n, n)
     for j in range(3):
-        wp.atomic_add(residual, ids[j], -f * bary[j] * n)
-        wp.atomic_add(contact_force, ids[j], -f * bary[j] * n)
-        wp.atomic_add(diag_block, ids[j], (bary[j] * bary[j]) * h)
+        wp.atomic_add(residual, ids[j], bary[j] * force)
+        wp.atomic_add(contact_force, ids[j], bary[j] * force)
+        wp.atomic_add(diag_block, ids[j], (bary[j] * bary[j]) * block)
     if record_pads != 0:
-        pad = w * pads_per_world + point_pad[q]
-        wp.atomic_max(penetration, w, depth - SKIN_KNEES * knee)
-        wp.atomic_add(pad_normal_force, pad, f)
-        wp.atomic_add(pad_force, pad, f * n)
+        pad = w * pads_per_world + point_pad[slot % points_per_world]
+        if f > 0.0:
+            wp.atomic_max(penetration, w, depth - SKIN_KNEES * knee)
+            wp.atomic_add(pad_normal_force, pad, f)
+        wp.atomic_add(pad_force, pad, -force)
 
 
 @wp.kernel
 def edge_point_energy(
     x: wp.array(dtype=wp.vec3),
+    x_start: wp.array(dtype=wp.vec3),
     triangles: wp.array(dtype=wp.vec3i),
     world_active: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
     pad_pos1: wp.array(dtype=wp.vec3),
     pad_rot1: wp.array(dtype=wp.quat),
     pad_half: wp.array(dtype=wp.vec3),
@@ -455,20 +507,30 @@ def edge_point_energy(
     point_normal: wp.array(dtype=wp.vec3),
     point_stiffness: wp.array(dtype=float),
     point_allowed: wp.array(dtype=float),
+    point_friction: wp.array(dtype=float),
     knee: float,
+    mu: float,
+    eps: float,
     energy: wp.array(dtype=wp.float64),
 ):
-    """energy += the edge points' penalty energy (J) per world (``evaluate_edge_points``' potential)."""
+    """energy += the edge points' penalty and friction potentials (J) per world
+    (``evaluate_edge_points``' potential)."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
     if t < 0 or world_active[w] == 0:
         return
-    q = slot % points_per_world
-    q1 = edge_point_end(q, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1, pad_half)
-    g = edge_point_depth(x, triangles[t], point_bary[slot], point_normal[slot], q1) - point_allowed[slot]
+    g, depth, slip = edge_point_terms(slot, w, t, x, x_start, triangles, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
+                                      pad_half, pads_per_world, points, point_pad, points_per_world, point_bary,
+                                      point_normal, point_allowed)
+    e = float(0.0)
     if g > 0.0:
-        wp.atomic_add(energy, w, wp.float64(penalty_energy(point_stiffness[slot], g, knee)))
+        e = penalty_energy(point_stiffness[slot], g, knee)
+    lag_fn = point_friction[slot]
+    if lag_fn > 0.0:
+        e += friction_potential(mu, lag_fn, slip, point_normal[slot], eps)
+    if e != 0.0:
+        wp.atomic_add(energy, w, wp.float64(e))
 
 
 @wp.kernel
@@ -480,25 +542,22 @@ def edge_point_product(
     point_tri: wp.array(dtype=int),
     point_bary: wp.array(dtype=wp.vec3),
     point_normal: wp.array(dtype=wp.vec3),
-    point_hessian: wp.array(dtype=float),
+    point_block: wp.array(dtype=wp.mat33),
     ap: wp.array(dtype=wp.vec3),
 ):
-    """ap += H p for the pressed edge points' Hessians H = s (w w^T) x (n n^T) (the depth is affine
-    in the triangle's nodes: its Gauss-Newton term is the exact Hessian), before
-    ``linear_solve.cg_node_product`` masks ap and adds the node terms."""
+    """ap += H p for the edge points' Hessians H = (w w^T) x B (node j, k: w_j w_k B; B from
+    ``evaluate_edge_points``: the surface point is affine in the triangle's nodes, so this is the
+    whole Hessian of its terms), before ``linear_solve.cg_node_product`` masks ap and adds the
+    node terms."""
     slot = wp.tid()
     t = point_tri[slot]
     if t < 0 or cg_active[slot // points_per_world] == 0:
         return
-    s = point_hessian[slot]
-    if s <= 0.0:
-        return
     ids = triangles[t]
     bary = point_bary[slot]
-    n = point_normal[slot]
-    along = s * wp.dot(n, bary[0] * p[ids[0]] + bary[1] * p[ids[1]] + bary[2] * p[ids[2]])
+    along = point_block[slot] * (bary[0] * p[ids[0]] + bary[1] * p[ids[1]] + bary[2] * p[ids[2]])
     for j in range(3):
-        wp.atomic_add(ap, ids[j], (bary[j] * along) * n)
+        wp.atomic_add(ap, ids[j], bary[j] * along)
 
 
 @wp.kernel
@@ -509,30 +568,26 @@ def coarse_assemble_edge_points(
     point_tri: wp.array(dtype=int),
     point_bary: wp.array(dtype=wp.vec3),
     point_normal: wp.array(dtype=wp.vec3),
-    point_hessian: wp.array(dtype=float),
+    point_block: wp.array(dtype=wp.mat33),
     free: wp.array(dtype=wp.vec3),
     node_aggregate: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
 ):
-    """E += T^T H T for the pressed edge points' Hessians (``edge_point_product``): block
-    s w_j w_k (F_j n)(F_k n)^T between the aggregates of nodes j and k (F: free axes)."""
+    """E += T^T H T for the edge points' Hessians (``edge_point_product``): block
+    w_j w_k F_j B F_k between the aggregates of nodes j and k (F: diagonal of free axes)."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
     if t < 0 or world_active[w] == 0:
         return
-    s = point_hessian[slot]
-    if s <= 0.0:
-        return
     ids = triangles[t]
     bary = point_bary[slot]
-    n = point_normal[slot]
+    block = point_block[slot]
     for j in range(3):
-        nj = bary[j] * wp.cw_mul(free[ids[j]], n)
         aj = node_aggregate[ids[j]]
         for k in range(3):
-            nk = (s * bary[k]) * wp.cw_mul(free[ids[k]], n)
+            part = (bary[j] * bary[k]) * (wp.diag(free[ids[j]]) * block * wp.diag(free[ids[k]]))
             ak = node_aggregate[ids[k]]
             for r in range(3):
                 for c in range(3):
-                    wp.atomic_add(matrix, w, 3 * aj + r, 3 * ak + c, wp.float64(nj[r] * nk[c]))
+                    wp.atomic_add(matrix, w, 3 * aj + r, 3 * ak + c, wp.float64(part[r, c]))
