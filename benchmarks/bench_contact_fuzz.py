@@ -203,8 +203,9 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=10, help="steps per sequence (default 10)")
     p.add_argument("--objects", nargs="+", default=list(OBJECT_SHAPES), choices=list(OBJECT_SHAPES))
     p.add_argument("--moduli", nargs="+", type=float, default=list(MODULI))
-    p.add_argument("--edge-contact", action="store_true",
-                   help="hold the pads' box edges and corners out of the object too (PickupConfig.edge_contact)")
+    p.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
+                   help="hold the pads' box edges and corners out of the object too (PickupConfig.edge_contact, "
+                        "the default; --no-edge-contact: node-vs-box contact alone)")
     p.add_argument("--no-append", action="store_true")
     args = p.parse_args()
     rows = ["| object | E (Pa) | deepest (mm) | crossed | flagged | unflagged | diverged | clamped | tip max (N) "

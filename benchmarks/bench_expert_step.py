@@ -64,7 +64,7 @@ class LaunchCounter:
         wp.capture_launch = counted_graph
 
 
-def run(obj: str, e: float, seed: int, max_steps: int, counter: LaunchCounter, edge_contact: bool = False) -> dict:
+def run(obj: str, e: float, seed: int, max_steps: int, counter: LaunchCounter, edge_contact: bool = True) -> dict:
     import gymnasium as gym
 
     import defgrasp_env  # noqa: F401
@@ -123,7 +123,8 @@ def main(argv=None) -> None:
     p.add_argument("--moduli", nargs="+", type=float, default=[1e4, 1e7])
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-steps", type=int, default=300)
-    p.add_argument("--edge-contact", action="store_true", help="PickupConfig.edge_contact on (off by default)")
+    p.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
+                   help="PickupConfig.edge_contact (on by default; --no-edge-contact: node-vs-box contact alone)")
     p.add_argument("--no-append", action="store_true")
     p.add_argument("--note", default="")
     args = p.parse_args(argv)

@@ -85,7 +85,9 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     unknown = sorted(set(env_overrides) - set(ENV_OPTIONS))
     if unknown:
         raise ValueError(f"env overrides must be among {ENV_OPTIONS}, got {unknown}")
-    given = {k: settings[k] for k in ENV_OPTIONS if k in settings}  # a run.json lacks options left at their default
+    # a run.json lacks options left at their default, and edge_contact where it was off (every run
+    # before it became the default on 2026-11-26)
+    given = {"edge_contact": False} | {k: settings[k] for k in ENV_OPTIONS if k in settings}
     given |= {k: v for k, v in env_overrides.items() if v is not None}
     config = PickupConfig(**given)
     env_options = {k: getattr(config, k) for k in ENV_OPTIONS}

@@ -259,8 +259,11 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                     n_epochs=n_epochs, seed=seed, **env_kwargs)
     if init_from is not None:
         settings["init_from"] = str(init_from)
-    if env_kwargs.get("edge_contact") is False:  # the default: earlier runs' run.json lacks it
-        settings.pop("edge_contact")
+    # recorded only where on (the default since 2026-11-26): the run.json of a run without it (all
+    # earlier runs) lacks the key, and eval_ppo reads a missing key as off
+    settings.pop("edge_contact", None)
+    if PickupConfig(**env_kwargs).edge_contact:
+        settings["edge_contact"] = True
     if fixed_world_objects:  # only when set: the run.json of earlier runs lacks it
         settings["fixed_world_objects"] = True
     tolerance = PickupConfig(**env_kwargs).success_tolerance
@@ -357,8 +360,9 @@ def main(argv=None) -> int:
                          "at autoresets (the vector env's world_objects)")
     ap.add_argument("--youngs-modulus", type=float, default=1e6)
     ap.add_argument("--episode-seconds", type=float, default=15.0)
-    ap.add_argument("--edge-contact", action="store_true",
-                    help="hold the pads' box edges and corners out of the object (PickupConfig.edge_contact)")
+    ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
+                    help="hold the pads' box edges and corners out of the object (PickupConfig.edge_contact, the "
+                         "default; --no-edge-contact: node-vs-box contact alone, as runs before 2026-11-26)")
     ap.add_argument("--device", default="cpu", help="simulation device (cpu, cuda:0)")
     ap.add_argument("--torch-device", default="cpu", help="PPO network device")
     ap.add_argument("--seed", type=int, default=0)

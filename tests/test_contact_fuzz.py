@@ -47,12 +47,8 @@ def _within_bounds(r) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name, e", [("cuboid", 1e5), ("sphere", 1e4), ("sphere", 1e6), ("cuboid", 1e7),
-                                     ("torus", 1e6), ("cylinder", 1e5)])
-def test_adversarial_actions_with_pad_edge_contact(name, e):
-    """The same fuzz with the pads' box edges held out of the object (``edge_contact=True``), on the
-    cells where earlier versions of that contact diverged, read kN (the soft cuboid and sphere swept
-    at 2 m/s) or read pad normal forces up to 394 N (the stiff sphere and cuboid, before the
-    initial guess left the nodes touching a pad where the nodes' own fix put them), and two cells
-    not used to tune it: every bound holds."""
-    _within_bounds(run_cell(name, e, STEPS, edge_contact=True))
+@pytest.mark.parametrize("name, e", [("cuboid", 1e7), ("sphere", 1e4), ("torus", 1e6)])
+def test_adversarial_actions_with_node_contact_alone(name, e):
+    """The same fuzz with the pads' box edges not held out (``edge_contact=False``, node-vs-box
+    contact alone, the default until 2026-11-26 and still an option): every bound holds."""
+    _within_bounds(run_cell(name, e, STEPS, edge_contact=False))

@@ -159,6 +159,19 @@ def test_config_json_round_trip_is_exact():
     assert config_from_json(config_to_json(cfg)) == cfg
     with pytest.raises(ValueError, match="unknown"):
         config_from_json('{"nonsense": 1}')
+    for edge in (True, False):  # both values round-trip, whatever the default
+        assert config_from_json(config_to_json(PickupConfig(edge_contact=edge))).edge_contact is edge
+
+
+def test_a_file_recorded_before_edge_contact_was_the_default_replays_without_it():
+    """Files written while ``edge_contact`` did not exist or was off by default lack the key: they
+    were simulated without it, so their config loads with it off (exact replay), not with today's default."""
+    import json
+
+    old = json.loads(config_to_json(PickupConfig(object="sphere")))
+    del old["edge_contact"]
+    assert PickupConfig().edge_contact is True
+    assert config_from_json(json.dumps(old)) == PickupConfig(object="sphere", edge_contact=False)
 
 
 def test_readme_schema_table_matches_the_code():

@@ -1,5 +1,6 @@
 """``SB3VectorEnv``: the native vector env under Stable-Baselines3's VecEnv protocol, and a PPO smoke run."""
 
+import json
 import pathlib
 
 import gymnasium as gym
@@ -272,9 +273,15 @@ def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
     assert sum(first["outcomes"].values()) == 3
     assert evaluate(tmp_path, 3, seed=11)["episodes"] == first["episodes"]
     softer = evaluate(tmp_path, 1, seed=11, youngs_modulus=1e4)  # an option the run left at its default
-    assert softer["env"] == {"object": "cuboid", "youngs_modulus": 1e4, "episode_seconds": 0.3, "edge_contact": False}
-    edges = evaluate(tmp_path, 1, seed=11, edge_contact=True)  # the pads' edges held out (vector env, CPU)
-    assert edges["env"]["edge_contact"] is True and sum(edges["outcomes"].values()) == 1
+    assert softer["env"] == {"object": "cuboid", "youngs_modulus": 1e4, "episode_seconds": 0.3, "edge_contact": True}
+    nodes = evaluate(tmp_path, 1, seed=11, edge_contact=False)  # node-vs-box contact alone (vector env, CPU)
+    assert nodes["env"]["edge_contact"] is False and sum(nodes["outcomes"].values()) == 1
+    # a run.json without the key is a run trained before edge contact was the default: without it
+    settings = json.loads((tmp_path / "run.json").read_text())
+    assert settings["edge_contact"] is True
+    del settings["edge_contact"]
+    (tmp_path / "run.json").write_text(json.dumps(settings))
+    assert evaluate(tmp_path, 1, seed=11)["env"]["edge_contact"] is False
     with pytest.raises(ValueError, match="gamma"):
         evaluate(tmp_path, 1, gamma=0.5)
 

@@ -80,8 +80,8 @@ class PickupConfig:
     pad_friction: float = 1.0
     contact_stiffness: float = 1e6
     #: ``ContactParams.edge_contact``: also hold the pads' box edges and corners out of the object
-    #: between its surface nodes (off by default, as there; see its docstring)
-    edge_contact: bool = False
+    #: between its surface nodes (on by default, as there; see its docstring)
+    edge_contact: bool = True
     init_position_noise: float = 0.02
     init_yaw_noise: float = math.pi
     control_hz: float = 20.0

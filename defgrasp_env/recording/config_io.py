@@ -48,12 +48,21 @@ def _build(cls: type, data: dict) -> Any:
     return cls(**kwargs)
 
 
+#: PickupConfig fields whose default changed after files were recorded without them: a file that
+#: lacks one was recorded with this value (``edge_contact`` was off by default until 2026-11-26),
+#: which its replay must use to be exact.
+RECORDED_BEFORE_DEFAULT = {"edge_contact": False}
+
+
 def config_from_json(text: str) -> PickupConfig:
-    """Inverse of :func:`config_to_json` (validated by the dataclasses themselves)."""
+    """Inverse of :func:`config_to_json` (validated by the dataclasses themselves); a field of
+    ``RECORDED_BEFORE_DEFAULT`` that the text lacks takes the value it was recorded with."""
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"config_json is not valid JSON: {exc}") from exc
+    if isinstance(data, dict):
+        data = {**RECORDED_BEFORE_DEFAULT, **data}
     return _build(PickupConfig, data)
 
 

@@ -44,10 +44,10 @@ class ContactParams:
         stiffening_depth: depth (m) beyond which the penalty force grows cubically.
         edge_contact: also hold the pads' box edges and corners out of the object's surface
             (``sim/kernels/pad_edge_contact.py``: points every <= 1.5 mm along each pad box edge
-            against the surface triangle nearest to each where the substep takes them,
-            frictionless, the first 0.5 mm free), so a pad edge cannot sink in between surface nodes. Off by
-            default: in the 2 m/s contact fuzz it reads pad normal forces up to ~400 N on stiff
-            objects (E >= 1e6) where the force limits allow ~260 N (README, known gaps).
+            against the surface triangle nearest to each where the substep takes them, with
+            the pads' friction, the first 0.5 mm free), so a pad edge cannot sink in between
+            surface nodes. On by default; off gives node-vs-box contact alone (faster on soft
+            objects, but a pad edge or corner sinks up to ~2 mm between a coarse mesh's nodes).
     """
 
     stiffness: float = 1e6
@@ -56,7 +56,7 @@ class ContactParams:
     stick_velocity: float = 1e-4
     modulus_scale: float = 100.0
     stiffening_depth: float = 2.5e-4
-    edge_contact: bool = False
+    edge_contact: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.edge_contact, bool):
