@@ -116,13 +116,13 @@ def test_pad_edge_pressed_between_surface_nodes_does_not_sink_in(size, resolutio
     cuboid's top face, is driven 3.5 mm below the face at 0.2 m/s and held. With edge contact
     (``ContactParams.edge_contact``) the surface under the edge must push back: no surface point
     deeper than 1 mm in the pad, and the pad feels a force that holds it up. With node-vs-box
-    contact alone (the default: 2.12 and 1.92 mm in the two cases) the edge sinks in deeper than
+    contact alone (``edge_contact=False``: 2.12 and 1.92 mm in the two cases) the edge sinks in deeper than
     1.5 mm: the gap edge contact closes. The first case is the geometry of the contact fuzz's
     cuboid; the second (another size, row spacing, modulus and edge direction) was not used to
     tune anything."""
     mesh, centre = edge_case_start(size, resolution, quat, corner)
     deepest, force = press(mesh, e, edges, centre, quat, 0.001 + 0.0035)
-    if not edges:  # node-vs-box contact alone (the default): the gap this test is about
+    if not edges:  # node-vs-box contact alone: the gap this test is about
         assert deepest > 1.5 * BOUND, deepest
         return
     assert deepest < BOUND, f"a surface point {deepest * 1e3:.2f} mm deep in the pad"

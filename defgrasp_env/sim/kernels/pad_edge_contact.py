@@ -28,16 +28,24 @@ meets the object's surface through one triangle per substep, lagged like a node'
   convex penalty of a fixed linear function: Newton sees no switching (the edge-crossing
   formulation this replaces switched crossings on and off within a solve and did not converge on
   a swept E = 1e6 cuboid).
-- forces: -f w_j n on node j (f = ``penalty_force``), +f n on the pad (its normal force adds f);
-  Hessian: the block-diagonal majorant s w_j n n^T on node j of the Gauss-Newton term
-  s (w w^T) x n n^T (Cauchy-Schwarz with sum w_j = 1), so the Newton direction stays a descent
-  direction of the line search's energy. Frictionless: the pads' friction acts on the nodes.
+- forces: -f w_j n on node j (f = ``penalty_force``), +f n on the pad (its normal force adds f).
+- friction: the pads' smoothed Coulomb law (``contact.friction_force``) on the slip of the
+  triangle's surface point against the pad's material point that held it at the substep start,
+  lagged on the normal force of the point's start depth beyond the depth it may keep; w_j of it
+  on node j, its opposite on the pad. Without it a torus held by the pads' rims slipped (the
+  expert's E = 1e7 torus episode took 244 steps instead of 79).
+- Hessian: the point's 3x3 block B (s n n^T of the penalty, c (I - n n^T) of the friction) on the
+  node pairs of its triangle, w_j w_k B: exact for the penalty, as the surface point is affine in
+  the nodes (``edge_point_product`` in CG, ``coarse_assemble_edge_points`` in the coarse matrix;
+  the diagonal blocks w_j^2 B in the block-Jacobi preconditioner). The per-node majorant
+  w_j B used before made Newton converge linearly: a held soft grasp ran 4 iterations per substep.
 - stiffness: the triangle's nodes' penalty stiffness (barycentric mean) times the point's share
   of its edge over the triangle's mean edge length, so a pad edge pressed along a face is about as
   stiff as a row of the face's nodes, whatever the sampling.
 - initial guess (``edge_point_push``, ``push_triangles``): where the pad's motion takes a point
-  deeper than g_a, its triangle's nodes that touch no pad move out by the largest such excess of
-  its points, as nodes touching a pad face are put on it.
+  deeper than g_a and than it was at the substep start, its triangle's nodes that touch no pad
+  move out by the largest such excess of its points, as nodes touching a pad face are put on it
+  (and a pressed point, like a node touching a pad, keeps its start depth).
 
 The reported penetration (``SolveStats.penetration``) includes the depth beyond the skin of every
 point deeper than it may be. Edge points do not take part in the extra Newton iterations or the
@@ -47,8 +55,8 @@ depth is pushed back by its penalty over the following substeps, a knee per subs
 Arrays (``solver_scratch.EdgeContactScratch``): triangles [T] vec3i global node ids and their world
 [T]; points [Q] vec3 in unit box coordinates, their pad index in the world [Q], their share of an
 edge [Q] (m), ``point_first`` [P+1]; per world and point (index w * Q + q): the lagged triangle (-1:
-none), weights, normal (world frame), stiffness (N/m) and kept depth (m), and the search's best
-distance and triangle.
+none), weights, normal (world frame), stiffness (N/m), kept depth (m), friction's normal force (N)
+and Hessian block (N/m), and the search's best distance and triangle.
 """
 
 import warp as wp
