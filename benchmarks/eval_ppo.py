@@ -7,8 +7,10 @@ script gives the policy's success rate as a user sees it: N worlds
 each run one episode from its reset to its end (success or the time limit), actions from the
 policy's mean (``--stochastic`` samples them instead), observation normalisation frozen. Env
 options are the run's (``run.json``) unless given (``--object``, ``--youngs-modulus``: a policy
-evaluated on another object or stiffness than it was trained on; ``--edge-contact``: with the pads'
-box edges held out of the object, ``PickupConfig.edge_contact``). Seeds start at ``--seed`` (default
+evaluated on another object or stiffness than it was trained on; ``--edge-contact`` /
+``--no-edge-contact``: with or without the pads' box edges held out of the object,
+``PickupConfig.edge_contact``; a run.json without the key is a run trained without it, before it
+became the default). Seeds start at ``--seed`` (default
 10**9: none of the training episodes' seeds, which count from the run's seed by env steps).
 
 A run trained on several objects with ``--fixed-world-objects`` is evaluated so (world i holds
