@@ -189,14 +189,10 @@ def _point_triangle_distances(p, tri):
     return np.where(inside, np.abs(height), best)
 
 
-@pytest.mark.parametrize("slip", [None, 0.5, 3.0])
-def test_edge_point_force_is_minus_the_gradient_of_its_energy(slip):
-    """A pad pressed 1.2 mm into the cuboid's top face at a tilt over the substep (from 3 mm
-    higher), so its edge points lie at depths past the skin and the cubic knee: the force the evaluate kernel adds to the nodes
-    equals minus the central-difference gradient of the energy kernel (float64 sums; step 1e-6 m),
-    and the force on the pad balances the nodes' forces. ``slip``: without friction, or with a
-    lagged normal force of 2 N on every point and the nodes slid sideways by that many stick slips
-    since the substep start (0.5: the smoothed law's sticking part; 3: sliding)."""
+def _tilted_pad_pressed():
+    """Two cuboid worlds (E = 1e6) and a pad of world 0 tilted so that its lowest corner ends the
+    substep 1.2 mm below the top face, coming from 3 mm higher, searched: (model, edges, x rest
+    positions, xw their Warp array, pad poses)."""
     _, model = _model(e=1e6)
     edges = EdgeContactScratch.from_model(model)
     x = model.rest_positions.numpy().astype(np.float64)
@@ -208,6 +204,18 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy(slip):
               .min())
     pos[0, 1] = top - lowest - 0.0012  # the lowest corner 1.2 mm below the face
     xw, pads = _search(model, edges, x, pos, rot, start=pos + np.array([0.0, 0.003, 0.0]))  # it came from above
+    return model, edges, x, xw, pads
+
+
+@pytest.mark.parametrize("slip", [None, 0.5, 3.0])
+def test_edge_point_force_is_minus_the_gradient_of_its_energy(slip):
+    """A pad pressed 1.2 mm into the cuboid's top face at a tilt over the substep (from 3 mm
+    higher), so its edge points lie at depths past the skin and the cubic knee: the force the evaluate kernel adds to the nodes
+    equals minus the central-difference gradient of the energy kernel (float64 sums; step 1e-6 m),
+    and the force on the pad balances the nodes' forces. ``slip``: without friction, or with a
+    lagged normal force of 2 N on every point and the nodes slid sideways by that many stick slips
+    since the substep start (0.5: the smoothed law's sticking part; 3: sliding)."""
+    model, edges, x, xw, pads = _tilted_pad_pressed()
     n = model.num_nodes
     active = wp.ones(model.num_worlds, dtype=int, device="cpu")
     slots = model.num_worlds * edges.points_per_world
@@ -259,17 +267,7 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
     approximation c (I - n n^T), not the exact Jacobian of a sliding force); (b)
     ``coarse_assemble_edge_points`` gives T^T H T for node aggregates (T: unit translations of each
     aggregate, some axes fixed), built column by column from the product, friction included."""
-    _, model = _model(e=1e6)
-    edges = EdgeContactScratch.from_model(model)
-    x = model.rest_positions.numpy().astype(np.float64)
-    top = x[:, 1].max()
-    axis = np.array([1.0, 0.0, 0.3])
-    rot = np.repeat(axis_angle_to_quat(0.5 * axis / np.linalg.norm(axis))[None], 4, 0)
-    pos = np.array([[0.003, 0.0, 0.002], [0.3, 1.0, 0.0], [0.3, 1.0, 0.0], [0.3, 1.0, 0.0]])
-    lowest = (quat_rotate(rot[:1], (np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * HALF))[:, 1]
-              .min())
-    pos[0, 1] = top - lowest - 0.0012
-    xw, pads = _search(model, edges, x, pos, rot, start=pos + np.array([0.0, 0.003, 0.0]))
+    model, edges, x, xw, pads = _tilted_pad_pressed()
     n, slots = model.num_nodes, model.num_worlds * edges.points_per_world
     active = wp.ones(model.num_worlds, dtype=int, device="cpu")
     shift = 3.0 * EPS if friction else 0.0
