@@ -45,8 +45,11 @@ class DefgraspEnvConfig(EnvConfig):
     ``fps`` is the env's control rate (Hz; actions are held for 1/fps s). ``object``: one of the
     five shapes, ``"random"`` or a mesh path; ``youngs_modulus`` (Pa); ``obs_type``: ``"state"``
     (``agent_pos`` + ``environment_state``), ``"pixels_agent_pos"`` or ``"pixels"``;
-    ``episode_seconds`` sets LeRobot's rollout length (``max_episode_steps``); ``render_mode``
-    "rgb_array" gives the evaluation videos. Actions are the env's delta actions [7] in [-1, 1].
+    ``episode_seconds`` sets LeRobot's rollout length (``max_episode_steps``); ``edge_contact``:
+    the pads' box edges held out of the object (``PickupConfig.edge_contact``, on by default;
+    ``--env.edge_contact=false`` evaluates a policy in the node-only contact of data recorded before
+    2026-11-26); ``render_mode`` "rgb_array" gives the evaluation videos. Actions are the env's
+    delta actions [7] in [-1, 1].
     """
 
     task: str | None = ENV_ID
@@ -55,6 +58,7 @@ class DefgraspEnvConfig(EnvConfig):
     youngs_modulus: float = 1e5
     obs_type: str = "state"
     episode_seconds: float = PickupConfig.episode_seconds
+    edge_contact: bool = PickupConfig.edge_contact
     render_mode: str = "rgb_array"
     device: str = "cpu"
     features: dict[str, PolicyFeature] = field(default_factory=dict)
@@ -83,7 +87,7 @@ class DefgraspEnvConfig(EnvConfig):
     def _pickup_kwargs(self) -> dict:
         return dict(object=self.object, youngs_modulus=float(self.youngs_modulus), obs_type=self.obs_type,
                     control_hz=float(self.fps), episode_seconds=float(self.episode_seconds),
-                    device=self.device)
+                    edge_contact=self.edge_contact, device=self.device)
 
     @property
     def package_name(self) -> str:

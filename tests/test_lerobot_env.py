@@ -73,6 +73,12 @@ def test_make_env_builds_and_steps_like_a_direct_env():
         np.testing.assert_array_equal(last, ref["agent_pos"])
         assert r[0] == pytest.approx(r_ref)
     assert trunc[0] and not term[0] and "is_success" in info["final_info"]
+    # the contact model is a config field: today's default, or node contact alone for old data
+    assert vec.call("config")[0].edge_contact is True
+    nodes = make_env(DefgraspEnvConfig(object="cuboid", edge_contact=False), n_envs=1)["defgrasp"][0]
+    assert nodes.call("config")[0].edge_contact is False
+    nodes.reset(seed=[0])
+    assert nodes.call("scene")[0].solver.scratch.edges.active is False
     frame = vec.call("render")[0]
     assert frame.shape == (224, 224, 3) and frame.dtype == np.uint8 and frame.std() > 0
     vec.close()

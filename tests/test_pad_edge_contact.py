@@ -256,6 +256,39 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy(slip):
             assert abs(fd - f[i, j]) < 0.02 * np.abs(f[i]).max() + 1e-3, (i, j, fd, f[i, j])
 
 
+def _expect_point_blocks(model, edges, x, x_start, pads):
+    """Each pressed or rubbing edge point's Hessian block as ``evaluate_edge_points`` left it equals
+    the block built here in float64 from the penalty law (``contact.penalty_stiffness``) and the
+    smoothed Coulomb law (``contact.friction_coefficient``: f1(s)/s = 1/s beyond the stick slip,
+    2/eps - s/eps^2 below), on the slip of the triangle's surface point against the pad (both pad
+    poses share their rotation here: the slip is the surface point's motion less the pad's)."""
+    tri, bary, normal = edges.point_tri.numpy(), edges.point_bary.numpy(), edges.point_normal.numpy()
+    stiffness, allowed = edges.point_stiffness.numpy(), edges.point_allowed.numpy()
+    lag, blocks = edges.point_friction.numpy(), edges.point_block.numpy()
+    tris, points, point_pad = edges.triangles.numpy(), edges.points.numpy(), edges.point_pad.numpy()
+    p0, q1, p1, half = pads[0].numpy(), pads[3].numpy(), pads[2].numpy(), model.pad_half_extents.numpy()
+    q_count, checked = edges.points_per_world, 0
+    for slot in np.flatnonzero(tri >= 0):
+        w, q = divmod(int(slot), q_count)
+        pad = w * model.pads_per_world + point_pad[q]
+        n, wts, ids = normal[slot].astype(np.float64), bary[slot].astype(np.float64), tris[tri[slot]]
+        end = p1[pad] + quat_rotate(q1[pad:pad + 1].astype(np.float64), (points[q] * half[pad])[None])[0]
+        g = n @ (wts @ x[ids] - end) - allowed[slot]
+        expected = np.zeros((3, 3))
+        if g > 0:
+            e = max(g - KNEE, 0.0)
+            expected += stiffness[slot] * (1 + 3 * e * e / KNEE**2) * np.outer(n, n)
+        if lag[slot] > 0:
+            slip = wts @ (x[ids] - x_start[ids]) - (p1[pad] - p0[pad])
+            st = np.linalg.norm(slip - (slip @ n) * n)
+            f1_over_s = 1 / st if st >= EPS else 2 / EPS - st / EPS**2
+            expected += MU * lag[slot] * f1_over_s * (np.eye(3) - np.outer(n, n))
+        if np.any(expected):
+            np.testing.assert_allclose(blocks[slot], expected, rtol=1e-3, atol=1e-4 * np.abs(expected).max())
+            checked += 1
+    assert checked >= 1
+
+
 @pytest.mark.parametrize("friction", [False, True])
 def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_product(friction):
     """The pressed points of the tilted pad above (depths past the knee): (a) the Hessian product
@@ -309,6 +342,8 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
         force(x)  # back to the curvature at x
         assert np.abs(hp).max() > 0
         np.testing.assert_allclose(hp, fd, atol=0.02 * np.abs(hp).max())
+    if friction:  # the blocks, from the documented laws: s n n^T (penalty) + mu f_n f1(s)/s (I - n n^T)
+        _expect_point_blocks(model, edges, x, x - shift * np.array([0.6, 0.0, 0.8]), pads)
     # (b) coarse block: 3 aggregates by node id, axis z fixed on every 5th node
     aggregate = np.arange(n) % 3
     free = np.ones((n, 3), np.float32)

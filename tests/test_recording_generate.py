@@ -42,6 +42,31 @@ def test_generate_resumes_and_summarises(tmp_path, capsys):
         assert ep.replay["seed"] == job.seed and ep["object/youngs_modulus"] == job.youngs_modulus
 
 
+def test_resuming_a_dataset_recorded_without_edge_contact_is_refused(tmp_path, capsys):
+    """A folder whose episodes were recorded with node contact alone (the default before pad edge
+    contact: their config lacks the key) is not resumed with today's default, which would mix two
+    contact models in one dataset: exit 2 naming the file, nothing written, the file untouched."""
+    import json
+
+    import h5py
+
+    args = [str(tmp_path), "--objects", "cuboid", "--moduli", "1e4", "--episodes", "2", "--max-steps", "2",
+            "--policy", "random", "--no-progress"]
+    assert generate_main(args[:6] + ["1"] + args[7:]) == 0
+    first = tmp_path / "cuboid_E1e4_000.h5"
+    with h5py.File(first, "r+") as f:  # as written before the key existed
+        config = json.loads(f.attrs["config_json"])
+        del config["edge_contact"]
+        f.attrs["config_json"] = json.dumps(config, sort_keys=True)
+    digest = hashlib.sha256(first.read_bytes()).hexdigest()
+    capsys.readouterr()
+    assert generate_main(args) == 2
+    err = capsys.readouterr().err
+    assert "cuboid_E1e4_000.h5 was recorded with edge_contact=False" in err and "new folder" in err
+    assert sorted(p.name for p in tmp_path.glob("*.h5")) == ["cuboid_E1e4_000.h5"]
+    assert hashlib.sha256(first.read_bytes()).hexdigest() == digest
+
+
 def test_bad_policy_is_reported(tmp_path, capsys):
     assert generate_main([str(tmp_path), "--objects", "cuboid", "--moduli", "1e5", "--policy", "nope:thing",
                           "--no-progress"]) == 2

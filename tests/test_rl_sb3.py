@@ -177,6 +177,9 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match=r"object: saved 'cuboid', given 'torus'"):
         train(num_envs=2, timesteps=16, n_steps=8, episode_seconds=0.3, actions="position-jaw", resume=tmp_path,
               object="torus")
+    with pytest.raises(ValueError, match=r"edge_contact: saved True, given None"):  # the contact model too
+        train(num_envs=2, timesteps=16, n_steps=8, episode_seconds=0.3, actions="position-jaw", resume=tmp_path,
+              object="cuboid", edge_contact=False)
     seeds = []  # the seeds each SB3 reset of the env uses
     reset = SB3VectorEnv.reset
     monkeypatch.setattr(SB3VectorEnv, "reset", lambda self: (seeds.append(list(self._seeds)), reset(self))[1])

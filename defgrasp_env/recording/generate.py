@@ -225,6 +225,29 @@ def progress_bar(total: int, finished: int, enabled: bool):
     return bar, on_episode
 
 
+def check_same_contact_model(out: pathlib.Path, jobs: list[Job]) -> None:
+    """Resuming into ``out`` must record what an uninterrupted run would have: raise ValueError
+    if an episode file already there was recorded with another pad contact model than today's
+    default (``PickupConfig.edge_contact``, on since 2026-11-26; files from before lack the key and
+    were recorded without it), naming the file."""
+    import h5py
+
+    from ..envs.config import PickupConfig
+    from .config_io import config_from_json
+
+    default = PickupConfig().edge_contact
+    for job in jobs:
+        path = out / job.name
+        if path.exists():
+            with h5py.File(path, "r") as f:
+                recorded = config_from_json(str(f.attrs["config_json"])).edge_contact
+            if recorded != default:
+                raise ValueError(f"{path} was recorded with edge_contact={recorded}, today's default is {default} "
+                                 "(pad edge contact): resuming would mix contact models in one dataset; "
+                                 "record into a new folder")
+            return  # one file tells: a run records all its files with one config
+
+
 def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
              device: str = "cpu", record_frames: bool = False, compression: str | None = None,
              progress: bool = True, worlds: int = 1) -> list[pathlib.Path]:
@@ -315,6 +338,7 @@ def main(argv: list[str] | None = None) -> int:
         from .distributed import run_jobs_ray
         record = partial(run_jobs_ray, address=None if args.ray == "local" else args.ray, workers=args.workers)
     try:
+        check_same_contact_model(args.out, jobs)
         paths = record(args.out, jobs, args.policy, args.max_steps, args.device, args.frames,
                        args.compression, progress=not args.no_progress, worlds=args.worlds)
     except KeyboardInterrupt:

@@ -31,8 +31,9 @@ meets the object's surface through one triangle per substep, lagged like a node'
 - forces: -f w_j n on node j (f = ``penalty_force``), +f n on the pad (its normal force adds f).
 - friction: the pads' smoothed Coulomb law (``contact.friction_force``) on the slip of the
   triangle's surface point against the pad's material point that held it at the substep start,
-  lagged on the normal force of the point's start depth beyond the depth it may keep; w_j of it
-  on node j, its opposite on the pad. Without it a torus held by the pads' rims slipped (the
+  lagged on the normal force of the point's start depth beyond the depth it may keep (at most a
+  knee's worth: a held point's load exactly, less than its load for a point pushed back out); w_j
+  of it on node j, its opposite on the pad. Without it a torus held by the pads' rims slipped (the
   expert's E = 1e7 torus episode took 244 steps instead of 79).
 - Hessian: the point's 3x3 block B (s n n^T of the penalty, c (I - n n^T) of the friction) on the
   node pairs of its triangle, w_j w_k B: exact for the penalty, as the surface point is affine in
@@ -252,7 +253,8 @@ def lag_edge_points(
     pad kept from it, or a solve stopped unconverged) is pushed out by at most a knee per substep,
     not at once (pushed out at once, a pad swept at 2 m/s into a soft cuboid read 1 kN). Also the
     normal force (N) its friction is lagged on: the penalty force of its start depth beyond the
-    depth it may keep (a held point's load: its start depth is its kept depth plus its load depth)."""
+    depth it may keep (a held point's load: its start depth is its kept depth plus its load depth;
+    at most a knee's worth, so less than the load of a point deeper than that, pushed back out)."""
     slot = wp.tid()
     w = slot // points_per_world
     q = slot % points_per_world
@@ -561,9 +563,12 @@ def edge_point_product(
     t = point_tri[slot]
     if t < 0 or cg_active[slot // points_per_world] == 0:
         return
+    block = point_block[slot]
+    if wp.ddot(block, block) == 0.0:  # neither pressed nor rubbing
+        return
     ids = triangles[t]
     bary = point_bary[slot]
-    along = point_block[slot] * (bary[0] * p[ids[0]] + bary[1] * p[ids[1]] + bary[2] * p[ids[2]])
+    along = block * (bary[0] * p[ids[0]] + bary[1] * p[ids[1]] + bary[2] * p[ids[2]])
     for j in range(3):
         wp.atomic_add(ap, ids[j], bary[j] * along)
 
@@ -588,9 +593,11 @@ def coarse_assemble_edge_points(
     t = point_tri[slot]
     if t < 0 or world_active[w] == 0:
         return
+    block = point_block[slot]
+    if wp.ddot(block, block) == 0.0:  # neither pressed nor rubbing
+        return
     ids = triangles[t]
     bary = point_bary[slot]
-    block = point_block[slot]
     for j in range(3):
         aj = node_aggregate[ids[j]]
         for k in range(3):
