@@ -18,6 +18,8 @@ and zeroes their wrist rotation: the contact-heavy steps of an RL policy learnin
 cost the actuator force limit's retries and the slowest world's iterations set; ``press`` = the
 closed gripper pushed down onto the object at full speed and kept pushing (``press_actions``: a
 learner pressing the object into the ground, the wrist at its force limit from the first touch).
+``--edge-contact on|off|both``: pad edge contact (``PickupConfig.edge_contact``, on by default;
+both: a row each, side by side).
 Printed per row: median and p95 ms per step, world-steps/s (W / median), the physics substeps per
 control step, the deepest solver-reported penetration (mm) and largest wrist force (N) over the timed
 steps, world-solves per world-substep (1 = no force-limit retry or patient re-solve; the scene's
@@ -72,10 +74,11 @@ def press_actions(obs: dict, scene) -> np.ndarray:
 
 
 def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
-             graphs: str = "auto", noise: float = 0.0) -> dict:
+             graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True) -> dict:
     """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table."""
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
-                       device=device, object=obj, youngs_modulus=modulus, solver=solver_with_graphs(graphs))
+                       device=device, object=obj, youngs_modulus=modulus, solver=solver_with_graphs(graphs),
+                       edge_contact=edge_contact)
     obs, _ = env.reset(seed=0)
     rng = np.random.default_rng(0)
     expert = ScriptedPickupExpert.from_env(env) if policy == "expert" else None
@@ -112,6 +115,7 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
     env.close()
     t, newton, cg = np.array(times), np.array(newton), np.array(cg)
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
+            "edges": "on" if edge_contact else "off",
             "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "substeps": substeps, "depth_mm": 1e3 * depth, "wrist_N": wrist, "successes": successes,
@@ -120,12 +124,12 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| W | actions | step graphs | object | E (Pa) | substeps | median ms | p95 ms | world-steps/s | "
-             "deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / mean | "
-             "CG / step, slowest / mean | episodes won |", "|---" * 15 + "|"]
+    lines = ["| W | actions | step graphs | edge contact | object | E (Pa) | substeps | median ms | p95 ms | "
+             "world-steps/s | deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / "
+             "mean | CG / step, slowest / mean | episodes won |", "|---" * 16 + "|"]
     for r in rows:
         won = r["successes"] if r["policy"].startswith("expert") else "-"
-        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
+        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
                      f"{r['median_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
                      f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['solves']:.3f} | {r['newton'][0]:.0f} / "
                      f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} |")
@@ -146,6 +150,8 @@ def main(argv=None) -> int:
                     help="capture each solver step as one graph (SolverConfig.graphs); both: a row each, side by side")
     ap.add_argument("--noise", type=float, default=0.0,
                     help="std of Gaussian noise on the expert's actions (wrist rotation zeroed); needs --policy expert")
+    ap.add_argument("--edge-contact", choices=["on", "off", "both"], default="on",
+                    help="pad edge contact (PickupConfig.edge_contact, on by default); both: a row each, side by side")
     ap.add_argument("--no-append", action="store_true")
     args = ap.parse_args(argv)
     if args.noise < 0.0 or (args.noise > 0.0 and args.policy != "expert"):
@@ -155,9 +161,10 @@ def main(argv=None) -> int:
     rows = []
     for w in args.worlds:
         for graphs in (["off", "on"] if args.graphs == "both" else [args.graphs]):
-            rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus, args.warmup,
-                                 args.steps, graphs, args.noise))
-            print(table(rows[-1:]).splitlines()[-1], flush=True)
+            for edges in (["off", "on"] if args.edge_contact == "both" else [args.edge_contact]):
+                rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus, args.warmup,
+                                     args.steps, graphs, args.noise, edges == "on"))
+                print(table(rows[-1:]).splitlines()[-1], flush=True)
     report = table(rows)
     print(report)
     if not args.no_append:
