@@ -11,6 +11,7 @@ import pytest
 import warp as wp
 
 from defgrasp_env.sim.kernels import pad_edge_contact as kpe
+from defgrasp_env.sim.kernels import pad_edge_search as kps
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.meshing import make_object_mesh
 from defgrasp_env.sim.model import ContactParams, build_model
@@ -28,7 +29,7 @@ EPS = 2e-5  # the friction's stick slip (m): 20 x the 1e-6 m finite-difference s
 def _closest(a: wp.array(dtype=wp.vec3), b: wp.array(dtype=wp.vec3), c: wp.array(dtype=wp.vec3),
              p: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
     i = wp.tid()
-    out[i] = kpe.closest_point_barycentric(a[i], b[i], c[i], p[i])
+    out[i] = kps.closest_point_barycentric(a[i], b[i], c[i], p[i])
 
 
 def test_closest_point_of_a_triangle_against_dense_sampling():
@@ -101,9 +102,9 @@ def _search(model, edges, x, pos, rot, start=None, lag=None):
     lag_arrays = (wp.array(force, dtype=float, device="cpu"), wp.array(normal, dtype=wp.vec3, device="cpu"))
     args = (xw, xw, edges.triangles, edges.triangle_world, *pads, model.pad_half_extents, model.pads_per_world,
             edges.points, edges.point_first, edges.points_per_world)
-    wp.launch(kpe.clear_edge_search, slots, [edges.best_dist, edges.best_tri], device="cpu")
+    wp.launch(kps.clear_edge_search, slots, [edges.best_dist, edges.best_tri], device="cpu")
     for choose in (0, 1):
-        wp.launch(kpe.nearest_surface_triangles, edges.triangles.shape[0] * model.pads_per_world,
+        wp.launch(kps.nearest_surface_triangles, edges.triangles.shape[0] * model.pads_per_world,
                   [*args, choose, edges.best_dist, edges.best_tri], device="cpu")
     wp.launch(kpe.lag_edge_points, slots, [xw, xw, edges.triangles, *pads, model.pad_half_extents,
                                            model.pads_per_world, edges.points, edges.point_pad, edges.point_share,
@@ -157,8 +158,8 @@ def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
             mine = np.flatnonzero((tri_world == w) & facing)
             d = _point_triangle_distances(q[slot], x[tris[mine]])
             best = d.min()
-            if best > kpe.SEARCH_MARGIN * 0.999:
-                if best > kpe.SEARCH_MARGIN * 1.001:
+            if best > kps.SEARCH_MARGIN * 0.999:
+                if best > kps.SEARCH_MARGIN * 1.001:
                     assert got[slot] == -1, (slot, best)
                 continue
             t = got[slot]

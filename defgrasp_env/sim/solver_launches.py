@@ -26,6 +26,7 @@ import warp as wp
 from .kernels import coarse_space as kcs
 from .kernels import contact as kc
 from .kernels import pad_edge_contact as kpe
+from .kernels import pad_edge_search as kps
 from .kernels import elastic as ke
 from .kernels import energy as kenergy
 from .kernels import line_search as kls
@@ -139,9 +140,9 @@ def _edge_search(c: _Context, x) -> list:
     slots, pairs = m.num_worlds * e.points_per_world, e.triangles.shape[0] * m.pads_per_world
     search = (s.x_start, x, e.triangles, e.triangle_world, *s.pads, m.pad_half_extents, m.pads_per_world, e.points,
               e.point_first, e.points_per_world)
-    return [c.rec(kpe.clear_edge_search, slots, e.best_dist, e.best_tri),
-            c.rec(kpe.nearest_surface_triangles, pairs, *search, 0, e.best_dist, e.best_tri),
-            c.rec(kpe.nearest_surface_triangles, pairs, *search, 1, e.best_dist, e.best_tri),
+    return [c.rec(kps.clear_edge_search, slots, e.best_dist, e.best_tri),
+            c.rec(kps.nearest_surface_triangles, pairs, *search, 0, e.best_dist, e.best_tri),
+            c.rec(kps.nearest_surface_triangles, pairs, *search, 1, e.best_dist, e.best_tri),
             c.rec(kpe.lag_edge_points, slots, s.x_start, x, e.triangles, *s.pads, m.pad_half_extents,
                   m.pads_per_world, e.points, e.point_pad, e.point_share, e.points_per_world,
                   m.node_contact_stiffness, s.lag_normal_force, s.lag_normal, e.best_tri, e.point_tri, e.point_bary,
