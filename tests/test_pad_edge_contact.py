@@ -325,8 +325,7 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
         out = wp.zeros(n, dtype=wp.vec3, device="cpu")
         wp.launch(kpe.edge_point_product, slots,
                   [wp.array(direction.astype(np.float32), dtype=wp.vec3, device="cpu"), edges.triangles, active,
-                   edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal, edges.point_block,
-                   out], device="cpu")
+                   edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_block, out], device="cpu")
         return out.numpy().astype(np.float64)
 
     f0 = force(x)  # sets point_hessian at x
@@ -353,8 +352,8 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
     matrix = wp.zeros((model.num_worlds, size, size), dtype=wp.float64, device="cpu")
     world = model.node_world.numpy()
     wp.launch(kpe.coarse_assemble_edge_points, slots,
-              [edges.triangles, active, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
-               edges.point_block, wp.array(free, dtype=wp.vec3, device="cpu"),
+              [edges.triangles, active, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_block,
+               wp.array(free, dtype=wp.vec3, device="cpu"),
                wp.array(aggregate.astype(np.int32), dtype=int, device="cpu"), matrix], device="cpu")
     got = matrix.numpy()[0]
     columns = np.zeros((size, n, 3))

@@ -124,16 +124,16 @@ def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
 
 
 def _edge_product(c: _Context, p, active) -> list:
-    """ap += the pressed edge points' Hessians times ``p`` (none without edge contact)."""
+    """ap += the edge points' Hessian blocks times ``p`` (none without edge contact)."""
     m, s, e = c.model, c.scratch, c.scratch.edges
     if not e.active:
         return []
     return [c.rec(kpe.edge_point_product, m.num_worlds * e.points_per_world, p, e.triangles, active,
-                  e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_block, s.ap)]
+                  e.points_per_world, e.point_tri, e.point_bary, e.point_block, s.ap)]
 
 
 def _edge_search(c: _Context, x) -> list:
-    """The pad edge points' triangles for the substep (``kernels/pad_edge_contact.py``'s search)."""
+    """The pad edge points' triangles for the substep (``kernels/pad_edge_search.py``, then the lag)."""
     m, s, e = c.model, c.scratch, c.scratch.edges
     if not e.active:
         return []
@@ -191,7 +191,7 @@ def _coarse_before(c: _Context, active) -> list:
               m.tet_lambda, s.cofactor, s.tet_r, s.tet_twist, m.tet_world, active, m.free_axes, s.node_aggregate,
               s.coarse_matrix),
         *([c.rec(kpe.coarse_assemble_edge_points, m.num_worlds * e.points_per_world, e.triangles, active,
-                 e.points_per_world, e.point_tri, e.point_bary, e.point_normal, e.point_block, m.free_axes,
+                 e.points_per_world, e.point_tri, e.point_bary, e.point_block, m.free_axes,
                  s.node_aggregate, s.coarse_matrix)] if e.active else []),
         c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_size, s.coarse_matrix, s.coarse_lower_inv,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),

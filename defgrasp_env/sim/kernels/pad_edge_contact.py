@@ -422,7 +422,6 @@ def edge_point_product(
     points_per_world: int,
     point_tri: wp.array(dtype=int),
     point_bary: wp.array(dtype=wp.vec3),
-    point_normal: wp.array(dtype=wp.vec3),
     point_block: wp.array(dtype=wp.mat33),
     ap: wp.array(dtype=wp.vec3),
 ):
@@ -451,7 +450,6 @@ def coarse_assemble_edge_points(
     points_per_world: int,
     point_tri: wp.array(dtype=int),
     point_bary: wp.array(dtype=wp.vec3),
-    point_normal: wp.array(dtype=wp.vec3),
     point_block: wp.array(dtype=wp.mat33),
     free: wp.array(dtype=wp.vec3),
     node_aggregate: wp.array(dtype=int),
