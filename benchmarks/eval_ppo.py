@@ -81,6 +81,7 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     from stable_baselines3 import PPO
 
     from defgrasp_env import PickupConfig
+    from defgrasp_env.recording.config_io import RECORDED_BEFORE_DEFAULT
 
     run = pathlib.Path(run)
     settings = json.loads((run / "run.json").read_text())
@@ -88,8 +89,8 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     if unknown:
         raise ValueError(f"env overrides must be among {ENV_OPTIONS}, got {unknown}")
     # a run.json lacks options left at their default, and edge_contact where it was off (every run
-    # before it became the default on 2026-11-26)
-    given = {"edge_contact": False} | {k: settings[k] for k in ENV_OPTIONS if k in settings}
+    # before it became the default on 2026-11-26): read as recorded files are
+    given = RECORDED_BEFORE_DEFAULT | {k: settings[k] for k in ENV_OPTIONS if k in settings}
     given |= {k: v for k, v in env_overrides.items() if v is not None}
     config = PickupConfig(**given)
     env_options = {k: getattr(config, k) for k in ENV_OPTIONS}
