@@ -19,7 +19,11 @@ cost the actuator force limit's retries and the slowest world's iterations set; 
 closed gripper pushed down onto the object at full speed and kept pushing (``press_actions``: a
 learner pressing the object into the ground, the wrist at its force limit from the first touch).
 ``--edge-contact on|off|both``: pad edge contact (``PickupConfig.edge_contact``, on by default;
-both: a row each, side by side).
+both: a row each, side by side). ``--split``: also time the solver's share of each step: every
+``ImplicitSolver.advance`` is bracketed by ``wp.synchronize_device`` (one more synchronisation per
+solve, so the step itself is then slightly slower) and the row gives the median ms per step inside
+the solver and outside it (gripper, force limits, readouts, observations, reward: the host side
+and its transfers).
 Printed per row: median and p95 ms per step, world-steps/s (W / median), the physics substeps per
 control step, the deepest solver-reported penetration (mm) and largest wrist force (N) over the timed
 steps, world-solves per world-substep (1 = no force-limit retry or patient re-solve; the scene's
@@ -51,7 +55,7 @@ import defgrasp_env  # noqa: E402,F401
 from defgrasp_env.envs.config import PickupConfig  # noqa: E402
 from defgrasp_env.layout import DELTA_ACTION, ENV_STATE  # noqa: E402
 from defgrasp_env.policies import ScriptedPickupExpert  # noqa: E402
-from defgrasp_env.sim import SolverConfig  # noqa: E402
+from defgrasp_env.sim import ImplicitSolver, SolverConfig  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
 
 
@@ -73,9 +77,45 @@ def press_actions(obs: dict, scene) -> np.ndarray:
                              jaw=np.ones((len(toward), 1))).astype(np.float32)
 
 
+class SolverClock:
+    """Context manager timing every ``ImplicitSolver.advance`` (bracketed by ``wp.synchronize_device``
+    on ``device``) while it is active; ``seconds`` accumulates (reset it between steps)."""
+
+    def __init__(self, device: str):
+        self.device = device
+        self.seconds = 0.0
+
+    def __enter__(self):
+        self._advance = advance = ImplicitSolver.advance
+        clock = self
+
+        def timed(solver, *args, **kwargs):
+            wp.synchronize_device(clock.device)
+            t0 = time.perf_counter()
+            result = advance(solver, *args, **kwargs)
+            wp.synchronize_device(clock.device)
+            clock.seconds += time.perf_counter() - t0
+            return result
+
+        ImplicitSolver.advance = timed
+        return self
+
+    def __exit__(self, *exc):
+        ImplicitSolver.advance = self._advance
+        return False
+
+
 def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
-             graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True) -> dict:
-    """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table."""
+             graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True, split: bool = False) -> dict:
+    """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table (with
+    ``split``, the solver's share of each step too: ``SolverClock``)."""
+    if split:
+        with SolverClock(device) as clock:
+            return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock)
+    return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact)
+
+
+def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock=None) -> dict:
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
                        device=device, object=obj, youngs_modulus=modulus, solver=solver_with_graphs(graphs),
                        edge_contact=edge_contact)
@@ -84,7 +124,7 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
     expert = ScriptedPickupExpert.from_env(env) if policy == "expert" else None
     if expert is not None:
         expert.reset()
-    times, depth, wrist, successes, newton, cg = [], 0.0, 0.0, 0, [], []
+    times, solver_times, depth, wrist, successes, newton, cg = [], [], 0.0, 0.0, 0, [], []
     rotation = DELTA_ACTION.slice("angular_velocity")
     scene = env.unwrapped.scene
     for k in range(warmup + steps):
@@ -101,11 +141,14 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
                 action[:, rotation] = 0.0
         if k == warmup:
             solves_before = scene.world_solves
+        if clock is not None:
+            clock.seconds = 0.0
         obs, _, terminated, _, info = env.step(action)
         wp.synchronize_device(device)
         successes += int(np.sum(terminated))
         if k >= warmup:
             times.append(time.perf_counter() - t0)
+            solver_times.append(clock.seconds if clock is not None else np.nan)
             depth = max(depth, float(np.max(info["penetration"])))
             wrist = max(wrist, float(np.max(info["wrist_force"])))
             newton.append(info["newton_iterations"])
@@ -113,26 +156,33 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
     substeps = scene.substeps
     solves = (scene.world_solves - solves_before) / (worlds * substeps * steps)
     env.close()
-    t, newton, cg = np.array(times), np.array(newton), np.array(cg)
+    t, solver_t, newton, cg = np.array(times), np.array(solver_times), np.array(newton), np.array(cg)
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
             "edges": "on" if edge_contact else "off",
             "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
+            "solver_ms": 1e3 * float(np.median(solver_t)), "outside_ms": 1e3 * float(np.median(t - solver_t)),
             "substeps": substeps, "depth_mm": 1e3 * depth, "wrist_N": wrist, "successes": successes,
             "solves": solves, "newton": (float(np.median(newton.max(axis=1))), float(newton.mean())),
             "cg": (float(np.median(cg.max(axis=1))), float(cg.mean()))}
 
 
+def _ms(value: float) -> str:
+    return "-" if np.isnan(value) else f"{value:.1f}"
+
+
 def table(rows: list[dict]) -> str:
     lines = ["| W | actions | step graphs | edge contact | object | E (Pa) | substeps | median ms | p95 ms | "
              "world-steps/s | deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / "
-             "mean | CG / step, slowest / mean | episodes won |", "|---" * 16 + "|"]
+             "mean | CG / step, slowest / mean | episodes won | solver ms (median) | outside the solver ms (median) |",
+             "|---" * 18 + "|"]
     for r in rows:
         won = r["successes"] if r["policy"].startswith("expert") else "-"
         lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
                      f"{r['median_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
                      f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['solves']:.3f} | {r['newton'][0]:.0f} / "
-                     f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} |")
+                     f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} | {_ms(r['solver_ms'])} | "
+                     f"{_ms(r['outside_ms'])} |")
     return "\n".join(lines)
 
 
@@ -152,6 +202,8 @@ def main(argv=None) -> int:
                     help="std of Gaussian noise on the expert's actions (wrist rotation zeroed); needs --policy expert")
     ap.add_argument("--edge-contact", choices=["on", "off", "both"], default="on",
                     help="pad edge contact (PickupConfig.edge_contact, on by default); both: a row each, side by side")
+    ap.add_argument("--split", action="store_true",
+                    help="also time the solver's share of each step (a synchronisation around every solve)")
     ap.add_argument("--no-append", action="store_true")
     args = ap.parse_args(argv)
     if args.noise < 0.0 or (args.noise > 0.0 and args.policy != "expert"):
@@ -163,7 +215,7 @@ def main(argv=None) -> int:
         for graphs in (["off", "on"] if args.graphs == "both" else [args.graphs]):
             for edges in (["off", "on"] if args.edge_contact == "both" else [args.edge_contact]):
                 rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus, args.warmup,
-                                     args.steps, graphs, args.noise, edges == "on"))
+                                     args.steps, graphs, args.noise, edges == "on", args.split))
                 print(table(rows[-1:]).splitlines()[-1], flush=True)
     report = table(rows)
     print(report)
