@@ -36,6 +36,7 @@ benchmarks/RESULTS.md unless ``--no-append``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import datetime
 import os
@@ -109,13 +110,11 @@ def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, wa
              graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True, split: bool = False) -> dict:
     """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table (with
     ``split``, the solver's share of each step too: ``SolverClock``)."""
-    if split:
-        with SolverClock(device) as clock:
-            return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock)
-    return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact)
+    with SolverClock(device) if split else contextlib.nullcontext() as clock:
+        return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock)
 
 
-def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock=None) -> dict:
+def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock) -> dict:
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
                        device=device, object=obj, youngs_modulus=modulus, solver=solver_with_graphs(graphs),
                        edge_contact=edge_contact)
