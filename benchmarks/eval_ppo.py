@@ -21,14 +21,18 @@ at the goal`` (grasped but never within the success tolerance of the goal, pierc
 counted), ``at the goal, not held`` (within it while
 grasped, not for the hold time). Heights of an episode's last step come from the terminal
 observation VecNormalize returns, unnormalised (exact unless a value was clipped at 10 std).
+``--workers N`` spreads the worlds over N processes (one CPU core each on the CPU) with the same
+episodes as one process.
 
-    python benchmarks/eval_ppo.py datasets/output/ppo_place --worlds 32 --device cpu
+    python benchmarks/eval_ppo.py datasets/output/ppo_place --worlds 32 --device cpu --workers 2
 """
 
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import json
+import multiprocessing
 import pathlib
 import sys
 import time
@@ -68,23 +72,15 @@ def feature_beyond_pad_faces(scene) -> np.ndarray:
     return np.maximum(np.abs(local[..., 1:]) - half, 0.0).max(axis=1)
 
 
-def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str = "cpu",
-             torch_device: str = "cpu", deterministic: bool = True, **env_overrides) -> dict:
-    """Run ``num_worlds`` episodes (one per world) of the run's policy; returns the settings, the
-    per-episode records (``success``, ``steps``, ``success_step``, ``outcome``, ``min_goal_distance``
-    while grasped (m), ``grasped_steps``, ``max_lift`` of the feature point above its start (m),
-    ``final_flange_height`` (m, world y), ``max_wrist_force`` (N), ``least_grasped_gap`` and
-    ``final_gap`` of the jaw (m), ``pierced_steps``, ``hold_beyond_pad_faces`` [length, width] (m,
-    ``feature_beyond_pad_faces`` at the last grasped step; None if never grasped), ``return``) and
-    their summary
-    (``success_rate``, outcome counts)."""
-    from stable_baselines3 import PPO
-
+def run_settings(run: pathlib.Path, env_overrides: dict) -> tuple[dict, dict, bool]:
+    """The run's settings (``run.json``), the env options to evaluate with (the run's, read as
+    recorded files are, then ``env_overrides``: keys of ``ENV_OPTIONS``, None = the run's) and
+    whether world i holds the run's i-th object (``--fixed-world-objects`` runs, unless the object
+    is overridden)."""
     from defgrasp_env import PickupConfig
     from defgrasp_env.recording.config_io import RECORDED_BEFORE_DEFAULT
 
-    run = pathlib.Path(run)
-    settings = json.loads((run / "run.json").read_text())
+    settings = json.loads((pathlib.Path(run) / "run.json").read_text())
     unknown = sorted(set(env_overrides) - set(ENV_OPTIONS))
     if unknown:
         raise ValueError(f"env overrides must be among {ENV_OPTIONS}, got {unknown}")
@@ -93,9 +89,62 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     given = RECORDED_BEFORE_DEFAULT | {k: settings[k] for k in ENV_OPTIONS if k in settings}
     given |= {k: v for k, v in env_overrides.items() if v is not None}
     config = PickupConfig(**given)
-    env_options = {k: getattr(config, k) for k in ENV_OPTIONS}
-    # a run trained with world i holding one object evaluates so too, unless the object is overridden
     fixed = bool(settings.get("fixed_world_objects", False)) and env_overrides.get("object") is None
+    return settings, {k: getattr(config, k) for k in ENV_OPTIONS}, fixed
+
+
+def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str = "cpu",
+             torch_device: str = "cpu", deterministic: bool = True, workers: int = 1, **env_overrides) -> dict:
+    """Run ``num_worlds`` episodes (one per world) of the run's policy; returns the settings, the
+    per-episode records (``success``, ``steps``, ``success_step``, ``outcome``, ``min_goal_distance``
+    while grasped (m), ``grasped_steps``, ``max_lift`` of the feature point above its start (m),
+    ``final_flange_height`` (m, world y), ``max_wrist_force`` (N), ``least_grasped_gap`` and
+    ``final_gap`` of the jaw (m), ``pierced_steps``, ``hold_beyond_pad_faces`` [length, width] (m,
+    ``feature_beyond_pad_faces`` at the last grasped step; None if never grasped), ``return``) and
+    their summary (``success_rate``, outcome counts).
+
+    ``workers`` > 1 splits the worlds into that many consecutive blocks, each evaluated in its own
+    process (seeds and, for a fixed-world-objects run, objects as in one process: a block starts
+    at a multiple of the object count), with the same episodes as one process gives (a world's
+    episode depends on its seed only)."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be an int >= 1, got {workers!r}")
+    settings, env_options, fixed = run_settings(run, env_overrides)
+    if workers == 1:
+        records, wall = _episodes(run, num_worlds, seed, device, torch_device, deterministic, settings,
+                                  env_options, fixed)
+    else:
+        period = len(env_options["object"]) if fixed and not isinstance(env_options["object"], str) else 1
+        per_worker = -(-num_worlds // workers)
+        size = -(-per_worker // period) * period  # worlds per block: a multiple of the period
+        starts = list(range(0, num_worlds, size))
+        t0 = time.perf_counter()
+        with concurrent.futures.ProcessPoolExecutor(len(starts), mp_context=multiprocessing.get_context("spawn")) as pool:
+            parts = pool.map(_episodes, *zip(*[(run, min(size, num_worlds - a), seed + a, device, torch_device,
+                                                  deterministic, settings, env_options, fixed) for a in starts]))
+            records = [r for part, _ in parts for r in part]
+        wall = time.perf_counter() - t0
+    counts = {o: sum(r["outcome"] == o for r in records) for o in OUTCOMES}
+    success_steps = [r["success_step"] for r in records if r["success"]]
+    objects = [r["object"] for r in records]
+    by_object = {name: {o: sum(r["outcome"] == o for r in records if r["object"] == name) for o in OUTCOMES}
+                 for name in dict.fromkeys(objects)}
+    return {"run": str(run), "worlds": num_worlds, "seed": seed, "device": device, "deterministic": deterministic,
+            "workers": workers, "env": env_options, "fixed_world_objects": fixed,
+            "success_rate": counts["success"] / num_worlds, "outcomes": counts, "outcomes_by_object": by_object,
+            "success_step_median": float(np.median(success_steps)) if success_steps else None,
+            "wall_s": round(wall, 1), "episodes": records}
+
+
+def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, deterministic: bool,
+              settings: dict, env_options: dict, fixed: bool) -> tuple[list[dict], float]:
+    """The episode records of worlds 0..num_worlds-1 (seeds from ``seed``) and the wall time (s)."""
+    from stable_baselines3 import PPO
+
+    from defgrasp_env import PickupConfig
+
+    run = pathlib.Path(run)
+    config = PickupConfig(**env_options)
     venv = make_vec_env(num_worlds, seed, actions=settings["actions"], gamma=settings["gamma"], device=device,
                         fixed_world_objects=fixed, **env_options)
     venv = load_normalisation(run, venv)
@@ -162,15 +211,7 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
                               "return": float(info["episode"]["r"])}
     wall = time.perf_counter() - t0
     venv.close()
-    counts = {o: sum(r["outcome"] == o for r in records) for o in OUTCOMES}
-    success_steps = [r["success_step"] for r in records if r["success"]]
-    by_object = {name: {o: sum(r["outcome"] == o for r in records if r["object"] == name) for o in OUTCOMES}
-                 for name in dict.fromkeys(objects)}
-    return {"run": str(run), "worlds": num_worlds, "seed": seed, "device": device, "deterministic": deterministic,
-            "env": env_options, "fixed_world_objects": fixed, "success_rate": counts["success"] / num_worlds,
-            "outcomes": counts, "outcomes_by_object": by_object,
-            "success_step_median": float(np.median(success_steps)) if success_steps else None,
-            "wall_s": round(wall, 1), "episodes": records}
+    return records, wall
 
 
 def main(argv=None) -> int:
@@ -188,11 +229,15 @@ def main(argv=None) -> int:
     ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=None,
                     help="evaluate with (or --no-edge-contact without) the pads' box edges held out of the "
                          "object (PickupConfig.edge_contact; default: the run's)")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="processes to spread the worlds over (the same episodes as one process)")
     ap.add_argument("--json", default=None, help="write the result (every episode) to this file")
     args = ap.parse_args(argv)
+    if args.workers < 1 or args.worlds < 1:
+        ap.error(f"--workers and --worlds must be >= 1, got {args.workers} and {args.worlds}")
     result = evaluate(pathlib.Path(args.run), args.worlds, args.seed, args.device, args.torch_device,
-                      deterministic=not args.stochastic, object=args.object, youngs_modulus=args.youngs_modulus,
-                      edge_contact=args.edge_contact)
+                      deterministic=not args.stochastic, workers=args.workers, object=args.object,
+                      youngs_modulus=args.youngs_modulus, edge_contact=args.edge_contact)
     env = result["env"]
     moduli = env["youngs_modulus"]
     moduli = f"{moduli:g}" if isinstance(moduli, (int, float)) else ", ".join(f"{m:g}" for m in moduli)

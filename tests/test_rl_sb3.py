@@ -275,6 +275,11 @@ def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
         assert e["success"] == (e["outcome"] == "success")
     assert sum(first["outcomes"].values()) == 3
     assert evaluate(tmp_path, 3, seed=11)["episodes"] == first["episodes"]
+    # spread over processes: the same episodes (a world's episode depends on its seed only)
+    spread = evaluate(tmp_path, 3, seed=11, workers=2)
+    assert spread["episodes"] == first["episodes"] and spread["outcomes"] == first["outcomes"]
+    with pytest.raises(ValueError, match="workers"):
+        evaluate(tmp_path, 3, workers=0)
     softer = evaluate(tmp_path, 1, seed=11, youngs_modulus=1e4)  # an option the run left at its default
     assert softer["env"] == {"object": "cuboid", "youngs_modulus": 1e4, "episode_seconds": 0.3, "edge_contact": True}
     nodes = evaluate(tmp_path, 1, seed=11, edge_contact=False)  # node-vs-box contact alone (vector env, CPU)
@@ -298,6 +303,8 @@ def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
     save_run(model, curve, many, "smoke")
     both = evaluate(many, 3, seed=11)
     assert both["fixed_world_objects"] and [e["object"] for e in both["episodes"]] == ["sphere", "rope", "sphere"]
+    # blocks of whole object cycles keep each seed's object: [sphere, rope] and [sphere]
+    assert evaluate(many, 3, seed=11, workers=3)["episodes"] == both["episodes"]
     assert {k: sum(v.values()) for k, v in both["outcomes_by_object"].items()} == {"sphere": 2, "rope": 1}
     one = evaluate(many, 2, seed=11, object="rope")  # an object override: every world holds it
     assert not one["fixed_world_objects"] and [e["object"] for e in one["episodes"]] == ["rope", "rope"]
