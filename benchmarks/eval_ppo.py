@@ -114,15 +114,16 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
         records, wall = _episodes(run, num_worlds, seed, device, torch_device, deterministic, settings,
                                   env_options, fixed)
     else:
-        period = len(env_options["object"]) if fixed and not isinstance(env_options["object"], str) else 1
+        from defgrasp_env import PickupConfig
+
+        period = len(PickupConfig(**env_options).object_names) if fixed else 1  # world i: object i mod period
         per_worker = -(-num_worlds // workers)
         size = -(-per_worker // period) * period  # worlds per block: a multiple of the period
-        starts = list(range(0, num_worlds, size))
         t0 = time.perf_counter()
-        with concurrent.futures.ProcessPoolExecutor(len(starts), mp_context=multiprocessing.get_context("spawn")) as pool:
-            parts = pool.map(_episodes, *zip(*[(run, min(size, num_worlds - a), seed + a, device, torch_device,
-                                                  deterministic, settings, env_options, fixed) for a in starts]))
-            records = [r for part, _ in parts for r in part]
+        with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            blocks = [pool.submit(_episodes, run, min(size, num_worlds - start), seed + start, device, torch_device,
+                                  deterministic, settings, env_options, fixed) for start in range(0, num_worlds, size)]
+            records = [r for block in blocks for r in block.result()[0]]
         wall = time.perf_counter() - t0
     counts = {o: sum(r["outcome"] == o for r in records) for o in OUTCOMES}
     success_steps = [r["success_step"] for r in records if r["success"]]
