@@ -22,8 +22,8 @@ learner pressing the object into the ground, the wrist at its force limit from t
 both: a row each, side by side). ``--split``: also time the solver's share of each step: every
 ``ImplicitSolver.advance`` is bracketed by ``wp.synchronize_device`` (one more synchronisation per
 solve, so the step itself is then slightly slower) and the row gives the median ms per step inside
-the solver and outside it (gripper, force limits, readouts, observations, reward: the host side
-and its transfers).
+the solver and outside it (the policy's actions where ``expert`` or ``press`` computes them, the
+gripper, force limits, readouts, observations, reward: the host side and its transfers).
 Printed per row: median and p95 ms per step, world-steps/s (W / median), the physics substeps per
 control step, the deepest solver-reported penetration (mm) and largest wrist force (N) over the timed
 steps, world-solves per world-substep (1 = no force-limit retry or patient re-solve; the scene's
