@@ -264,3 +264,44 @@ def test_a_failed_capture_falls_back_to_launches(monkeypatch):
     with pytest.raises(RuntimeError, match="capture not available here"):
         held_rope_steps("step", steps=1)
 
+
+
+def test_cg_stops_at_the_forcing_term_of_the_last_newton_update():
+    """``start_cg_worlds``: CG stops at r.z = eta^2 times its start value, eta = cg_tolerance x
+    (last Newton update / newton_tolerance) clamped to [cg_tolerance, cg_tolerance_far], computed
+    here by hand; a far tolerance below the near one means the near one everywhere; worlds not
+    iterating Newton, or with nothing to solve (r.z = 0), do not start CG."""
+    tol, near = 1e-5, 1e-3
+    last = np.array([0.0, 3e-5, 1e-4, 1e-3, 1.0, 5e-5], np.float32)
+    rz = np.array([2.0, 2.0, 2.0, 2.0, 2.0, 0.0], np.float32)
+    active = np.array([1, 1, 1, 1, 1, 1], np.int32)
+    active[3] = 0
+    for far in (1e-2, 1e-4):
+        out_stop, out_active = wp.zeros(6, dtype=float, device="cpu"), wp.zeros(6, dtype=int, device="cpu")
+        wp.launch(klin.start_cg_worlds, dim=6, device="cpu",
+                  inputs=[wp.array(active, dtype=int, device="cpu"), wp.array(last, dtype=float, device="cpu"), tol,
+                          near, far, wp.array(rz, dtype=float, device="cpu"), out_stop, out_active])
+        eta = np.clip(near * last.astype(np.float64) / tol, near, max(near, far))
+        np.testing.assert_allclose(out_stop.numpy(), eta ** 2 * rz, rtol=1e-6)   # float32 products
+        assert out_active.numpy().tolist() == [1, 1, 1, 0, 1, 0]
+    assert eta.tolist() == [near] * 6   # far < near: the near tolerance everywhere
+
+
+def test_an_inexact_newton_step_converges_to_the_same_solution_with_fewer_cg_iterations():
+    """A cuboid (E = 1e4) started 3 mm below the ground, one step to a tight Newton tolerance
+    (1e-7 m): CG with the far tolerance 3e-2 (rough steps while the update is large) ends within
+    1e-6 m (10 x the tolerance: each solve's last update is below it, so both lie within about a
+    tolerance of the solution) of CG solved to 1e-3 in every iteration, in fewer CG iterations."""
+    results = []
+    for far in (1e-3, 3e-2):
+        model = build_model([make_object_mesh("cuboid")], [Material(youngs_modulus=1e4)],
+                            poses=[((0.0, -0.003, 0.0), (0.0, 0.0, 0.0, 1.0))], device="cpu")
+        state, control = State.from_model(model), Control.from_model(model)
+        solver = ImplicitSolver(model, SolverConfig(substeps=1, newton_iterations=40, newton_tolerance=1e-7,
+                                                    cg_iterations=200, cg_tolerance=1e-3, cg_tolerance_far=far))
+        stats = solver.step(state, state, control, dt=DT)
+        assert stats.converged[0], stats
+        results.append((state.positions.numpy(), int(stats.cg_iterations[0])))
+    (x_tight, cg_tight), (x_rough, cg_rough) = results
+    assert np.abs(x_tight - x_rough).max() < 1e-6, np.abs(x_tight - x_rough).max()
+    assert cg_rough < cg_tight, (cg_rough, cg_tight)

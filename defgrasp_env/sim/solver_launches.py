@@ -244,11 +244,12 @@ def _lag(c: _Context) -> list:
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
 
 
-def _evaluate(c: _Context) -> list:
+def _evaluate(c: _Context, config) -> list:
     s, x = c.scratch, c.work.positions
     return [*_nodes(c, x, s.newton_active, 0), _tets(c, x, s.newton_active), _begin_solve(c, s.newton_active),
             *_coarse_before(c, s.newton_active),
-            c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.rz, s.rz0, s.cg_active)]
+            c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.last_dx, config.newton_tolerance,
+                  config.cg_tolerance, config.cg_tolerance_far, s.rz, s.rz_stop, s.cg_active)]
 
 
 def _cg(c: _Context, config) -> list:
@@ -262,7 +263,7 @@ def _cg(c: _Context, config) -> list:
               1.0 / (c.h * c.h), s.ap, s.p_ap),
         c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate, active,
               s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs),
-        c.rec(klin.cg_end_iteration, m.num_worlds, s.rz0, config.cg_tolerance ** 2,
+        c.rec(klin.cg_end_iteration, m.num_worlds, s.rz_stop,
               config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.coarse_size,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it, s.cg_total,
               active, s.cg_update),
@@ -319,7 +320,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         return [LaunchSequence(commands, model.device, phase_graphs)]
 
     return SubstepLaunches(
-        pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c)),
+        pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c, config)),
         cg=seq(_cg(c, config) * block), coarse_post=seq(_coarse_after(c, s.newton_active)),
         energy0=seq([*_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)]),
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,

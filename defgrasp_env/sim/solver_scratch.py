@@ -105,7 +105,7 @@ class SolverScratch:
     # per-world reductions and flags [W]
     rz: wp.array                # float: r . z of CG
     rz_new: wp.array            # float
-    rz0: wp.array               # float: r . z at the start of CG
+    rz_stop: wp.array           # float: r . z at which CG stops (its start value times the tolerance squared)
     p_ap: wp.array              # float: p . A p
     dx_norm: wp.array           # float, m: largest component of the current Newton direction
     last_dx: wp.array           # float, m: that of the last Newton iteration (SolveStats.last_update)

@@ -59,12 +59,23 @@ def begin_linear_solve(
 @wp.kernel
 def start_cg_worlds(
     newton_active: wp.array(dtype=int),
+    last_update: wp.array(dtype=float),
+    newton_tolerance: float,
+    tolerance_near: float,
+    tolerance_far: float,
     rz: wp.array(dtype=float),
-    rz_initial: wp.array(dtype=float),
+    rz_stop: wp.array(dtype=float),
     cg_active: wp.array(dtype=int),
 ):
+    """Start CG in the worlds still iterating Newton, with the r.z at which it stops: its start
+    value times eta^2, eta = tolerance_near * (last Newton update / newton_tolerance) clamped to
+    [tolerance_near, tolerance_far] (an inexact Newton method's forcing term: a world whose last
+    update was far above the tolerance takes a rough step, one near it an accurate one, so that
+    the convergence test and the contact forces of a converged solve rest on accurate steps)."""
     w = wp.tid()
-    rz_initial[w] = rz[w]
+    eta = wp.clamp(tolerance_near * last_update[w] / newton_tolerance, tolerance_near,
+                   wp.max(tolerance_near, tolerance_far))
+    rz_stop[w] = eta * eta * rz[w]
     active = 0
     if newton_active[w] != 0 and rz[w] > 0.0:
         active = 1
@@ -134,8 +145,7 @@ def cg_update_solution(
 
 @wp.kernel
 def cg_end_iteration(
-    rz_initial: wp.array(dtype=float),
-    rel_tol_sq: float,
+    rz_stop: wp.array(dtype=float),
     update_tol: float,
     max_iterations: int,
     coarse_size: int,
@@ -164,7 +174,7 @@ def cg_end_iteration(
     cg_iterations[w] = it
     cg_iterations_total[w] = cg_iterations_total[w] + 1
     stalled = cg_update[w] <= update_tol and it >= 8  # CG can creep for a few iterations first
-    if rz_next <= rel_tol_sq * rz_initial[w] or stalled or it >= max_iterations or p_ap[w] <= 0.0:
+    if rz_next <= rz_stop[w] or stalled or it >= max_iterations or p_ap[w] <= 0.0:
         cg_active[w] = 0
     b = 0.0
     if rz[w] > 0.0:
