@@ -15,7 +15,9 @@ median / p95 time of its vector steps and the slowest world's Newton / CG iterat
 (median over the rollout); at the end it prints the learning curve as a table and writes
 ``curve.csv`` and ``curve.png`` (success and grasp vs env steps and vs wall time) to ``--out``, the
 model to ``--out/ppo.zip``, the observation/reward normalisation to ``--out/vecnormalize.pkl`` and
-the run's settings to ``--out/run.json``; ``--resume DIR`` goes on from such a folder (model,
+the run's settings to ``--out/run.json``, and the policy of the rollout with the best cohort rate
+(over >= ``--best-min-episodes`` episodes) to ``--out/best`` as the same files (``BestPolicy``);
+``--resume DIR`` goes on from such a folder (model,
 normalisation and curve continue; the env and PPO options, ``--seed`` included, must be the run's;
 the env is seeded with ``--seed`` + the env steps so far, so the resumed run does not replay the
 earlier episodes). ``eval_ppo.py`` evaluates a saved run on fresh episodes (one per world).
@@ -52,12 +54,47 @@ import numpy as np  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
 
+class BestPolicy:
+    """Keeps, in ``folder``, the policy of the rollout with the highest cohort success rate so far
+    (over at least ``min_episodes`` episodes): ``ppo.zip``, ``vecnormalize.pkl`` and ``run.json`` as
+    ``save_run`` writes them (``eval_ppo.py`` evaluates the folder), and ``best.json`` (the row's env
+    steps, wall time, cohort rate and episodes). A cohort's episodes began one time limit earlier, so
+    they ran under the policies of the rollouts since; the one kept is the latest of those. A folder
+    that already holds a ``best.json`` (a resumed run) is replaced only by a better rate. PPO's
+    fine-tunes here rose to a 0.73 cohort rate and fell back to 0.3 (benchmarks/RESULTS.md): the
+    last policy alone is not the run's best."""
+
+    def __init__(self, folder: pathlib.Path, min_episodes: int = 256):
+        if min_episodes < 1:
+            raise ValueError(f"min_episodes must be >= 1, got {min_episodes}")
+        self.folder = pathlib.Path(folder)
+        self.min_episodes = min_episodes
+        path = self.folder / "best.json"
+        self.rate = json.loads(path.read_text())["cohort_success_rate"] if path.is_file() else float("-inf")
+
+    def offer(self, model, row: dict, settings: dict) -> bool:
+        """Save ``model`` if ``row`` (a ``LearningCurve`` row) beats the kept rate; True if saved."""
+        rate, episodes = row.get("cohort_success_rate", float("nan")), row.get("cohort_episodes", 0)
+        if episodes < self.min_episodes or not rate > self.rate:
+            return False
+        self.folder.mkdir(parents=True, exist_ok=True)
+        model.save(self.folder / "ppo.zip")
+        model.get_vec_normalize_env().save(str(self.folder / "vecnormalize.pkl"))
+        (self.folder / "run.json").write_text(json.dumps(settings, indent=1) + "\n")
+        keep = {k: row[k] for k in ("env_steps", "wall_s", "cohort_success_rate", "cohort_episodes")}
+        (self.folder / "best.json").write_text(json.dumps(keep, indent=1) + "\n")
+        self.rate = rate
+        return True
+
+
 class LearningCurve(BaseCallback):
     """Success rate and mean return of the episodes that ended in each rollout, vs env steps and wall time."""
 
     def __init__(self, settings: dict, env_seed: int, max_seconds: float = float("inf"),
-                 rows: list[dict] | None = None, success_tolerance: float = 0.05, episode_steps: int = 300):
+                 rows: list[dict] | None = None, success_tolerance: float = 0.05, episode_steps: int = 300,
+                 best: BestPolicy | None = None):
         super().__init__()
+        self.best = best  # keeps the policy of the best cohort rate (None: not kept)
         self.episode_steps = episode_steps  # the env's time limit (vector steps): every episode has ended this long after its start
         self.success_tolerance = success_tolerance  # m: the env's; "at goal" = grasped and this close
         self.settings = dict(settings)  # the run's env and PPO options and its --seed (run.json)
@@ -116,6 +153,9 @@ class LearningCurve(BaseCallback):
                           "rollout_s": round(time.perf_counter() - self._rollout_t0, 2),
                           **self._step_costs()})
         r = self.rows[-1]
+        if self.best is not None and self.best.offer(self.model, r, self.settings):
+            print(f"best cohort success so far: {r['cohort_success_rate']:.3f} [{r['cohort_episodes']}], saved to "
+                  f"{self.best.folder}", flush=True)
         print(f"steps {r['env_steps']:>9d}  wall {r['wall_s']:>8.1f} s  episodes {n:>4d}  "
               f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}  "
               f"at goal {r['at_goal_fraction']:.3f}  cohort success {r['cohort_success_rate']:.2f} "
@@ -240,7 +280,8 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
 def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
           torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
           gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, resume: pathlib.Path | None = None,
-          init_from: pathlib.Path | None = None, fixed_world_objects: bool = False, **env_kwargs):
+          init_from: pathlib.Path | None = None, fixed_world_objects: bool = False, best: BestPolicy | None = None,
+          **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
     ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples).
@@ -249,7 +290,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     ``init_from``: a folder ``save_run`` wrote, whose policy weights and normalisation statistics
     start this new run (e.g. a GPU run's policy fine-tuned with fewer worlds or another reward); its
     settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
-    ``fixed_world_objects``: see ``make_vec_env``."""
+    ``fixed_world_objects``: see ``make_vec_env``. ``best``: keeps the policy of the best cohort rate."""
     from stable_baselines3 import PPO
 
     from defgrasp_env import PickupConfig
@@ -278,7 +319,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
         curve = LearningCurve(settings, env_seed, max_seconds, rows=rows, success_tolerance=tolerance,
-                              episode_steps=episode_steps)
+                              episode_steps=episode_steps, best=best)
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, fixed_world_objects=fixed_world_objects,
@@ -299,7 +340,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         source_actions = json.loads((pathlib.Path(init_from) / "run.json").read_text()).get("actions", "full")
         model.policy.load_state_dict(transfer_policy(trained.policy.state_dict(), source_actions,
                                                      model.policy.state_dict(), actions, log_std_init))
-    curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps)
+    curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps,
+                          best=best)
     model.learn(timesteps, callback=curve)
     return model, curve
 
@@ -372,15 +414,20 @@ def main(argv=None) -> int:
     ap.add_argument("--init-from", default=None,
                     help="folder of an earlier run whose policy and normalisation start a new run (other options "
                          "allowed); a run started so is resumed with the same --init-from")
+    ap.add_argument("--best-min-episodes", type=int, default=256,
+                    help="keep the policy of the best cohort success rate over at least this many episodes in "
+                         "--out/best (0: do not keep it)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
+    out = pathlib.Path(args.out)
+    best = BestPolicy(out / "best", args.best_min_episodes) if args.best_min_episodes > 0 else None
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
                          max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma, resume=args.resume,
                          init_from=args.init_from, fixed_world_objects=args.fixed_world_objects,
                          object=parse_object(args.object), youngs_modulus=args.youngs_modulus,
-                         episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=args.device)
+                         episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=args.device,
+                         best=best)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
-    out = pathlib.Path(args.out)
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {args.youngs_modulus:g} Pa, "
              f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "
              f"in {wall / 60:.1f} min")

@@ -157,11 +157,16 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
     import sys
 
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
-    from train_ppo import save_curve, save_run, train
+    from train_ppo import BestPolicy, save_curve, save_run, train
 
+    best = BestPolicy(tmp_path / "best", min_episodes=1)
     model, curve = train(num_envs=2, timesteps=32, n_steps=8, minibatches=2, episode_seconds=0.3,
-                         actions="position-jaw", object="cuboid")
+                         actions="position-jaw", object="cuboid", best=best)
     assert model.num_timesteps == 32 and len(curve.rows) == 2
+    cohorts = [r for r in curve.rows if r["cohort_episodes"] >= 1]
+    assert cohorts, "the test needs a rollout with a cohort"
+    kept = json.loads((tmp_path / "best" / "best.json").read_text())   # the callback offered every rollout
+    assert kept["cohort_success_rate"] == max(r["cohort_success_rate"] for r in cohorts)
     assert sum(r["episodes"] for r in curve.rows) == 2 * (16 // 6)  # 6-step episodes, 2 worlds x 16 steps
     for r in curve.rows:  # step costs: 4 substeps a step, each at least one Newton iteration with CG in it
         assert 0 < r["step_ms_p50"] <= r["step_ms_p95"] < 1e3 * r["rollout_s"]
@@ -211,6 +216,41 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
     assert started.get_vec_normalize_env().obs_rms["agent_pos"].count > resumed.get_vec_normalize_env().obs_rms["agent_pos"].count
     assert 0.0 <= curve3.rows[0]["at_goal_fraction"] <= curve3.rows[0]["grasped_fraction"]
     assert any(not np.allclose(a.numpy(), b.detach().cpu().numpy()) for a, b in zip(weights, resumed.policy.parameters()))
+
+
+def test_best_policy_keeps_the_policy_of_the_best_cohort_rate(tmp_path):
+    """``BestPolicy``: among rollouts with enough cohort episodes the best rate's policy is saved as a
+    run folder (the model's weights, its normalisation, the settings, best.json with the row); a
+    keeper on that folder (a resumed run) takes only a better rate; bad sizes are refused."""
+    import sys
+
+    from stable_baselines3 import PPO
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import BestPolicy, train
+
+    model, curve = train(num_envs=1, timesteps=8, n_steps=8, episode_seconds=0.3, actions="position-jaw",
+                         object="cuboid")
+    folder = tmp_path / "best"
+    best = BestPolicy(folder, min_episodes=100)
+
+    def row(rate, episodes, steps):
+        return {"env_steps": steps, "wall_s": 1.0, "cohort_success_rate": rate, "cohort_episodes": episodes}
+
+    offers = [(float("nan"), 0), (0.2, 300), (0.9, 99), (0.4, 300), (0.3, 300), (0.4, 500)]
+    saved = [best.offer(model, row(rate, n, 100 * i), curve.settings) for i, (rate, n) in enumerate(offers)]
+    assert saved == [False, True, False, True, False, False]
+    assert json.loads((folder / "best.json").read_text()) == row(0.4, 300, 300)
+    assert json.loads((folder / "run.json").read_text()) == json.loads(json.dumps(curve.settings))
+    loaded = PPO.load(folder / "ppo.zip").policy.state_dict()
+    for k, v in model.policy.state_dict().items():
+        np.testing.assert_array_equal(loaded[k].cpu().numpy(), v.cpu().numpy())
+    assert (folder / "vecnormalize.pkl").stat().st_size > 0
+    again = BestPolicy(folder, min_episodes=100)
+    assert not again.offer(model, row(0.35, 300, 700), curve.settings)
+    assert again.offer(model, row(0.45, 300, 800), curve.settings) and again.rate == 0.45
+    with pytest.raises(ValueError, match="min_episodes must be >= 1, got 0"):
+        BestPolicy(folder, min_episodes=0)
 
 
 def test_cohort_success_rate_is_unbiased_where_the_ended_rate_is_not():
