@@ -43,6 +43,7 @@ import csv
 import json
 import os
 import pathlib
+import shutil
 import sys
 import time
 
@@ -59,30 +60,44 @@ class BestPolicy:
     (over at least ``min_episodes`` episodes): ``ppo.zip``, ``vecnormalize.pkl`` and ``run.json`` as
     ``save_run`` writes them (``eval_ppo.py`` evaluates the folder), and ``best.json`` (the row's env
     steps, wall time, cohort rate and episodes). A cohort's episodes began one time limit earlier, so
-    they ran under the policies of the rollouts since; the one kept is the latest of those. A folder
-    that already holds a ``best.json`` (a resumed run) is replaced only by a better rate. PPO's
-    fine-tunes here rose to a 0.73 cohort rate and fell back to 0.3 (benchmarks/RESULTS.md): the
-    last policy alone is not the run's best."""
+    they ran under the policies of the rollouts since; the one kept is the latest of those.
+    ``resumed``: the folder's kept policy (a ``best.json``) is this run's, and only a better rate
+    replaces it; otherwise a kept policy there (of an earlier run into the same ``--out``) is removed.
+    Each save writes a new folder and then swaps it in, so a crash leaves the old or the new policy
+    whole (or both, as ``folder`` and ``folder.old``). Why: a PPO fine-tune's cohort rate here rose to
+    0.68 (over 1,379 episodes) and ended at 0.3 (benchmarks/RESULTS.md): the last policy alone is not
+    the run's best."""
 
-    def __init__(self, folder: pathlib.Path, min_episodes: int = 256):
+    def __init__(self, folder: pathlib.Path, min_episodes: int = 256, resumed: bool = False):
         if min_episodes < 1:
             raise ValueError(f"min_episodes must be >= 1, got {min_episodes}")
         self.folder = pathlib.Path(folder)
         self.min_episodes = min_episodes
-        path = self.folder / "best.json"
-        self.rate = json.loads(path.read_text())["cohort_success_rate"] if path.is_file() else float("-inf")
+        self.rate = float("-inf")
+        marker = self.folder / "best.json"
+        if resumed and marker.is_file():
+            self.rate = json.loads(marker.read_text())["cohort_success_rate"]
+        elif marker.is_file():
+            shutil.rmtree(self.folder)
 
     def offer(self, model, row: dict, settings: dict) -> bool:
         """Save ``model`` if ``row`` (a ``LearningCurve`` row) beats the kept rate; True if saved."""
         rate, episodes = row.get("cohort_success_rate", float("nan")), row.get("cohort_episodes", 0)
         if episodes < self.min_episodes or not rate > self.rate:
             return False
-        self.folder.mkdir(parents=True, exist_ok=True)
-        model.save(self.folder / "ppo.zip")
-        model.get_vec_normalize_env().save(str(self.folder / "vecnormalize.pkl"))
-        (self.folder / "run.json").write_text(json.dumps(settings, indent=1) + "\n")
+        new, old = self.folder.with_name(self.folder.name + ".new"), self.folder.with_name(self.folder.name + ".old")
+        shutil.rmtree(new, ignore_errors=True)
+        new.mkdir(parents=True)
+        model.save(new / "ppo.zip")
+        model.get_vec_normalize_env().save(str(new / "vecnormalize.pkl"))
+        (new / "run.json").write_text(json.dumps(settings, indent=1) + "\n")
         keep = {k: row[k] for k in ("env_steps", "wall_s", "cohort_success_rate", "cohort_episodes")}
-        (self.folder / "best.json").write_text(json.dumps(keep, indent=1) + "\n")
+        (new / "best.json").write_text(json.dumps(keep, indent=1) + "\n")
+        shutil.rmtree(old, ignore_errors=True)
+        if self.folder.exists():
+            self.folder.rename(old)
+        new.rename(self.folder)
+        shutil.rmtree(old, ignore_errors=True)
         self.rate = rate
         return True
 
@@ -420,7 +435,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     out = pathlib.Path(args.out)
-    best = BestPolicy(out / "best", args.best_min_episodes) if args.best_min_episodes > 0 else None
+    resumed = args.resume is not None and pathlib.Path(args.resume).resolve() == out.resolve()
+    best = BestPolicy(out / "best", args.best_min_episodes, resumed) if args.best_min_episodes > 0 else None
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
                          max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma, resume=args.resume,
                          init_from=args.init_from, fixed_world_objects=args.fixed_world_objects,

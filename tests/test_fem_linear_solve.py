@@ -268,40 +268,78 @@ def test_a_failed_capture_falls_back_to_launches(monkeypatch):
 
 def test_cg_stops_at_the_forcing_term_of_the_last_newton_update():
     """``start_cg_worlds``: CG stops at r.z = eta^2 times its start value, eta = cg_tolerance x
-    (last Newton update / newton_tolerance) clamped to [cg_tolerance, cg_tolerance_far], computed
-    here by hand; a far tolerance below the near one means the near one everywhere; worlds not
-    iterating Newton, or with nothing to solve (r.z = 0), do not start CG."""
+    (last Newton update of this solve / newton_tolerance) clamped to [cg_tolerance,
+    cg_tolerance_far], computed here by hand; at a solve's first iteration (no update yet, whatever
+    ``last_dx`` holds from an earlier solve) and in a patient world eta is cg_tolerance; a far
+    tolerance below the near one means the near one everywhere; worlds not iterating Newton, or
+    with nothing to solve (r.z = 0), do not start CG."""
     tol, near = 1e-5, 1e-3
-    last = np.array([0.0, 3e-5, 1e-4, 1e-3, 1.0, 5e-5], np.float32)
-    rz = np.array([2.0, 2.0, 2.0, 2.0, 2.0, 0.0], np.float32)
-    active = np.array([1, 1, 1, 1, 1, 1], np.int32)
-    active[3] = 0
+    last = np.array([0.0, 3e-5, 1e-4, 1e-3, 1.0, 5e-5, 1.0, 1.0], np.float32)
+    iterations = np.array([1, 2, 1, 3, 1, 1, 0, 2], np.int32)
+    patient = np.array([0, 0, 0, 0, 0, 0, 0, 1], np.int32)
+    rz = np.array([2.0, 2.0, 2.0, 2.0, 2.0, 0.0, 2.0, 2.0], np.float32)
+    active = np.array([1, 1, 1, 0, 1, 1, 1, 1], np.int32)
+    used = np.where((iterations > 0) & (patient == 0), last.astype(np.float64), 0.0)
     for far in (1e-2, 1e-4):
-        out_stop, out_active = wp.zeros(6, dtype=float, device="cpu"), wp.zeros(6, dtype=int, device="cpu")
-        wp.launch(klin.start_cg_worlds, dim=6, device="cpu",
-                  inputs=[wp.array(active, dtype=int, device="cpu"), wp.array(last, dtype=float, device="cpu"), tol,
+        out_stop, out_active = wp.zeros(8, dtype=float, device="cpu"), wp.zeros(8, dtype=int, device="cpu")
+        wp.launch(klin.start_cg_worlds, dim=8, device="cpu",
+                  inputs=[wp.array(active, dtype=int, device="cpu"), wp.array(iterations, dtype=int, device="cpu"),
+                          wp.array(patient, dtype=int, device="cpu"), wp.array(last, dtype=float, device="cpu"), tol,
                           near, far, wp.array(rz, dtype=float, device="cpu"), out_stop, out_active])
-        eta = np.clip(near * last.astype(np.float64) / tol, near, max(near, far))
+        eta = np.clip(near * used / tol, near, max(near, far))
         np.testing.assert_allclose(out_stop.numpy(), eta ** 2 * rz, rtol=1e-6)   # float32 products
-        assert out_active.numpy().tolist() == [1, 1, 1, 0, 1, 0]
-    assert eta.tolist() == [near] * 6   # far < near: the near tolerance everywhere
+        assert out_active.numpy().tolist() == [1, 1, 1, 0, 1, 0, 1, 1]
+        if far > near:
+            assert eta[[1, 2, 4]].tolist() == pytest.approx([3e-3, 1e-2, 1e-2]) and eta[6] == eta[7] == near
+    assert eta.tolist() == [near] * 8   # far < near: the near tolerance everywhere
+
+
+def _sunk_cuboid_step(config: SolverConfig, solver_steps: int = 1, patient: bool = False):
+    """A cuboid (E = 1e4) started 3 mm below the ground: positions and reports after one step of
+    ``config`` repeated ``solver_steps`` times from the same input (a fresh output each time)."""
+    model = build_model([make_object_mesh("cuboid")], [Material(youngs_modulus=1e4)],
+                        poses=[((0.0, -0.003, 0.0), (0.0, 0.0, 0.0, 1.0))], device="cpu")
+    state, control = State.from_model(model), Control.from_model(model)
+    solver = ImplicitSolver(model, config)
+    out = []
+    for _ in range(solver_steps):
+        result = State.from_model(model)
+        stats = solver.step(state, result, control, dt=DT, patient=np.ones(1, bool) if patient else None)
+        out.append((result.positions.numpy(), stats))
+    return out
 
 
 def test_an_inexact_newton_step_converges_to_the_same_solution_with_fewer_cg_iterations():
-    """A cuboid (E = 1e4) started 3 mm below the ground, one step to a tight Newton tolerance
-    (1e-7 m): CG with the far tolerance 3e-2 (rough steps while the update is large) ends within
-    1e-6 m (10 x the tolerance: each solve's last update is below it, so both lie within about a
-    tolerance of the solution) of CG solved to 1e-3 in every iteration, in fewer CG iterations."""
-    results = []
-    for far in (1e-3, 3e-2):
-        model = build_model([make_object_mesh("cuboid")], [Material(youngs_modulus=1e4)],
-                            poses=[((0.0, -0.003, 0.0), (0.0, 0.0, 0.0, 1.0))], device="cpu")
-        state, control = State.from_model(model), Control.from_model(model)
-        solver = ImplicitSolver(model, SolverConfig(substeps=1, newton_iterations=40, newton_tolerance=1e-7,
-                                                    cg_iterations=200, cg_tolerance=1e-3, cg_tolerance_far=far))
-        stats = solver.step(state, state, control, dt=DT)
-        assert stats.converged[0], stats
-        results.append((state.positions.numpy(), int(stats.cg_iterations[0])))
-    (x_tight, cg_tight), (x_rough, cg_rough) = results
-    assert np.abs(x_tight - x_rough).max() < 1e-6, np.abs(x_tight - x_rough).max()
-    assert cg_rough < cg_tight, (cg_rough, cg_tight)
+    """One step to a tight Newton tolerance (1e-7 m): CG with the far tolerance 3e-2 (rough steps
+    while the update is large) ends within 1e-6 m (10 x the tolerance: each solve's last update is
+    below it, so both lie within about a tolerance of the solution) of CG solved to 1e-3 in every
+    iteration, in fewer CG iterations, and in more than with 3e-2 in every iteration (the near
+    tolerance is used where the update is small: the launch passes both)."""
+    tight = SolverConfig(substeps=1, newton_iterations=40, newton_tolerance=1e-7, cg_iterations=200,
+                         cg_tolerance=1e-3, cg_tolerance_far=1e-3)
+    runs = {name: _sunk_cuboid_step(config)[0] for name, config in (
+        ("tight", tight), ("adaptive", dataclasses.replace(tight, cg_tolerance_far=3e-2)),
+        ("rough", dataclasses.replace(tight, cg_tolerance=3e-2, cg_tolerance_far=3e-2)))}
+    assert all(stats.converged[0] for _, stats in runs.values()), runs
+    assert np.abs(runs["tight"][0] - runs["adaptive"][0]).max() < 1e-6
+    cg = {name: int(stats.cg_iterations[0]) for name, (_, stats) in runs.items()}
+    assert cg["rough"] < cg["adaptive"] < cg["tight"], cg
+
+
+def test_an_inexact_solve_depends_on_its_input_alone():
+    """The forcing term reads only the solve's own Newton updates: an unconverged step (2 Newton
+    iterations) taken twice from the same input gives the same bits, and so does a fresh solver;
+    a patient world solves every CG to the near tolerance (the forces that decide the actuator
+    limit): the same bits as with the far tolerance equal to the near one."""
+    config = SolverConfig(substeps=1, newton_iterations=2, cg_tolerance_far=1e-2, penetration_iterations=0)
+    (x1, s1), (x2, s2) = _sunk_cuboid_step(config, solver_steps=2)
+    ((x3, s3),) = _sunk_cuboid_step(config)
+    assert not s1.converged[0], "the test needs an unconverged solve (its last update above the tolerance)"
+    for x, s in ((x2, s2), (x3, s3)):
+        np.testing.assert_array_equal(x, x1)
+        assert int(s.cg_iterations[0]) == int(s1.cg_iterations[0])
+    patient = dataclasses.replace(config, patient_iterations=3)
+    ((xp, sp),) = _sunk_cuboid_step(patient, patient=True)
+    ((xq, sq),) = _sunk_cuboid_step(dataclasses.replace(patient, cg_tolerance_far=patient.cg_tolerance), patient=True)
+    np.testing.assert_array_equal(xp, xq)
+    assert int(sp.cg_iterations[0]) == int(sq.cg_iterations[0]) > 0

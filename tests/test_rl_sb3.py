@@ -219,11 +219,13 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
 
 
 def test_best_policy_keeps_the_policy_of_the_best_cohort_rate(tmp_path):
-    """``BestPolicy``: among rollouts with enough cohort episodes the best rate's policy is saved as a
-    run folder (the model's weights, its normalisation, the settings, best.json with the row); a
-    keeper on that folder (a resumed run) takes only a better rate; bad sizes are refused."""
+    """``BestPolicy``: among rollouts with enough cohort episodes the best rate's policy (the weights
+    the model had then, changed between offers here) is saved as a run folder (weights,
+    normalisation, settings, best.json with the row); a resumed run's keeper takes only a better
+    rate; a fresh run removes an earlier run's kept policy; bad sizes are refused."""
     import sys
 
+    import torch
     from stable_baselines3 import PPO
 
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -233,22 +235,29 @@ def test_best_policy_keeps_the_policy_of_the_best_cohort_rate(tmp_path):
                          object="cuboid")
     folder = tmp_path / "best"
     best = BestPolicy(folder, min_episodes=100)
+    first = next(iter(model.policy.parameters()))
 
     def row(rate, episodes, steps):
         return {"env_steps": steps, "wall_s": 1.0, "cohort_success_rate": rate, "cohort_episodes": episodes}
 
     offers = [(float("nan"), 0), (0.2, 300), (0.9, 99), (0.4, 300), (0.3, 300), (0.4, 500)]
-    saved = [best.offer(model, row(rate, n, 100 * i), curve.settings) for i, (rate, n) in enumerate(offers)]
+    saved, weights = [], []
+    for i, (rate, n) in enumerate(offers):
+        with torch.no_grad():
+            first.add_(1.0)   # another policy at every rollout
+        weights.append(first.detach().cpu().numpy().copy())
+        saved.append(best.offer(model, row(rate, n, 100 * i), curve.settings))
     assert saved == [False, True, False, True, False, False]
     assert json.loads((folder / "best.json").read_text()) == row(0.4, 300, 300)
     assert json.loads((folder / "run.json").read_text()) == json.loads(json.dumps(curve.settings))
-    loaded = PPO.load(folder / "ppo.zip").policy.state_dict()
-    for k, v in model.policy.state_dict().items():
-        np.testing.assert_array_equal(loaded[k].cpu().numpy(), v.cpu().numpy())
-    assert (folder / "vecnormalize.pkl").stat().st_size > 0
-    again = BestPolicy(folder, min_episodes=100)
-    assert not again.offer(model, row(0.35, 300, 700), curve.settings)
+    kept = PPO.load(folder / "ppo.zip").policy
+    np.testing.assert_array_equal(next(iter(kept.parameters())).detach().cpu().numpy(), weights[3])
+    assert (folder / "vecnormalize.pkl").stat().st_size > 0 and sorted(p.name for p in tmp_path.iterdir()) == ["best"]
+    again = BestPolicy(folder, min_episodes=100, resumed=True)
+    assert again.rate == 0.4 and not again.offer(model, row(0.35, 300, 700), curve.settings)
     assert again.offer(model, row(0.45, 300, 800), curve.settings) and again.rate == 0.45
+    fresh = BestPolicy(folder, min_episodes=100)   # another run into the same --out
+    assert fresh.rate == float("-inf") and not folder.exists()
     with pytest.raises(ValueError, match="min_episodes must be >= 1, got 0"):
         BestPolicy(folder, min_episodes=0)
 

@@ -59,6 +59,8 @@ def begin_linear_solve(
 @wp.kernel
 def start_cg_worlds(
     newton_active: wp.array(dtype=int),
+    newton_iterations: wp.array(dtype=int),
+    patient: wp.array(dtype=int),
     last_update: wp.array(dtype=float),
     newton_tolerance: float,
     tolerance_near: float,
@@ -71,9 +73,17 @@ def start_cg_worlds(
     value times eta^2, eta = tolerance_near * (last Newton update / newton_tolerance) clamped to
     [tolerance_near, tolerance_far] (an inexact Newton method's forcing term: a world whose last
     update was far above the tolerance takes a rough step, one near it an accurate one, so that
-    the convergence test and the contact forces of a converged solve rest on accurate steps)."""
+    the convergence test and the contact forces of a converged solve rest on accurate steps).
+    The last update is that of this solve (``newton_iterations`` [W]: its Newton iterations so
+    far, cleared when a solve starts): a solve's first iteration solves to tolerance_near, so a
+    solve's result depends on its input alone, not on the solves before it. A ``patient`` world
+    (iterated to convergence because its contact forces decide the actuator force limit) solves
+    every iteration to tolerance_near."""
     w = wp.tid()
-    eta = wp.clamp(tolerance_near * last_update[w] / newton_tolerance, tolerance_near,
+    update = float(0.0)
+    if newton_iterations[w] > 0 and patient[w] == 0:
+        update = last_update[w]
+    eta = wp.clamp(tolerance_near * update / newton_tolerance, tolerance_near,
                    wp.max(tolerance_near, tolerance_far))
     rz_stop[w] = eta * eta * rz[w]
     active = 0
