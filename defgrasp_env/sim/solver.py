@@ -47,12 +47,13 @@ class SolverConfig:
         cg_iterations: CG iterations per Newton iteration at most.
         cg_tolerance: CG stops once r.z falls below eta^2 of its initial value, eta (the forcing
             term of an inexact Newton method) = cg_tolerance times the world's last Newton update in
-            this solve (none at its first iteration) over ``newton_tolerance``, at least cg_tolerance and at most ``cg_tolerance_far``: a world
-            whose last update was near the tolerance (it is converging; the convergence test and
-            a converged solve's contact forces rest on this step) solves to cg_tolerance, one far
-            from it takes a rougher step that the next Newton iteration corrects.
-        cg_tolerance_far: the loosest eta (if at most cg_tolerance, eta is cg_tolerance always). 1e-2: the
-            operator's soft-cube episode takes the same Newton iterations as with 1e-3 everywhere
+            this solve (none at its first iteration) over ``newton_tolerance``, at least
+            cg_tolerance and at most ``cg_tolerance_far``: a world whose last update was near the
+            tolerance (it is converging; the convergence test and a converged solve's contact
+            forces rest on this step) solves to cg_tolerance, one far from it takes a rougher step
+            that the next Newton iteration corrects.
+        cg_tolerance_far: the loosest eta (if at most cg_tolerance, eta is cg_tolerance always).
+            1e-2: the operator's soft-cube episode takes the same Newton iterations as with 1e-3 everywhere
             and 23 % fewer CG iterations (its rope 19 %); 3e-2 saved more but let a stiff cube's
             wrist force in the contact fuzz read 308 N where 1e-3 and 1e-2 read 192 / 186 N
             (benchmarks/RESULTS.md, "An inexact Newton step"). A ``patient`` world (``advance``)
