@@ -268,9 +268,9 @@ def test_a_failed_capture_falls_back_to_launches(monkeypatch):
 
 def test_cg_stops_at_the_forcing_term_of_the_last_newton_update():
     """``start_cg_worlds``: CG stops at r.z = eta^2 times its start value, eta = cg_tolerance x
-    (last Newton update of this solve / newton_tolerance) clamped to [cg_tolerance,
-    cg_tolerance_far], computed here by hand; at a solve's first iteration (no update yet, whatever
-    ``last_dx`` holds from an earlier solve) and in a patient world eta is cg_tolerance; a far
+    (last Newton update of this substep / newton_tolerance) clamped to [cg_tolerance,
+    cg_tolerance_far], computed here by hand; at a substep's first iteration (no update yet,
+    whatever ``last_dx`` holds from before) and in a patient world eta is cg_tolerance; a far
     tolerance below the near one means the near one everywhere; worlds not iterating Newton, or
     with nothing to solve (r.z = 0), do not start CG."""
     tol, near = 1e-5, 1e-3
@@ -327,8 +327,10 @@ def test_an_inexact_newton_step_converges_to_the_same_solution_with_fewer_cg_ite
 
 
 def test_an_inexact_solve_depends_on_its_input_alone():
-    """The forcing term reads only the solve's own Newton updates: an unconverged step (2 Newton
-    iterations) taken twice from the same input gives the same bits, and so does a fresh solver;
+    """The forcing term reads only the substep's own Newton updates: an unconverged step (2 Newton
+    iterations) taken twice from the same input gives the same bits, and so does a fresh solver
+    (``test_fem_solver_reports.test_newton_limit_is_per_substep``: a step of 3 substeps is
+    bit-identical to 3 steps of one);
     a patient world solves every CG to the near tolerance (the forces that decide the actuator
     limit): the same bits as with the far tolerance equal to the near one."""
     config = SolverConfig(substeps=1, newton_iterations=2, cg_tolerance_far=1e-2, penetration_iterations=0)

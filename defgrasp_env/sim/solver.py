@@ -47,7 +47,7 @@ class SolverConfig:
         cg_iterations: CG iterations per Newton iteration at most.
         cg_tolerance: CG stops once r.z falls below eta^2 of its initial value, eta (the forcing
             term of an inexact Newton method) = cg_tolerance times the world's last Newton update in
-            this solve (none at its first iteration) over ``newton_tolerance``, at least
+            this substep (none at its first iteration) over ``newton_tolerance``, at least
             cg_tolerance and at most ``cg_tolerance_far``: a world whose last update was near the
             tolerance (it is converging; the convergence test and a converged solve's contact
             forces rest on this step) solves to cg_tolerance, one far from it takes a rougher step

@@ -248,7 +248,7 @@ def _evaluate(c: _Context, config) -> list:
     s, x = c.scratch, c.work.positions
     return [*_nodes(c, x, s.newton_active, 0), _tets(c, x, s.newton_active), _begin_solve(c, s.newton_active),
             *_coarse_before(c, s.newton_active),
-            c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.newton_it, s.patient, s.last_dx,
+            c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.substep_newton_it, s.patient, s.last_dx,
                   config.newton_tolerance, config.cg_tolerance, config.cg_tolerance_far, s.rz, s.rz_stop,
                   s.cg_active)]
 

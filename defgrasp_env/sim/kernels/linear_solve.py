@@ -74,9 +74,10 @@ def start_cg_worlds(
     [tolerance_near, tolerance_far] (an inexact Newton method's forcing term: a world whose last
     update was far above the tolerance takes a rough step, one near it an accurate one, so that
     the convergence test and the contact forces of a converged solve rest on accurate steps).
-    The last update is that of this solve (``newton_iterations`` [W]: its Newton iterations so
-    far, cleared when a solve starts): a solve's first iteration solves to tolerance_near, so a
-    solve's result depends on its input alone, not on the solves before it. A ``patient`` world
+    The last update is that of this substep (``newton_iterations`` [W]: its Newton iterations so
+    far, cleared when a substep starts): a substep's first iteration solves to tolerance_near, so
+    a substep's result depends on its input alone (not on the substeps or solves before it: a step
+    of K substeps is bit-identical to K steps of one). A ``patient`` world
     (iterated to convergence because its contact forces decide the actuator force limit) solves
     every iteration to tolerance_near."""
     w = wp.tid()
