@@ -88,9 +88,7 @@ class BestPolicy:
         new, old = self.folder.with_name(self.folder.name + ".new"), self.folder.with_name(self.folder.name + ".old")
         shutil.rmtree(new, ignore_errors=True)
         new.mkdir(parents=True)
-        model.save(new / "ppo.zip")
-        model.get_vec_normalize_env().save(str(new / "vecnormalize.pkl"))
-        (new / "run.json").write_text(json.dumps(settings, indent=1) + "\n")
+        save_policy(model, settings, new)
         keep = {k: row[k] for k in ("env_steps", "wall_s", "cohort_success_rate", "cohort_episodes")}
         (new / "best.json").write_text(json.dumps(keep, indent=1) + "\n")
         shutil.rmtree(old, ignore_errors=True)
@@ -266,13 +264,18 @@ def read_curve(folder: pathlib.Path) -> list[dict]:
                 for row in csv.DictReader(f)]
 
 
-def save_run(model, curve: LearningCurve, out: pathlib.Path, title: str) -> None:
-    """Model (``ppo.zip``), normalisation (``vecnormalize.pkl``), settings (``run.json``) and curve
-    of a run, for ``--resume``."""
-    save_curve(curve.rows, out, title)
+def save_policy(model, settings: dict, out: pathlib.Path) -> None:
+    """Model (``ppo.zip``), normalisation (``vecnormalize.pkl``) and settings (``run.json``): what
+    ``eval_ppo.py`` reads."""
     model.save(out / "ppo.zip")
     model.get_vec_normalize_env().save(str(out / "vecnormalize.pkl"))
-    (out / "run.json").write_text(json.dumps(curve.settings, indent=1) + "\n")
+    (out / "run.json").write_text(json.dumps(settings, indent=1) + "\n")
+
+
+def save_run(model, curve: LearningCurve, out: pathlib.Path, title: str) -> None:
+    """``save_policy`` and the curve of a run, for ``--resume``."""
+    save_curve(curve.rows, out, title)
+    save_policy(model, curve.settings, out)
 
 
 def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:

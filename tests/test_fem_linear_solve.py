@@ -265,7 +265,6 @@ def test_a_failed_capture_falls_back_to_launches(monkeypatch):
         held_rope_steps("step", steps=1)
 
 
-
 def test_cg_stops_at_the_forcing_term_of_the_last_newton_update():
     """``start_cg_worlds``: CG stops at r.z = eta^2 times its start value, eta = cg_tolerance x
     (last Newton update of this substep / newton_tolerance) clamped to [cg_tolerance,

@@ -77,9 +77,9 @@ def start_cg_worlds(
     The last update is that of this substep (``newton_iterations`` [W]: its Newton iterations so
     far, cleared when a substep starts): a substep's first iteration solves to tolerance_near, so
     a substep's result depends on its input alone (not on the substeps or solves before it: a step
-    of K substeps is bit-identical to K steps of one). A ``patient`` world
-    (iterated to convergence because its contact forces decide the actuator force limit) solves
-    every iteration to tolerance_near."""
+    of K substeps is bit-identical to K steps of one). A ``patient`` world (iterated to
+    convergence because its contact forces decide the actuator force limit) solves every
+    iteration to tolerance_near."""
     w = wp.tid()
     update = float(0.0)
     if newton_iterations[w] > 0 and patient[w] == 0:
