@@ -51,25 +51,14 @@ OUTCOMES = ("success", "at the goal, not held", "grasped, never at the goal", "n
 
 
 def feature_beyond_pad_faces(scene) -> np.ndarray:
-    """[W, 2] m: how far each world's feature point (the object's mean node position) lies beyond
-    the rectangle of the pad faces, along the pads' length (finger direction) and width, the larger
-    of the two pads; 0 where it lies between the faces. A grasp whose feature point lies beyond
-    the faces holds the object off its centre: a prism gripped across its width near its top
-    (a sound grasp), or, with a jaw gap below the object's width there, on the pads' edges or
-    corners (a sphere pinched above its equator, a cube across a corner), which node-against-pad
-    contact resolves poorly (README, known gaps). The scripted expert's holds read 0 for all five
-    objects (the torus's rim lies along the closing axis, which is not counted)."""
-    from defgrasp_env.gripper import Gripper
-    from defgrasp_env.transforms import quat_to_matrix
+    """[W, 2] m: ``envs.task.feature_beyond_pad_faces`` of the scene's current state (its solver's
+    pad poses)."""
+    from defgrasp_env.envs.task import feature_beyond_pad_faces as beyond
 
-    feature, _ = scene.feature_points()
     pads = scene.model.pads_per_world
-    pos = scene.state.pad_positions.numpy().reshape(scene.num_worlds, pads, 3)
+    pos = scene.state.pad_positions.numpy().reshape(scene.num_worlds, pads, 3).astype(np.float64)
     quat = scene.state.pad_orientations.numpy().reshape(scene.num_worlds, pads, 4).astype(np.float64)
-    half = np.asarray(Gripper.pad_half_extents, np.float64)[1:]  # length, width (x: the closing axis)
-    # the feature point in each pad's frame: R^T (feature - pad centre), [W, P, 3]
-    local = np.einsum("wpji,wpj->wpi", quat_to_matrix(quat), feature[:, None, :] - pos)
-    return np.maximum(np.abs(local[..., 1:]) - half, 0.0).max(axis=1)
+    return beyond(scene.feature_points()[0], pos, quat)
 
 
 def run_settings(run: pathlib.Path, env_overrides: dict) -> tuple[dict, dict, bool]:
@@ -163,6 +152,7 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
     least_gap = np.full(num_worlds, np.inf)  # m, the jaw's least gap while grasped
     pierced_steps = np.zeros(num_worlds, int)  # steps whose info["pierced"] was set
     hold_beyond = np.full((num_worlds, 2), np.nan)  # m, feature_beyond_pad_faces at the last grasped step
+    qualities: list[list[float]] = [[] for _ in range(num_worlds)]  # info["grasp_quality"] of grasped steps
     scene = venv.unwrapped.env.unwrapped.scene
     records: list[dict | None] = [None] * num_worlds
     t0 = time.perf_counter()
@@ -186,6 +176,8 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
             pierced_steps[i] += bool(info.get("pierced", False))
             if grasped and not done:
                 hold_beyond[i] = beyond[i]
+            if grasped:
+                qualities[i].append(float(info["grasp_quality"]))
             if grasped and not info.get("pierced", False):  # a pierced hold is not "at the goal"
                 closest[i] = min(closest[i], float(info["goal_distance"]))
                 least_gap[i] = min(least_gap[i], float(info["jaw_gap"]))
@@ -207,6 +199,7 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
                               "least_grasped_gap": None if not np.isfinite(least_gap[i]) else round(least_gap[i], 4),
                               "final_gap": round(float(info["jaw_gap"]), 4),
                               "pierced_steps": int(pierced_steps[i]),
+                              "median_grasp_quality": round(float(np.median(qualities[i])), 3) if qualities[i] else None,
                               "hold_beyond_pad_faces": None if np.isnan(hold_beyond[i, 0])
                               else [round(float(v), 4) for v in hold_beyond[i]],
                               "return": float(info["episode"]["r"])}

@@ -297,12 +297,14 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
 
 def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
           torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
-          gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, resume: pathlib.Path | None = None,
-          init_from: pathlib.Path | None = None, fixed_world_objects: bool = False, best: BestPolicy | None = None,
+          gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, learning_rate: float = 3e-4,
+          resume: pathlib.Path | None = None, init_from: pathlib.Path | None = None,
+          fixed_world_objects: bool = False, best: BestPolicy | None = None,
           **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
-    ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples).
+    ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples)
+    at Adam's ``learning_rate``.
     ``resume``: a folder ``save_run`` wrote, with the same settings (``check_resume``); its model,
     normalisation statistics and curve go on, the env seeded with ``seed`` + the env steps so far.
     ``init_from``: a folder ``save_run`` wrote, whose policy weights and normalisation statistics
@@ -315,7 +317,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     from defgrasp_env.rl.policy_transfer import transfer_policy
 
     settings = dict(num_envs=num_envs, n_steps=n_steps, actions=actions, gamma=gamma, gae_lambda=gae_lambda,
-                    n_epochs=n_epochs, seed=seed, **env_kwargs)
+                    n_epochs=n_epochs, learning_rate=learning_rate, seed=seed, **env_kwargs)
     if init_from is not None:
         settings["init_from"] = str(init_from)
     # recorded only where on (the default since 2026-11-26): the run.json of a run without it (all
@@ -349,7 +351,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     minibatches = max(1, min(minibatches, rollout // 64))
     log_std_init = -0.5
     model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=rollout // minibatches,
-                n_epochs=n_epochs, learning_rate=3e-4, gamma=gamma, gae_lambda=gae_lambda, clip_range=0.2,
+                n_epochs=n_epochs, learning_rate=learning_rate, gamma=gamma, gae_lambda=gae_lambda, clip_range=0.2,
                 target_kl=0.1, max_grad_norm=0.5, vf_coef=0.5, ent_coef=0.0,
                 policy_kwargs=dict(net_arch=[256, 256, 256], log_std_init=log_std_init), seed=seed,
                 device=torch_device, verbose=verbose)
@@ -413,6 +415,7 @@ def main(argv=None) -> int:
                     help="what the policy controls: all 7 delta actions, wrist position and jaw, or wrist "
                          "position, its turn about the vertical and jaw")
     ap.add_argument("--gamma", type=float, default=0.8)
+    ap.add_argument("--learning-rate", type=float, default=3e-4, help="Adam's step size (a fine-tune may want less)")
     ap.add_argument("--object", default="cuboid",
                     help="an object name, 'random' (the five), or names separated by commas (drawn from)")
     ap.add_argument("--fixed-world-objects", action="store_true",
@@ -441,7 +444,8 @@ def main(argv=None) -> int:
     resumed = args.resume is not None and pathlib.Path(args.resume).resolve() == out.resolve()
     best = BestPolicy(out / "best", args.best_min_episodes, resumed) if args.best_min_episodes > 0 else None
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
-                         max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma, resume=args.resume,
+                         max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma,
+                         learning_rate=args.learning_rate, resume=args.resume,
                          init_from=args.init_from, fixed_world_objects=args.fixed_world_objects,
                          object=parse_object(args.object), youngs_modulus=args.youngs_modulus,
                          episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=args.device,

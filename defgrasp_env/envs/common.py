@@ -61,6 +61,7 @@ def step_infos(scene: PickupScene, result: dict, stats, diverged: np.ndarray) ->
     info.update(
         is_success=result["is_success"].copy(),
         grasped=result["grasped"].copy(),
+        grasp_quality=result["grasp_quality"].copy(),
         pierced=result["pierced"].copy(),
         goal_distance=result["goal_distance"].copy(),
         left_tip_normal_force=scene.gripper.tip_force[:, 0].copy(),

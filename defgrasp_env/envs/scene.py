@@ -262,29 +262,29 @@ class PickupScene:
                 # (in the other state, untouched since) is what a new one would give
                 nonlocal solved
                 worlds = None if solved is None else fraction != solved
-                number, tip, wrist = self._solve_substep(fraction, h, worlds=worlds)
+                number, tip, pads = self._solve_substep(fraction, h, worlds=worlds)
                 solved = np.array(fraction, dtype=np.float64)
-                load = actuator_load(wrist, tip, *limits)
+                load = actuator_load(wrist_force(pads), tip, *limits)
                 over = load > 1.0 + FORCE_TOLERANCE
                 if over.any():
                     # an unconverged stiff contact can read kN where its solution reads tens of N:
                     # over the limit, the forces of a converged solve decide
                     patient = over & ~self._last_solve_converged()
                     if patient.any():
-                        number, tip, wrist = self._solve_substep(fraction, h, patient, worlds=patient)
-                        load = actuator_load(wrist, tip, *limits)
-                return (number, tip, wrist), load
+                        number, tip, pads = self._solve_substep(fraction, h, patient, worlds=patient)
+                        load = actuator_load(wrist_force(pads), tip, *limits)
+                return (number, tip, pads), load
 
             load_before = actuator_load(self.gripper.wrist_force, self.gripper.tip_force, *limits)
             held = self.gripper.held_at_limit(load_before)
-            (number, tip, wrist), _, scale = limited_substep(solve, load_before, held=held)
+            (number, tip, pads), _, scale = limited_substep(solve, load_before, held=held)
             self.gripper.record_limit(scale, held)
             if number != self._solves:
                 raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
                                    "the last solve's state and report are kept")
             self.state, self._next_state = self._next_state, self.state
             self._report.fold(self.solver.scratch, self.solver.config.penetration_bound, first=k == 0)
-            self.gripper.sense(tip, wrist)
+            self.gripper.sense(tip, pads)
         if self.state is not self._home_state:  # an odd number of substeps
             self._home_state.copy_from(self.state)
             self.state, self._next_state = self._home_state, self.state
@@ -296,8 +296,9 @@ class PickupScene:
         other state, with ``fraction`` [W] of the actuators' motion (the force limit's retry,
         ``Gripper.move``), the ``patient`` worlds [W] iterated to convergence, of the ``worlds`` [W]
         bool (default all; the others keep their last solve: ``ImplicitSolver.advance``). Returns
-        (the solve's number, pad normal forces [W, P] N, wrist force [W] N of each world's last
-        solve), from one download of the pad loads; the report stays on the device."""
+        (the solve's number, pad normal forces [W, P] N, the object's total force on each pad
+        [W, P, 3] N (world) of each world's last solve), from one download of the pad loads; the
+        report stays on the device."""
         pos, quat = self.gripper.move(fraction)
         self._pad_targets.assign(np.concatenate([pos, quat], axis=-1).reshape(-1, 7).astype(np.float32))
         wp.launch(unpack_pad_targets, dim=len(self._pad_targets), inputs=[self._pad_targets],
@@ -310,7 +311,7 @@ class PickupScene:
                   outputs=[self._pad_loads], device=self.model.device)
         loads = self._pad_loads.numpy().reshape(self.num_worlds, -1, 4).copy()  # CPU: numpy() views
         self._solves += 1
-        return self._solves, loads[..., 0], wrist_force(loads[..., 1:])
+        return self._solves, loads[..., 0], loads[..., 1:]
 
     def _last_solve_converged(self) -> np.ndarray:
         """[W] bool: the last solve met the Newton tolerance in every substep and did not diverge

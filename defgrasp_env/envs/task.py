@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
+from ..gripper import PAD_BOX_HALF_EXTENTS
 from ..layout import ACTION_LAYOUTS, AGENT_POS, ENV_STATE, VectorLayout
+from ..transforms import quat_to_matrix
 from .config import PickupConfig
 from .scene import PickupScene
 
@@ -28,6 +30,56 @@ LIFT_SCALE = 2.0
 #: held it there for ``success_hold_seconds`` (2.9 M steps, benchmarks/RESULTS.md); ManiSkill's pick
 #: tasks shape their place reward with 5/m over a goal 0.1-0.3 m away.
 PLACE_SCALE = 10.0
+
+
+#: Distance scale (1/m) of the grasp quality's centring factor ``1 - tanh(scale * beyond)`` (beyond:
+#: how far the object's feature point lies outside the pad faces across their width): 0.86 at 2 mm,
+#: 0.60 at 6 mm, 0.12 at 20 mm. The scripted expert's holds of all five objects read 0 mm; PPO's
+#: failed cuboid holds (pads pinching the cube's edge beside it, pressing down at the wrist's force
+#: limit) 20-22 mm, its successes 6-8 mm (benchmarks/RESULTS.md, 2026-11-26).
+CENTRE_SCALE = 70.0
+
+
+def grasp_quality(pad_force_angles: np.ndarray, pad_friction: float, beyond_pad_faces: np.ndarray) -> np.ndarray:
+    """[W] in [0, 1]: how sound a hold is, the product of two factors, 1 for the scripted expert's
+    antipodal, centred holds:
+
+    * the friction-cone margin of the worse pad, ``(cos(angle) - cos(cone)) / (1 - cos(cone))``
+      clipped to [0, 1], cone = atan(``pad_friction``): 1 where both pads are pushed straight out
+      along the closing axis, 0 where a pad's force lies on the cone (held by friction alone: it
+      slips on any further load, as a wedge squeezed out between the pads does);
+      ``pad_force_angles`` [W, 2] rad (``Gripper.pad_force_angles``). ManiSkill's ``is_grasping``
+      gates its grasps on the same angle (at a fixed 85 degrees);
+    * the centring ``1 - tanh(CENTRE_SCALE * beyond_pad_faces[:, 1])``: ``beyond_pad_faces`` [W, 2]
+      m (``feature_beyond_pad_faces``: along the pads' length, across their width), 1 where the
+      object's feature point lies within the pad faces' width: an object held beside its centre
+      (pinched at an edge) reads less. Along the pads' length it is not counted: a soft object held
+      near its top, or a torus held by its rim, hangs below the pads (the expert's soft torus: 10 mm).
+    """
+    cone = np.cos(np.arctan(pad_friction))
+    worst = np.cos(np.max(pad_force_angles, axis=1))
+    if cone >= 1.0:  # frictionless pads: only a force straight along the closing axis holds
+        margin = (worst >= 1.0).astype(np.float64)
+    else:
+        margin = np.clip((worst - cone) / (1.0 - cone), 0.0, 1.0)
+    return margin * shaped_progress(beyond_pad_faces[:, 1], CENTRE_SCALE)
+
+
+def feature_beyond_pad_faces(feature: np.ndarray, pad_positions: np.ndarray, pad_quats: np.ndarray) -> np.ndarray:
+    """[W, 2] m: how far each world's feature point ``feature`` [W, 3] (m, world) lies beyond the
+    rectangle of the pad faces, along the pads' length (finger direction) and width, the larger of
+    the pads; 0 where it lies between the faces. Pad box centres ``pad_positions`` [W, P, 3] m and
+    orientations ``pad_quats`` [W, P, 4] xyzw (world; ``Gripper.pad_poses``). A hold whose feature
+    point lies beyond the faces holds the object off its centre: a prism gripped across its width
+    near its top (a sound grasp), or, with a jaw gap below the object's width there, on the pads'
+    edges or corners (a sphere pinched above its equator, a cube across an edge). The scripted
+    expert's holds read 0 for all five objects (the torus's rim lies along the closing axis, which
+    is not counted)."""
+    half = np.asarray(PAD_BOX_HALF_EXTENTS, np.float64)[1:]  # length, width (x: the closing axis)
+    # the feature point in each pad's frame: R^T (feature - pad centre), [W, P, 3]
+    rot = quat_to_matrix(np.asarray(pad_quats, np.float64))
+    local = np.einsum("wpji,wpj->wpi", rot, np.asarray(feature, np.float64)[:, None, :] - pad_positions)
+    return np.maximum(np.abs(local[..., 1:]) - half, 0.0).max(axis=1)
 
 
 def shaped_progress(distance: np.ndarray, scale: float) -> np.ndarray:
@@ -93,6 +145,9 @@ class PickupTask:
         reach_dist = np.linalg.norm(tcp - feat, axis=1)
         goal_dist = np.linalg.norm(feat - self.goal, axis=1)
         grasped = np.all(scene.gripper.tip_force > GRASP_FORCE, axis=1)
+        quality = grasp_quality(scene.gripper.pad_force_angles(), self.config.pad_friction,
+                                feature_beyond_pad_faces(feat, *scene.gripper.pad_poses()))
+        held_well = grasped * quality
         embedding = scene.pad_embedding()
         pierced = (stats.penetration > PIERCE_DEPTH) | (embedding > PIERCE_DEPTH)
         at_goal = (goal_dist < self.config.success_tolerance) & grasped & ~pierced & valid
@@ -102,14 +157,14 @@ class PickupTask:
         lift_progress = shaped_progress(goal_dist, LIFT_SCALE)
         terms = {
             "reach": shaped_progress(reach_dist, REACH_SCALE) * 0.5,
-            "grasp": 0.5 * grasped,
-            "lift": grasped * lift_progress * 2.0,
-            "place": grasped * shaped_progress(goal_dist, PLACE_SCALE),
+            "grasp": 0.5 * held_well,
+            "lift": held_well * lift_progress * 2.0,
+            "place": held_well * shaped_progress(goal_dist, PLACE_SCALE),
             "success": 10.0 * success,
         }
         reward = np.zeros(scene.num_worlds)
         for name in REWARD_TERMS:
             terms[name] = np.where(valid, terms[name], 0.0)
             reward = reward + terms[name]
-        return {"reward": reward, "terms": terms, "is_success": success, "grasped": grasped,
+        return {"reward": reward, "terms": terms, "is_success": success, "grasped": grasped, "grasp_quality": quality,
                 "pierced": pierced, "goal_distance": goal_dist, "pad_embedding": embedding}

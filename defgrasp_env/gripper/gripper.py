@@ -24,6 +24,7 @@ import numpy as np
 
 from ..transforms import quat_rotate, quat_to_matrix
 from ..wrist import clamp_joints, fk_analytic, ik_joints
+from ..wrist.force_limit import wrist_force
 from .driver import GripperConfig, GripperDriver, update_grip_stiffness
 from .linkage import GAP_MAX, GAP_MIN, pad_boxes, pad_centers, theta_from_gap
 
@@ -86,6 +87,8 @@ class Gripper:
     * ``gap`` [W]: jaw gap between the pad inner faces, m, in [GAP_MIN, GAP_MAX];
     * ``tip_force`` [W, 2]: normal force on the left and right pad inner face, N (last substep);
     * ``grip_stiffness`` [W]: the jaw driver's estimate of d(grip force)/d(closing), N/m (0: unknown);
+    * ``pad_force`` [W, 2, 3]: total force (normal + friction) the object exerts on the left and
+      right pad, N, world frame (last substep);
     * ``wrist_force`` [W]: magnitude of the net force of both pads on the object, N (last substep):
       the force the wrist carries, limited by ``wrist.force_limit``.
 
@@ -104,7 +107,7 @@ class Gripper:
         self._gap = np.full(num_worlds, GAP_MAX)
         self._tip_force = np.zeros((num_worlds, 2))
         self._grip_stiffness = np.zeros(num_worlds)
-        self._wrist_force = np.zeros(num_worlds)
+        self._pad_force = np.zeros((num_worlds, 2, 3))
         self._q_start = self._q_move = None
         self._plan = None   # (joints before, gap after, joints after) of the planned substep
         #: [W, 3] per world, the planned substep push (flange slide, m, world) that the actuator
@@ -130,8 +133,23 @@ class Gripper:
         return _read_only(self._grip_stiffness)
 
     @property
+    def pad_force(self) -> np.ndarray:
+        return _read_only(self._pad_force)
+
+    @property
     def wrist_force(self) -> np.ndarray:
-        return _read_only(self._wrist_force)
+        return wrist_force(self._pad_force)
+
+    def pad_force_angles(self) -> np.ndarray:
+        """[W, 2] rad, in [0, pi]: angle of the object's total force on each pad (``pad_force``)
+        from the pad's opening direction (left +x_G, right -x_G): 0 where the object pushes the pad
+        straight out along the closing axis (an antipodal grasp), atan(friction) at the edge of a
+        Coulomb cone, over pi/2 where it pulls the pad inward; 0 where the force is zero."""
+        _, quat = self.flange_pose()
+        opening = quat_to_matrix(quat)[:, None, :, 0] * np.array([1.0, -1.0])[None, :, None]  # [W, 2, 3]
+        along = np.sum(self._pad_force * opening, axis=-1)
+        across = np.linalg.norm(self._pad_force - along[..., None] * opening, axis=-1)
+        return np.arctan2(across, along)
 
     def reset(self, mask: np.ndarray, flange_xz: np.ndarray) -> None:
         """Worlds in ``mask`` [W]: flange at ``flange_xz`` [W, 2] (m, world x and z; rows outside the
@@ -141,7 +159,7 @@ class Gripper:
             self._gap[w] = GAP_MAX
             self._tip_force[w] = 0.0
             self._grip_stiffness[w] = 0.0
-            self._wrist_force[w] = 0.0
+            self._pad_force[w] = 0.0
             self._stopped_push[w] = 0.0
 
     # -- kinematics ------------------------------------------------------------------------
@@ -255,13 +273,13 @@ class Gripper:
         self.plan_substep(k, count, h, target_gap, active)
         return self.move()
 
-    def sense(self, pad_normal_force: np.ndarray, wrist_force: np.ndarray | None = None) -> None:
-        """The pad normal forces [W, 2] (N, left and right) and the net pad force magnitude [W] (N;
-        default: unchanged) measured at the end of the substep: the readouts and the
-        grip-stiffness estimate follow them."""
+    def sense(self, pad_normal_force: np.ndarray, pad_force: np.ndarray | None = None) -> None:
+        """The pad normal forces [W, 2] (N, left and right) and the object's total force on each pad
+        [W, 2, 3] (N, world; default: unchanged) measured at the end of the substep: the readouts
+        and the grip-stiffness estimate follow them."""
         gap_before, force_before, target_gap = self._before
         self._tip_force = np.array(pad_normal_force, dtype=np.float64).reshape(self.num_worlds, 2)
-        if wrist_force is not None:
-            self._wrist_force = np.array(wrist_force, dtype=np.float64).reshape(self.num_worlds)
+        if pad_force is not None:
+            self._pad_force = np.array(pad_force, dtype=np.float64).reshape(self.num_worlds, 2, 3)
         self._grip_stiffness = update_grip_stiffness(self._grip_stiffness, gap_before, self._gap, force_before,
                                                      self._tip_force.mean(axis=1), target_gap)
