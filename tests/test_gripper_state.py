@@ -222,10 +222,11 @@ def test_state_is_the_same_object_after_every_step(substeps):
 
 def test_held_at_limit_only_for_the_same_push():
     """``held_at_limit``: after a try stopped by the force limit (down at 0.3 m/s, jaw closing), a
-    world stays held under the same push (any speed, or within ~26 degrees) at load >= 1; it tries
-    to move when the command turns away (a slow lift, a stop with the jaw still closing, a turn of
-    the wrist, a push more than 26 degrees off), when its load fell below the limit, and after a
-    substep that moved.
+    world stays held under the same push (any speed, or within ~26 degrees, with a turn of the
+    wrist or not: the limit stops a try's turn with its slide) at load >= 1; it tries to move when
+    the command turns away (a slow lift, a stop with the jaw still closing, a push more than 26
+    degrees off, a turn without a slide), when its load fell below the limit, and after a substep
+    that moved.
     A held substep keeps the stopped push, so a command turning by small steps is released once it
     is 26 degrees off the push that was stopped."""
     down, quat = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0])
@@ -247,7 +248,7 @@ def test_held_at_limit_only_for_the_same_push():
              "20 degrees off": (0.3 * np.array([np.sin(0.35), -np.cos(0.35), 0.0]), 0.0, True),
              "35 degrees off": (0.3 * np.array([np.sin(0.61), -np.cos(0.61), 0.0]), 0.0, False),
              "slow lift": (-0.05 * down, 0.0, False), "stop": (np.zeros(3), 0.0, False),
-             "turning wrist": (0.3 * down, 0.3, False)}
+             "same push, turning wrist": (0.3 * down, 0.3, True), "turning wrist only": (np.zeros(3), 0.3, False)}
     for name, (velocity, turn, expected) in cases.items():
         plan(g, velocity, turn=turn)
         assert g.held_at_limit(at_limit)[0] == expected, name

@@ -111,15 +111,23 @@ def test_held_world_stays_stopped_in_one_solve():
     assert force_held[0] <= limit * (1 + FORCE_TOLERANCE)
 
 
-@pytest.mark.parametrize("name, modulus, sideways", [("cuboid", 1e6, 0.7), ("sphere", 1e7, 0.3)])
-def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch, name, modulus, sideways):
+@pytest.mark.parametrize("name, modulus, sideways, turn", [("cuboid", 1e6, 0.7, 0.0), ("sphere", 1e7, 0.3, 0.0),
+                                                          ("cuboid", 1e6, 0.7, 0.4), ("sphere", 3e6, 0.3, 0.3)])
+def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch, name, modulus, sideways, turn):
     """The closed gripper pushed down (and sideways) onto an object on the ground for 26 control
-    steps, then lifted: what an RL policy does while learning. The wrist stops at its limit; each
-    later substep of the same push is held (``Gripper.held_at_limit``) in one solve instead of a
-    full-motion try, its patient re-solve and a stopped re-solve. Independent truth: the same
-    episode with holding switched off (every substep tries its motion) gives bit-identical
-    observations and wrist forces with >= 1.6x the solves (measured 1.8-1.9x); the lift then moves
-    the wrist up at the full 0.3 m/s from its first step."""
+    steps, then lifted: what an RL policy does while learning, also turning its wrist about the
+    vertical back and forth (``turn``: the yaw action, alternating each step, as a learner's noisy
+    policy does). The wrist stops at its limit; each later substep of the same push is held
+    (``Gripper.held_at_limit``, turn or not) in one solve instead of a full-motion try, its patient
+    re-solve and a stopped re-solve. Independent truth: the same episode with holding switched off
+    (every substep tries its motion) gives bit-identical observations and wrist forces with >= 1.6x
+    the solves (measured 1.8-1.9x), turning or not: a world at its limit whose try reads over is
+    stopped whole (slide, turn and jaw), as the held one is. While pressing, the turning wrist keeps
+    its orientation. The lift then moves the wrist up at the full 0.3 m/s from its first step.
+    (Where a turn eases the load enough for the full try to read within the limit, holding does
+    change an episode: a cylinder, E = 3e6, pushed with the yaw at 0.4 turned and read 168 N on a
+    pad tried, 136 N held; the hold is a protective stop, released when the slide turns away or the
+    load drops.)"""
     from defgrasp_env.gripper.gripper import Gripper
     from defgrasp_env.layout import AGENT_POS, DELTA_ACTION, ENV_STATE
 
@@ -132,7 +140,8 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
             offset = ENV_STATE.get(obs["environment_state"], "feature_position") - scene.gripper.tcp_positions()[0]
             toward = np.clip(offset / 0.015, -1.0, 1.0)
             push = [toward[0] + sideways, -1.0 if t > 5 else 0.0, toward[2]] if t < 32 else [0.0, 1.0, 0.0]
-            action = DELTA_ACTION.pack(linear_velocity=np.clip(push, -1.0, 1.0), angular_velocity=np.zeros(3), jaw=[1.0])
+            spin = [0.0, turn * (-1.0) ** t if t < 32 else 0.0, 0.0]
+            action = DELTA_ACTION.pack(linear_velocity=np.clip(push, -1.0, 1.0), angular_velocity=spin, jaw=[1.0])
             obs, _, _, _, info = env.step(action.astype(np.float32))
             rows.append((obs["agent_pos"].copy(), obs["environment_state"].copy(), info["wrist_force"]))
         env.close()
@@ -145,6 +154,11 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
         np.testing.assert_array_equal(pos_a, pos_b)
         np.testing.assert_array_equal(state_a, state_b)
         assert wrist_a == wrist_b
+    if turn:  # it turned before the press; while pressing at the limit its orientation stays
+        quats = np.array([AGENT_POS.get(r[0], "wrist_quat") for r in held_rows])
+        pressing = [t for t in range(1, 32) if held_rows[t - 1][2] >= DEFAULT_WRIST_FORCE_LIMIT]
+        assert len(pressing) >= 10 and np.abs(quats[1] - quats[0]).max() > 1e-3
+        assert max(np.abs(quats[t] - quats[t - 1]).max() for t in pressing[1:]) == 0.0
     assert max(r[2] for r in held_rows) > DEFAULT_WRIST_FORCE_LIMIT  # it pressed at the limit
     assert max(r[2] for r in held_rows) <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE)
     assert tried_solves >= 1.6 * held_solves, (held_solves, tried_solves)

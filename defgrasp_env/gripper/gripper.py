@@ -250,16 +250,17 @@ class Gripper:
         motion (``wrist.force_limit.limited_substep``'s ``held``), like a protective stop: at a
         limit at the substep start (``load_before`` [W] >= 1), their last try stopped by the limit,
         and the planned flange slide within ~26 degrees of that stopped one (cosine >=
-        ``HOLD_COSINE``, any speed) with no turn of the wrist planned. (The force limit scales the
-        jaw's closing with the wrist's motion, so a held world's jaw waits too, as after a stopped
-        try.) A world whose load fell below its limit (the object gave way), whose command turned,
-        that turns its wrist or only moves its jaw, tries to move."""
+        ``HOLD_COSINE``, any speed), whatever turn of the wrist is planned with it: the force limit
+        scales the whole motion (slide, turn and the jaw's closing) by one fraction, and a world at
+        its limit is stopped at fraction 0 when its try reads over, so a try that pushes on the same
+        way with a turn ends stopped as the held world does, with two more solves (a learner's
+        policy turns its wrist a little in every action; 1-3 degrees a control step measured while
+        pressing a cube into the ground). A world whose load fell below its limit (the object gave
+        way), whose slide turned away, or that only moves its jaw, tries to move."""
         stopped, push = self._stopped_push, self.planned_push()
         norms = np.linalg.norm(stopped, axis=1) * np.linalg.norm(push, axis=1)
         same_push = (norms > 0.0) & (np.einsum("wi,wi->w", stopped, push) >= HOLD_COSINE * norms)
-        q_before, _, q = self._plan
-        no_turn = np.all(q[:, 3:] == q_before[:, 3:], axis=1)
-        return same_push & no_turn & (np.asarray(load_before) >= 1.0)
+        return same_push & (np.asarray(load_before) >= 1.0)
 
     def record_limit(self, scale: np.ndarray, held: np.ndarray) -> None:
         """After a substep's force limit: a world that tried to move (not ``held`` [W]) and was

@@ -24,8 +24,8 @@ learner pressing the object into the ground for seconds) stays stopped in one so
 instead of trying its motion again (a solve over the limit, a patient re-solve and the stopped
 re-solve: 2.75-3 solves per substep, ~15x the time of a free step on the CPU, and on the GPU the
 batch's slowest world), like a protective stop that holds until the load drops below the limit or
-the command turns away (``Gripper.held_at_limit``: the same flange push within ~26 degrees, no
-turn). Where the try would have been stopped anyway (a push into a stiff object) the result is the
+the command turns away (``Gripper.held_at_limit``: the same flange push within ~26 degrees, with or
+without a turn of the wrist). Where the try would have been stopped anyway (a push into a stiff object) the result is the
 same, bit for bit (tests/test_wrist_force_limit.py, also the rope); where a try's patient re-solve
 would have read within the tolerance, the held wrist stays where it stopped instead of creeping on
 in 10 % load steps (a first version that held on any push with a positive component along the
