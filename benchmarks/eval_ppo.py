@@ -89,7 +89,9 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     while grasped (m), ``grasped_steps``, ``max_lift`` of the feature point above its start (m),
     ``final_flange_height`` (m, world y), ``max_wrist_force`` (N), ``least_grasped_gap`` and
     ``final_gap`` of the jaw (m), ``pierced_steps``, ``hold_beyond_pad_faces`` [length, width] (m,
-    ``feature_beyond_pad_faces`` at the last grasped step; None if never grasped), ``return``) and
+    ``feature_beyond_pad_faces`` at the last grasped step; None if never grasped),
+    ``median_grasp_quality`` (of ``info["grasp_quality"]`` over the grasped steps; None if never
+    grasped), ``return``) and
     their summary (``success_rate``, outcome counts).
 
     ``workers`` > 1 splits the worlds into that many consecutive blocks, each evaluated in its own
@@ -242,7 +244,10 @@ def main(argv=None) -> int:
     print(f"success {result['outcomes']['success']}/{args.worlds} = {result['success_rate']:.3f}; "
           f"median step of success {result['success_step_median']}")
     for outcome, n in result["outcomes"].items():
-        print(f"  {outcome}: {n}")
+        quality = [e["median_grasp_quality"] for e in result["episodes"]
+                   if e["outcome"] == outcome and e["median_grasp_quality"] is not None]
+        print(f"  {outcome}: {n}" + (f" (grasp quality while grasped, median of the episodes' medians: "
+                                     f"{np.median(quality):.2f})" if quality else ""))
     beyond = [max(e["hold_beyond_pad_faces"]) for e in result["episodes"] if e["success"]]
     if beyond:
         print(f"  successes held with the feature point > 5 mm beyond the pad faces (off-centre; see "

@@ -379,7 +379,7 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
         w.writeheader()
         w.writerows(rows)
     steps = [r["env_steps"] for r in rows]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.4))
     for ax, x, label in ((axes[0], steps, "env steps"), (axes[1], [r["wall_s"] / 60 for r in rows], "wall time (min)")):
         ax.plot(x, [r["success_rate"] for r in rows], "o-", ms=3, alpha=0.5,
                 label="success rate (episodes ended in the rollout: early successes over-represented)")
@@ -392,9 +392,9 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
         ax.set_ylim(-0.02, 1.02)
         ax.set_ylabel("fraction, per PPO rollout")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=2, fontsize=7)  # below, off the data
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.1, 1.0, 1.0))
     fig.savefig(out / "curve.png", dpi=110)
 
 
