@@ -278,13 +278,18 @@ def save_run(model, curve: LearningCurve, out: pathlib.Path, title: str) -> None
     save_policy(model, curve.settings, out)
 
 
+#: Settings ``run.json`` records since a later version, with the value every earlier run used.
+RECORDED_SINCE = {"learning_rate": 3e-4}
+
+
 def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
-    """The curve rows of the run saved in ``folder`` if its settings (``run.json``) are ``settings``
-    (the simulation device may differ); else ValueError naming each difference."""
+    """The curve rows of the run saved in ``folder`` if its settings (``run.json``; a key it lacks
+    reads as ``RECORDED_SINCE`` gives) are ``settings`` (the simulation device may differ); else
+    ValueError naming each difference."""
     path = pathlib.Path(folder) / "run.json"
     if not path.is_file():
         raise FileNotFoundError(f"--resume {folder}: no run.json there (the settings save_run writes)")
-    saved = json.loads(path.read_text())
+    saved = {**RECORDED_SINCE, **json.loads(path.read_text())}
     settings = json.loads(json.dumps(settings))  # as saved: tuples become lists
     keys = [k for k in sorted(set(saved) | set(settings)) if k != "device"]
     differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}"

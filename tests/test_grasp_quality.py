@@ -32,8 +32,8 @@ def test_quality_centring_factor_and_frictionless_pads():
 
 
 def test_pad_force_angles_in_a_turned_wrists_frame():
-    """Forces built in the flange frame of a wrist turned 0.7 rad about the vertical and tilted
-    0.3 rad: each pad's opening direction (left +x_G, right -x_G) reads 0, a force with as much
+    """Forces built in the flange frame of a wrist turning toward 0.7 rad about the vertical and a
+    0.3 rad tilt (one substep of it applied: turned and tilted, asserted): each pad's opening direction (left +x_G, right -x_G) reads 0, a force with as much
     across as along reads 45 degrees, an inward pull more than 90, no force 0."""
     g = Gripper(GripperConfig(), 4)
     g.reset(np.ones(4, bool), np.zeros((4, 2)))
@@ -86,8 +86,8 @@ def _expert_episode(offset: float):
 
 
 def test_the_experts_hold_reads_sound_and_an_edge_pinch_beside_the_centre_does_not():
-    """Centred: the expert's antipodal hold reads >= 0.8 (0.96-0.99 measured over the five objects,
-    benchmarks/RESULTS.md). Aimed 25 mm beside the centre along the pads' width (11 mm half width),
+    """Centred: the expert's antipodal hold reads >= 0.8 (medians 0.90-1.00 measured over the five
+    objects at E = 1e4 and 1e7, benchmarks/RESULTS.md). Aimed 25 mm beside the centre along the pads' width (11 mm half width),
     the feature point lies ~14 mm beyond the faces: the centring factor alone is 1 - tanh(70 x 0.014)
     = 0.25, so while the edge is held its median quality is <= 0.35 (the margin leaves 0.1 for the
     object turning toward the pads while squeezed)."""

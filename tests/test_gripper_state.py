@@ -40,7 +40,7 @@ def test_reset_state_and_read_only_views():
     np.testing.assert_allclose(pos, [[0.0, START_FLANGE_HEIGHT, 0.0], [0.01, 0.3, -0.02], [0.02, 0.3, -0.04]])
     np.testing.assert_allclose(quat, np.tile([0, 0, 0, 1.0], (3, 1)), atol=1e-15)  # pointing down
     assert np.all(g.gap == GAP_MAX) and not g.tip_force.any() and not g.grip_stiffness.any()
-    for name in ("q", "gap", "tip_force", "grip_stiffness"):
+    for name in ("q", "gap", "tip_force", "grip_stiffness", "pad_force", "wrist_force"):
         with pytest.raises(ValueError, match="read-only"):
             getattr(g, name)[...] = 0.0
     # the tcp hangs below the flange by the linkage's offset

@@ -463,3 +463,20 @@ def test_feature_beyond_pad_faces_against_placed_pads():
     got = place(local, turned)
     np.testing.assert_allclose(got, [0.0, 0.03 - half[2]], atol=1e-6)
     env.close()
+
+
+def test_resume_reads_a_setting_recorded_later_as_its_earlier_value(tmp_path):
+    """A run saved before ``run.json`` recorded ``learning_rate`` (every run before 2026-11-26, all
+    at 3e-4) resumes with 3e-4 and refuses another rate, naming it."""
+    import json
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import check_resume
+
+    settings = {"num_envs": 2, "object": "cuboid", "device": "cpu"}
+    (tmp_path / "run.json").write_text(json.dumps(settings))
+    (tmp_path / "curve.csv").write_text("env_steps,wall_s\n32,1.5\n")
+    assert check_resume(tmp_path, {**settings, "learning_rate": 3e-4}) == [{"env_steps": 32, "wall_s": 1.5}]
+    with pytest.raises(ValueError, match=r"learning_rate: saved 0.0003, given 0.0001"):
+        check_resume(tmp_path, {**settings, "learning_rate": 1e-4})

@@ -96,7 +96,7 @@ class DeformablePickupEnv(gym.Env):
     lift); place = q (1 - tanh(10 |feature - goal|)) while grasped (a sharp maximum at the goal, where
     the object must stay for the success hold); success = 10 on the success step (distances in m;
     ``envs.task.REACH_SCALE``, ``LIFT_SCALE``, ``PLACE_SCALE``). q in [0, 1] is the grasp quality
-    (``info["grasp_quality"]``, ``envs.task.grasp_quality``): the worse pad's margin inside the
+    (``info["grasp_quality"]``, 0 while not grasped; ``envs.task.grasp_quality``): the worse pad's margin inside the
     pads' friction cone times a centring factor, 1 - tanh(70 x how far the feature point lies beyond
     the pad faces across their width); ~1 for an antipodal, centred hold (the scripted expert's read
     0.9-1.0 on all five objects), ~0.1 for a cube pinched at its edge beside the pads.

@@ -36,7 +36,7 @@ PLACE_SCALE = 10.0
 #: how far the object's feature point lies outside the pad faces across their width): 0.86 at 2 mm,
 #: 0.60 at 6 mm, 0.12 at 20 mm. The scripted expert's holds of all five objects read 0 mm; PPO's
 #: failed cuboid holds (pads pinching the cube's edge beside it, pressing down at the wrist's force
-#: limit) 20-22 mm, its successes 6-8 mm (benchmarks/RESULTS.md, 2026-11-26).
+#: limit) 16-22 mm, its successes 6-8 mm (benchmarks/RESULTS.md, 2026-11-26).
 CENTRE_SCALE = 70.0
 
 
@@ -73,8 +73,8 @@ def feature_beyond_pad_faces(feature: np.ndarray, pad_positions: np.ndarray, pad
     point lies beyond the faces holds the object off its centre: a prism gripped across its width
     near its top (a sound grasp), or, with a jaw gap below the object's width there, on the pads'
     edges or corners (a sphere pinched above its equator, a cube across an edge). The scripted
-    expert's holds read 0 for all five objects (the torus's rim lies along the closing axis, which
-    is not counted)."""
+    expert's holds read 0 across the width for all five objects (the torus's rim lies along the
+    closing axis, which is not counted; a soft torus hangs ~10 mm below the pads' length)."""
     half = np.asarray(PAD_BOX_HALF_EXTENTS, np.float64)[1:]  # length, width (x: the closing axis)
     # the feature point in each pad's frame: R^T (feature - pad centre), [W, P, 3]
     rot = quat_to_matrix(np.asarray(pad_quats, np.float64))
@@ -147,7 +147,8 @@ class PickupTask:
         grasped = np.all(scene.gripper.tip_force > GRASP_FORCE, axis=1)
         quality = grasp_quality(scene.gripper.pad_force_angles(), self.config.pad_friction,
                                 feature_beyond_pad_faces(feat, *scene.gripper.pad_poses()))
-        held_well = grasped * quality
+        # the hold's quality, 0 where nothing is held (or a diverged world's forces are not finite)
+        held_well = np.where(grasped & np.isfinite(quality), quality, 0.0)
         embedding = scene.pad_embedding()
         pierced = (stats.penetration > PIERCE_DEPTH) | (embedding > PIERCE_DEPTH)
         at_goal = (goal_dist < self.config.success_tolerance) & grasped & ~pierced & valid
@@ -166,5 +167,5 @@ class PickupTask:
         for name in REWARD_TERMS:
             terms[name] = np.where(valid, terms[name], 0.0)
             reward = reward + terms[name]
-        return {"reward": reward, "terms": terms, "is_success": success, "grasped": grasped, "grasp_quality": quality,
+        return {"reward": reward, "terms": terms, "is_success": success, "grasped": grasped, "grasp_quality": held_well,
                 "pierced": pierced, "goal_distance": goal_dist, "pad_embedding": embedding}

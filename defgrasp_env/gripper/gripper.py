@@ -138,7 +138,7 @@ class Gripper:
 
     @property
     def wrist_force(self) -> np.ndarray:
-        return wrist_force(self._pad_force)
+        return _read_only(wrist_force(self._pad_force))
 
     def pad_force_angles(self) -> np.ndarray:
         """[W, 2] rad, in [0, pi]: angle of the object's total force on each pad (``pad_force``)
@@ -256,7 +256,8 @@ class Gripper:
         way with a turn ends stopped as the held world does, with two more solves (a learner's
         policy turns its wrist a little in every action; 1-3 degrees a control step measured while
         pressing a cube into the ground). A world whose load fell below its limit (the object gave
-        way), whose slide turned away, or that only moves its jaw, tries to move."""
+        way), whose slide turned away, or that only moves its jaw or only turns its wrist (no
+        slide), tries to move."""
         stopped, push = self._stopped_push, self.planned_push()
         norms = np.linalg.norm(stopped, axis=1) * np.linalg.norm(push, axis=1)
         same_push = (norms > 0.0) & (np.einsum("wi,wi->w", stopped, push) >= HOLD_COSINE * norms)
