@@ -96,10 +96,11 @@ class DeformablePickupEnv(gym.Env):
     lift); place = q (1 - tanh(10 |feature - goal|)) while grasped (a sharp maximum at the goal, where
     the object must stay for the success hold); success = 10 on the success step (distances in m;
     ``envs.task.REACH_SCALE``, ``LIFT_SCALE``, ``PLACE_SCALE``). q in [0, 1] is the grasp quality
-    (``info["grasp_quality"]``, 0 while not grasped; ``envs.task.grasp_quality``): the worse pad's margin inside the
-    pads' friction cone times a centring factor, 1 - tanh(70 x how far the feature point lies beyond
-    the pad faces across their width); ~1 for an antipodal, centred hold (the scripted expert's read
-    0.9-1.0 on all five objects), ~0.1 for a cube pinched at its edge beside the pads.
+    (``info["grasp_quality"]``, 0 while not grasped; ``envs.task.grasp_quality``): the worse pad's
+    margin inside the pads' friction cone times a centring factor, 1 - tanh(70 x how far the feature
+    point lies beyond the pad faces across their width); ~1 for an antipodal, centred hold (the
+    scripted expert's read 0.9-1.0 on all five objects), ~0.1 for a cube pinched at its edge beside
+    the pads.
 
     **Episode end**: terminated on success = feature point within ``success_tolerance`` (0.05 m) of
     the goal, grasped and not pierced (no node 5 mm deep in a pad or the ground, no tet centroid 5 mm
@@ -107,8 +108,8 @@ class DeformablePickupEnv(gym.Env):
     truncated after ``episode_seconds`` (15 s, via ``max_episode_steps``) or when the simulation
     diverges (``info["sim_diverged"]``: the state is then kept at its last finite value).
 
-    **Info**: ``is_success``, ``grasped``, ``grasp_quality``, ``pierced``, ``goal_distance`` (m), reward terms, tip
-    forces (N), ``wrist_force`` (N, net force of the pads on the object), jaw gap (m), mean von
+    **Info**: ``is_success``, ``grasped``, ``grasp_quality``, ``pierced``, ``goal_distance`` (m),
+    reward terms, tip forces (N), ``wrist_force`` (N, net force of the pads on the object), jaw gap (m), mean von
     Mises stress (Pa), solver iterations (of the accepted solves, summed over substeps; a force-limit
     retry is not counted)/residual/penetration (m), ``pad_embedding`` (m: how deep the object's
     material lies inside a pad, its deepest tet centroid; node contact keeps nodes out of the pads,
