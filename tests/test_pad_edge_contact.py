@@ -18,6 +18,7 @@ from defgrasp_env.sim.model import ContactParams, build_model
 from defgrasp_env.sim.pad_edge_points import EDGE_POINT_SPACING, pad_edge_points, surface_triangles
 from defgrasp_env.sim.solver_scratch import EdgeContactScratch
 from defgrasp_env.transforms import axis_angle_to_quat, quat_rotate
+from geometry_reference import point_triangle_distances
 
 HALF = np.array([0.008175, 0.01875, 0.011])  # the env's pad collision box (m)
 KNEE = ContactParams().stiffening_depth
@@ -156,7 +157,7 @@ def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
             a, b, c = (x[tris[:, j]] for j in range(3))
             facing = np.cross(b - a, c - a) @ (centre - q[slot]) > 0
             mine = np.flatnonzero((tri_world == w) & facing)
-            d = _point_triangle_distances(q[slot], x[tris[mine]])
+            d = point_triangle_distances(q[slot], x[tris[mine]])
             best = d.min()
             if best > kps.SEARCH_MARGIN * 0.999:
                 if best > kps.SEARCH_MARGIN * 1.001:
@@ -164,30 +165,12 @@ def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
                 continue
             t = got[slot]
             assert t >= 0 and tri_world[t] == w, (slot, t)
-            assert abs(_point_triangle_distances(q[slot], x[tris[t]][None])[0] - best) < 2e-6, (slot, best)
+            assert abs(point_triangle_distances(q[slot], x[tris[t]][None])[0] - best) < 2e-6, (slot, best)
             a, b, c = x[tris[t]]
             n = np.cross(b - a, c - a)
             assert np.allclose(normals[slot], n / np.linalg.norm(n), atol=1e-5)
             checked += 1
     assert checked > 200, checked
-
-
-def _point_triangle_distances(p, tri):
-    """Distances from p [3] to triangles tri [T, 3, 3]: to the plane where p projects inside,
-    else to the nearest of the three edges (float64, vectorised over the triangles)."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    normal = np.cross(b - a, c - a)
-    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    height = np.einsum("ij,ij->i", p - a, normal)
-    proj = p - height[:, None] * normal
-    inside = np.ones(len(tri), bool)
-    for u, v in ((a, b), (b, c), (c, a)):  # the projection on the inner side of every edge
-        inside &= np.einsum("ij,ij->i", np.cross(v - u, proj - u), normal) >= 0
-    best = np.full(len(tri), np.inf)
-    for u, v in ((a, b), (b, c), (c, a)):
-        t = np.clip(np.einsum("ij,ij->i", p - u, v - u) / np.einsum("ij,ij->i", v - u, v - u), 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(p - (u + t[:, None] * (v - u)), axis=1))
-    return np.where(inside, np.abs(height), best)
 
 
 def _tilted_pad_pressed():
@@ -241,7 +224,7 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy(slip):
     pad_fn = wp.zeros(4, dtype=float, device="cpu")
     pad_f = wp.zeros(4, dtype=wp.vec3, device="cpu")
     pen = wp.zeros(2, dtype=float, device="cpu")
-    wp.launch(kpe.evaluate_edge_points, slots, [xw, *args, 1, residual, diag, hess, force, pad_fn, pad_f, pen],
+    wp.launch(kpe.evaluate_edge_points, slots, [xw, *args, edges.triangle_first, 1, residual, diag, hess, force, pad_fn, pad_f, pen],
               device="cpu")
     f = residual.numpy().astype(np.float64)
     touched = np.flatnonzero(np.abs(f).sum(1) > 0)
@@ -315,7 +298,7 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
     def force(xx):
         out = wp.zeros(n, dtype=wp.vec3, device="cpu")
         wp.launch(kpe.evaluate_edge_points, slots,
-                  [wp.array(xx.astype(np.float32), dtype=wp.vec3, device="cpu"), *args, 0, out,
+                  [wp.array(xx.astype(np.float32), dtype=wp.vec3, device="cpu"), *args, edges.triangle_first, 0, out,
                    wp.zeros(n, dtype=wp.mat33, device="cpu"), edges.point_block, wp.zeros(n, dtype=wp.vec3, device="cpu"),
                    wp.zeros(4, dtype=float, device="cpu"), wp.zeros(4, dtype=wp.vec3, device="cpu"),
                    wp.zeros(2, dtype=float, device="cpu")], device="cpu")
@@ -467,3 +450,54 @@ def test_no_edge_contact_where_the_object_wraps_the_pad():
             force[node * 2 + 1], normal[node * 2 + 1] = 1.0, face
         _search(model, edges, x, end, rot, start=start, lag=(force, normal))
         assert bool(edges.point_tri.numpy()[slot] >= 0) is kept, name
+
+
+@pytest.mark.parametrize("where, offset, expected", [
+    ("beside the cube, behind the top face's extended plane", (0.010, -0.008), 0.0),
+    ("inside, nearest the top face", (-0.006, -0.003), 0.003),
+    ("inside, nearest the side face", (-0.001, -0.003), 0.001),
+])
+def test_reported_penetration_is_how_deep_a_pressed_point_lies_inside_the_object(where, offset, expected):
+    """One pressed edge point held against a top-face triangle at the cuboid's +x edge, its pad's
+    corner placed (x offset from the +x face, y offset from the top face, m): the world's reported
+    penetration is the point's distance to the nearest face beyond the skin where it lies inside the
+    cube, and nothing where it lies beside it, although its plane depth reads 8 mm there (before
+    2026-11-26 the plane depth was reported: a policy's pad beside a cube's edge read 7-12 mm and
+    flagged the step pierced). The contact's force still follows the plane depth."""
+    model, edges, x, _, _ = _one_triangle_model()
+    tris = edges.triangles.numpy()
+    top, side = x[:, 1].max(), x[:, 0].max()
+    corners = x[tris]
+    at_edge = np.flatnonzero(np.all(np.isclose(corners[:, :, 1], top), 1) & np.isclose(corners[:, :, 0].max(1), side))
+    t = int(at_edge[0])
+    z = float(corners[t, :, 2].mean())
+    q = np.array([side + offset[0], top + offset[1], z])
+    slot = 0  # the pad's first edge point: placed at q by the pad's position (no rotation)
+    pos = (q - edges.points.numpy()[slot] * HALF)[None]
+    rot = np.array([[0.0, 0.0, 0.0, 1.0]])
+    pads = tuple(wp.array(v.astype(np.float32), dtype=dt, device="cpu")
+                 for v, dt in ((pos, wp.vec3), (rot, wp.quat), (pos, wp.vec3), (rot, wp.quat)))
+    count = edges.points_per_world
+    tri = np.full(count, -1, np.int32)
+    tri[slot] = t
+    edges.point_tri.assign(tri)
+    edges.point_bary.assign(np.full((count, 3), 1.0 / 3.0, np.float32))
+    edges.point_normal.assign(np.tile(np.float32([0.0, 1.0, 0.0]), (count, 1)))
+    edges.point_stiffness.assign(np.full(count, 1e4, np.float32))
+    edges.point_allowed.assign(np.full(count, kpe.SKIN_KNEES * KNEE, np.float32))
+    edges.point_friction.zero_()
+    xw = wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu")
+    n = model.num_nodes
+    pad_fn = wp.zeros(1, dtype=float, device="cpu")
+    pen = wp.zeros(1, dtype=float, device="cpu")
+    wp.launch(kpe.evaluate_edge_points, count,
+              [xw, xw, edges.triangles, wp.ones(1, dtype=int, device="cpu"), *pads, model.pad_half_extents,
+               model.pads_per_world, edges.points, edges.point_pad, count, edges.point_tri, edges.point_bary,
+               edges.point_normal, edges.point_stiffness, edges.point_allowed, edges.point_friction, KNEE, MU, EPS,
+               edges.triangle_first, 1, wp.zeros(n, dtype=wp.vec3, device="cpu"),
+               wp.zeros(n, dtype=wp.mat33, device="cpu"),
+               edges.point_block, wp.zeros(n, dtype=wp.vec3, device="cpu"), pad_fn,
+               wp.zeros(1, dtype=wp.vec3, device="cpu"), pen], device="cpu")
+    assert pad_fn.numpy()[0] > 0.0, where  # pressed: its plane depth is past the skin
+    skin = kpe.SKIN_KNEES * KNEE
+    assert pen.numpy()[0] == pytest.approx(max(expected - skin, 0.0), abs=2e-6), where

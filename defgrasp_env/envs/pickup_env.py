@@ -115,7 +115,9 @@ class DeformablePickupEnv(gym.Env):
     material lies inside a pad, its deepest tet centroid; node contact keeps nodes out of the pads,
     not the material between them), ``sim_diverged``,
     ``sim_converged`` (Newton met its tolerance in every substep), ``sim_penetrated`` (a node ended
-    deeper than ``solver.penetration_bound``, 1 mm, in a pad or the ground); ``reset`` returns
+    deeper than ``solver.penetration_bound``, 1 mm, in a pad or the ground, or a pad's edge that
+    deep inside the object, measured to its surface: ``penetration`` is the deepest of these over
+    the step's substeps); ``reset`` returns
     ``is_success``, ``object``, ``youngs_modulus`` (Pa) and ``replay_spec`` (a ``ReplaySpec``: seed
     or RNG state, options, object, material, initial pose and the reset that built the simulation;
     ``spec.reset(env)`` repeats the reset bit for bit).

@@ -26,7 +26,8 @@ class SolveStats:
     cg_iterations: np.ndarray       # int: CG iterations summed over Newton iterations and substeps
     last_update: np.ndarray         # float, m: largest node update of the last full Newton step
     residual_force: np.ndarray      # float, N: largest node force residual at the returned state
-    penetration: np.ndarray         # float, m: deepest ground/pad penetration at the returned state
+    penetration: np.ndarray         # float, m: deepest at the returned state: a node in the ground or a pad,
+    #                                 a pad edge in the object
     diverged: np.ndarray            # bool: the world blew up (NaN, runaway update); its state was kept
     converged: np.ndarray           # bool: every substep's Newton loop met newton_tolerance, not diverged
     penetrated: np.ndarray          # bool: a substep's solve left a node deeper than

@@ -118,7 +118,7 @@ def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
     return [c.rec(kc.evaluate_nodes, m.num_nodes, x, s.x_start, work.velocities, *common, record_pads, s.residual,
                   s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force, work.pad_normal_force,
                   work.pad_force, s.penetration),
-            *([c.rec(kpe.evaluate_edge_points, slots, *points, record_pads, s.residual, s.diag_block,
+            *([c.rec(kpe.evaluate_edge_points, slots, *points, e.triangle_first, record_pads, s.residual, s.diag_block,
                      e.point_block, work.contact_force, work.pad_normal_force, work.pad_force, s.penetration)]
               if slots else [])]
 

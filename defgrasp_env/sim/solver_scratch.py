@@ -21,6 +21,7 @@ class EdgeContactScratch:
 
     triangles: wp.array         # [T] vec3i: global node ids of the objects' surface triangles (outward)
     triangle_world: wp.array    # [T] int: world of each triangle
+    triangle_first: wp.array    # [W+1] int: first triangle of each world (a world's are contiguous)
     points: wp.array            # [Q] vec3: edge points in unit box coordinates (times the half extents: pad frame, m)
     point_pad: wp.array         # [Q] int: the point's pad within its world
     point_share: wp.array       # [Q] float, m: length of pad edge the point stands for
@@ -46,8 +47,10 @@ class EdgeContactScratch:
         points, point_pad, share, first = pad_edge_points(half) if on else (
             np.zeros((0, 3), np.float32), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(1, np.int32))
         slots = w * len(points)
+        tri_first = np.searchsorted(tri_world, np.arange(w + 1)).astype(np.int32)
         return cls(
             triangles=wp.array(tris, dtype=wp.vec3i, device=d), triangle_world=wp.array(tri_world, dtype=int, device=d),
+            triangle_first=wp.array(tri_first, dtype=int, device=d),
             points=wp.array(points, dtype=wp.vec3, device=d), point_pad=wp.array(point_pad, dtype=int, device=d),
             point_share=wp.array(share, dtype=float, device=d), point_first=wp.array(first, dtype=int, device=d),
             best_dist=wp.zeros(slots, dtype=float, device=d), best_tri=wp.zeros(slots, dtype=int, device=d),
@@ -110,7 +113,7 @@ class SolverScratch:
     dx_norm: wp.array           # float, m: largest component of the current Newton direction
     last_dx: wp.array           # float, m: that of the last Newton iteration (SolveStats.last_update)
     res_norm: wp.array          # float, N: largest residual component
-    penetration: wp.array       # float, m: deepest contact at the returned state
+    penetration: wp.array       # float, m: deepest contact at the returned state (nodes; pad edges in the object)
     step_length: wp.array       # float: line-search step length
     cg_update: wp.array         # float, m: largest node move of the last CG iteration
     cg_beta: wp.array           # float: CG's beta of the current iteration

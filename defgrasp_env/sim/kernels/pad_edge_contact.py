@@ -48,8 +48,9 @@ meets the object's surface through one triangle per substep, lagged like a node'
   move out by the largest such excess of its points, as nodes touching a pad face are put on it
   (and a pressed point, like a node touching a pad, keeps its start depth).
 
-The reported penetration (``SolveStats.penetration``) includes the depth beyond the skin of every
-point deeper than it may be. Edge points do not take part in the extra Newton iterations or the
+The reported penetration (``SolveStats.penetration``) includes how far beyond the skin a pressed
+point lies inside the object (its distance to the surface, where the surface's winding number says
+it is inside: ``evaluate_edge_points``). Edge points do not take part in the extra Newton iterations or the
 depth clamp of the nodes (``contact.deepest_contact``, ``clamp_depth``): a point beyond its kept
 depth is pushed back by its penalty over the following substeps, a knee per substep at most.
 
@@ -65,6 +66,7 @@ import warp as wp
 from .contact import friction_force, pad_slip, penalty_energy, penalty_force, penalty_stiffness
 from .energy import friction_potential
 from .pad_edge_search import NO_TRIANGLE, closest_point_barycentric
+from .surface_query import depth_inside_surface
 
 #: Free depth of a pad edge point behind the surface, in penalty knees (2 x 0.25 mm = 0.5 mm).
 SKIN_KNEES = 2.0
@@ -310,6 +312,7 @@ def evaluate_edge_points(
     knee: float,
     mu: float,
     eps: float,
+    triangle_first: wp.array(dtype=int),
     record_pads: int,
     # outputs, accumulated onto those of ``contact.evaluate_nodes`` (``point_block``: set)
     residual: wp.array(dtype=wp.vec3),
@@ -327,8 +330,15 @@ def evaluate_edge_points(
     law with the lagged normal force ``point_friction``, ``mu`` the pads' friction coefficient,
     ``eps`` its stick slip (m)) for the whole Hessian's products (node blocks w_j w_k B:
     ``edge_point_product``, ``coarse_assemble_edge_points``); at the returned state (``record_pads``)
-    also the pad's normal force (N), the force on the pad (N) and the point's depth behind the
-    surface (m)."""
+    also the pad's normal force (N), the force on the pad (N) and, into the world's ``penetration``
+    (m, an atomic maximum), how far a pressed point lies inside the object beyond the skin: its
+    distance to the nearest surface triangle of its world (``triangle_first`` [W+1]: the world's
+    triangles), at most its depth behind its triangle's plane, where the surface's winding number
+    says it is inside (``surface_query.depth_inside_surface``), else nothing. The plane depth alone
+    over-reported: a point beside a cube's edge, outside it, read 7-12 mm behind the extended plane
+    of a face it was searched against. Only a point whose plane depth could raise the world's
+    reading so far is tested (one pass over its world's triangles), so the maximum is the same
+    whatever the order the points run in."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
@@ -363,7 +373,12 @@ def evaluate_edge_points(
     if record_pads != 0:
         pad = w * pads_per_world + point_pad[slot % points_per_world]
         if f > 0.0:
-            wp.atomic_max(penetration, w, depth - SKIN_KNEES * knee)
+            skin = SKIN_KNEES * knee
+            if depth - skin > penetration[w]:
+                q1 = edge_point_end(slot % points_per_world, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1,
+                                    pad_half)
+                inside = depth_inside_surface(x, triangles, triangle_first[w], triangle_first[w + 1], q1)
+                wp.atomic_max(penetration, w, wp.min(depth, inside) - skin)
             wp.atomic_add(pad_normal_force, pad, f)
         wp.atomic_add(pad_force, pad, -force)
 
