@@ -107,7 +107,7 @@ def _search(model, edges, x, pos, rot, start=None, lag=None):
     for choose in (0, 1):
         wp.launch(kps.nearest_surface_triangles, edges.triangles.shape[0] * model.pads_per_world,
                   [*args, choose, edges.best_dist, edges.best_tri], device="cpu")
-    wp.launch(kpe.lag_edge_points, slots, [xw, xw, edges.triangles, *pads, model.pad_half_extents,
+    wp.launch(kpe.lag_edge_points, slots, [xw, xw, edges.triangles, edges.triangle_first, *pads, model.pad_half_extents,
                                            model.pads_per_world, edges.points, edges.point_pad, edges.point_share,
                                            edges.points_per_world, model.node_contact_stiffness,
                                            *lag_arrays,
@@ -132,14 +132,16 @@ def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
     pads placed across the objects' surfaces at random poses: every edge point within the search
     radius (2 mm, nothing moves) of a triangle that faces its pad's centre gets a triangle of its
     own world at the brute-force nearest distance among those (float32) and that triangle's
-    outward normal; points farther away get none."""
+    outward normal, unless it lies outside the cube deeper than the skin behind that triangle's
+    plane (``lag_edge_points`` drops it: beside a convex edge); points farther away get none."""
     _, model = _model()
     edges = EdgeContactScratch.from_model(model)
     tris, tri_world = surface_triangles(model)
     x = model.rest_positions.numpy().astype(np.float64)
     x[model.world_nodes(1)] += np.array([0.3, 0.0, 0.0])
+    boxes = [(x[model.world_nodes(w)].min(0), x[model.world_nodes(w)].max(0)) for w in range(2)]
     rng = np.random.default_rng(11)
-    checked = 0
+    checked = dropped = 0
     for trial in range(6):
         rot = rng.normal(size=(4, 4))
         rot /= np.linalg.norm(rot, axis=1, keepdims=True)
@@ -163,14 +165,28 @@ def test_search_finds_the_nearest_surface_triangle_of_the_points_own_world():
                 if best > kps.SEARCH_MARGIN * 1.001:
                     assert got[slot] == -1, (slot, best)
                 continue
+            outside = not np.all((q[slot] > boxes[w][0]) & (q[slot] < boxes[w][1]))
             t = got[slot]
-            assert t >= 0 and tri_world[t] == w, (slot, t)
+            if t == -1:  # dropped: outside, deeper than the skin behind a triangle at the nearest distance
+                tied = mine[d <= best + 2e-6]
+                assert outside and max(_plane_depth(q[slot], x[tris[k]]) for k in tied) > 2 * KNEE, slot
+                dropped += 1
+                continue
+            assert tri_world[t] == w, (slot, t)
             assert abs(point_triangle_distances(q[slot], x[tris[t]][None])[0] - best) < 2e-6, (slot, best)
+            assert not (outside and _plane_depth(q[slot], x[tris[t]]) > 2 * KNEE + 1e-6), slot
             a, b, c = x[tris[t]]
             n = np.cross(b - a, c - a)
             assert np.allclose(normals[slot], n / np.linalg.norm(n), atol=1e-5)
             checked += 1
-    assert checked > 200, checked
+    assert checked > 200 and dropped > 0, (checked, dropped)
+
+
+def _plane_depth(q, tri):
+    """How far (m) q lies behind the plane of triangle tri [3, 3] (outward normal by the right-hand rule)."""
+    a, b, c = tri
+    n = np.cross(b - a, c - a)
+    return float(n @ (a - q) / np.linalg.norm(n))
 
 
 def _tilted_pad_pressed():
@@ -465,12 +481,7 @@ def test_reported_penetration_is_how_deep_a_pressed_point_lies_inside_the_object
     2026-11-26 the plane depth was reported: a policy's pad beside a cube's edge read 7-12 mm and
     flagged the step pierced). The contact's force still follows the plane depth."""
     model, edges, x, _, _ = _one_triangle_model()
-    tris = edges.triangles.numpy()
-    top, side = x[:, 1].max(), x[:, 0].max()
-    corners = x[tris]
-    at_edge = np.flatnonzero(np.all(np.isclose(corners[:, :, 1], top), 1) & np.isclose(corners[:, :, 0].max(1), side))
-    t = int(at_edge[0])
-    z = float(corners[t, :, 2].mean())
+    t, top, side, z = _top_edge_triangle(edges, x)
     q = np.array([side + offset[0], top + offset[1], z])
     slot = 0  # the pad's first edge point: placed at q by the pad's position (no rotation)
     pos = (q - edges.points.numpy()[slot] * HALF)[None]
@@ -501,3 +512,47 @@ def test_reported_penetration_is_how_deep_a_pressed_point_lies_inside_the_object
     assert pad_fn.numpy()[0] > 0.0, where  # pressed: its plane depth is past the skin
     skin = kpe.SKIN_KNEES * KNEE
     assert pen.numpy()[0] == pytest.approx(max(expected - skin, 0.0), abs=2e-6), where
+
+
+def _top_edge_triangle(edges, x):
+    """A top-face triangle of the cuboid at its +x edge: (triangle id, top y, +x face x, its mean z)."""
+    tris = edges.triangles.numpy()
+    top, side = x[:, 1].max(), x[:, 0].max()
+    corners = x[tris]
+    at_edge = np.flatnonzero(np.all(np.isclose(corners[:, :, 1], top), 1) & np.isclose(corners[:, :, 0].max(1), side))
+    t = int(at_edge[0])
+    return t, top, side, float(corners[t, :, 2].mean())
+
+
+@pytest.mark.parametrize("where, offset, kept", [
+    ("beside the cube, 8 mm behind the top face's extended plane", (0.010, -0.008), False),
+    ("beside the cube, within the skin behind the plane", (0.010, -0.0003), True),
+    ("in front of the top face", (-0.004, 0.001), True),
+    ("inside, 3 mm under the top face", (-0.006, -0.003), True),
+])
+def test_a_point_found_deep_behind_its_plane_but_outside_the_object_gets_no_contact(where, offset, kept):
+    """``lag_edge_points`` given a top-face triangle at the cuboid's +x edge for the pad's first
+    edge point (as the search may give one whose motion window reaches it), the point placed (x
+    offset from the +x face, y offset from the top face, m) at the substep start and end: a point
+    deeper than the skin behind the plane is dropped where it lies outside the cube (it touches
+    nothing: held, it pushed the face a knee's worth in every substep) and kept inside it; a point
+    within the skin or in front of the face is kept wherever it is (a pad edge approaching)."""
+    model, edges, x, _, _ = _one_triangle_model()
+    t, top, side, z = _top_edge_triangle(edges, x)
+    slot = 0
+    pos = (np.array([side + offset[0], top + offset[1], z]) - edges.points.numpy()[slot] * HALF)[None]
+    rot = np.array([[0.0, 0.0, 0.0, 1.0]])
+    pads = tuple(wp.array(v.astype(np.float32), dtype=dt, device="cpu")
+                 for v, dt in ((pos, wp.vec3), (rot, wp.quat), (pos, wp.vec3), (rot, wp.quat)))
+    best = np.full(edges.points_per_world, kps.NO_TRIANGLE, np.int32)
+    best[slot] = t
+    edges.best_tri.assign(best)
+    xw = wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu")
+    contacts = model.num_nodes * (model.pads_per_world + 1)
+    wp.launch(kpe.lag_edge_points, edges.points_per_world,
+              [xw, xw, edges.triangles, edges.triangle_first, *pads, model.pad_half_extents, model.pads_per_world,
+               edges.points, edges.point_pad, edges.point_share, edges.points_per_world, model.node_contact_stiffness,
+               wp.zeros(contacts, dtype=float, device="cpu"), wp.zeros(contacts, dtype=wp.vec3, device="cpu"),
+               edges.best_tri, edges.point_tri, edges.point_bary, edges.point_normal, edges.point_stiffness,
+               edges.point_allowed, edges.point_friction, KNEE], device="cpu")
+    assert bool(edges.point_tri.numpy()[slot] == t) is kept, where

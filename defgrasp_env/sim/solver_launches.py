@@ -143,7 +143,7 @@ def _edge_search(c: _Context, x) -> list:
     return [c.rec(kps.clear_edge_search, slots, e.best_dist, e.best_tri),
             c.rec(kps.nearest_surface_triangles, pairs, *search, 0, e.best_dist, e.best_tri),
             c.rec(kps.nearest_surface_triangles, pairs, *search, 1, e.best_dist, e.best_tri),
-            c.rec(kpe.lag_edge_points, slots, s.x_start, x, e.triangles, *s.pads, m.pad_half_extents,
+            c.rec(kpe.lag_edge_points, slots, s.x_start, x, e.triangles, e.triangle_first, *s.pads, m.pad_half_extents,
                   m.pads_per_world, e.points, e.point_pad, e.point_share, e.points_per_world,
                   m.node_contact_stiffness, s.lag_normal_force, s.lag_normal, e.best_tri, e.point_tri, e.point_bary,
                   e.point_normal,

@@ -18,6 +18,9 @@ meets the object's surface through one triangle per substep, lagged like a node'
   face normal >= 0): the nodes' contacts hold the pad, and a coarse surface cannot fold around a
   90-degree edge (its chords cut the corner by millimetres); pushing them out of the pad's edge
   pushed those nodes into the pad, and the two fought until the solves blew up in the contact fuzz.
+  No contact either for a point deeper than the skin behind its triangle's plane at the substep
+  start that lies outside the object (beside a convex edge, behind a face's extended plane: the
+  surface's winding number, ``surface_query.py``).
 - **contact** (``evaluate_edge_points``): depth g(x) = n . (sum_j w_j x_j - q1), q1 the point at the
   pad's substep-end pose: how far the point lies behind the plane of its triangle. Energy
   ``penalty_energy(k, g - g_a)`` for g > g_a, the depth the point may keep: the free skin of
@@ -93,6 +96,7 @@ def lag_edge_points(
     x_start: wp.array(dtype=wp.vec3),
     x_guess: wp.array(dtype=wp.vec3),
     triangles: wp.array(dtype=wp.vec3i),
+    triangle_first: wp.array(dtype=int),
     pad_pos0: wp.array(dtype=wp.vec3),
     pad_rot0: wp.array(dtype=wp.quat),
     pad_pos1: wp.array(dtype=wp.vec3),
@@ -124,7 +128,12 @@ def lag_edge_points(
     pad pose 0) less one penalty knee, or the free skin, whichever is larger; all held for the
     substep. A point deeper than the skin at the start (it met a triangle that a node touching the
     pad kept from it, or a solve stopped unconverged) is pushed out by at most a knee per substep,
-    not at once (pushed out at once, a pad swept at 2 m/s into a soft cuboid read 1 kN). Also the
+    not at once (pushed out at once, a pad swept at 2 m/s into a soft cuboid read 1 kN). A point
+    deeper than the skin at the start that lies outside the object there (the winding number of its
+    world's surface, ``triangle_first`` [W+1]: ``surface_query.depth_inside_surface``) gets no
+    contact: it sits beside the object off a convex edge, behind the extended plane of a face it
+    does not touch, which its kept depth would otherwise push a knee's worth every substep (a
+    learner's pad hanging past a cube's edge, 7-12 mm behind the top face's plane). Also the
     normal force (N) its friction is lagged on: the penalty force of its start depth beyond the
     depth it may keep (a held point's load: its start depth is its kept depth plus its load depth;
     at most a knee's worth, so less than the load of a point deeper than that, pushed back out)."""
@@ -162,15 +171,22 @@ def lag_edge_points(
                 point_tri[slot] = -1
                 return
             face = f
+    q0 = pad_pos0[pad] + wp.quat_rotate(pad_rot0[pad], wp.cw_mul(points[q], pad_half[pad]))
+    start = edge_point_depth(x_start, ids, bary, n, q0)
+    skin = SKIN_KNEES * knee
+    if start > skin:
+        # behind the triangle's plane beyond the skin at the start: in the object, or beside it (off
+        # a convex edge, behind the extended plane of a face), where it touches nothing
+        if depth_inside_surface(x_start, triangles, triangle_first[w], triangle_first[w + 1], q0) <= 0.0:
+            point_tri[slot] = -1
+            return
     mean_edge = (wp.length(xb - xa) + wp.length(xc - xb) + wp.length(xa - xc)) / 3.0
     k = bary[0] * stiffness[ids[0]] + bary[1] * stiffness[ids[1]] + bary[2] * stiffness[ids[2]]
     point_tri[slot] = t
     point_bary[slot] = bary
     point_normal[slot] = n
     point_stiffness[slot] = k * point_share[q] / mean_edge
-    q0 = pad_pos0[pad] + wp.quat_rotate(pad_rot0[pad], wp.cw_mul(points[q], pad_half[pad]))
-    start = edge_point_depth(x_start, ids, bary, n, q0)
-    allowed = wp.max(start - RECOVERY_KNEES * knee, SKIN_KNEES * knee)
+    allowed = wp.max(start - RECOVERY_KNEES * knee, skin)
     point_allowed[slot] = allowed
     point_friction[slot] = 0.0
     if start > allowed:

@@ -25,21 +25,30 @@ def triangle_solid_angle(a: wp.vec3, b: wp.vec3, c: wp.vec3):
 
 
 @wp.func
-def depth_inside_surface(x: wp.array(dtype=wp.vec3), triangles: wp.array(dtype=wp.vec3i), first: int, last: int,
+def winding_and_distance(x: wp.array(dtype=wp.vec3), triangles: wp.array(dtype=wp.vec3i), first: int, last: int,
                          p: wp.vec3):
-    """Distance (m) from p to the nearest of ``triangles[first:last]`` (a closed surface, outward
-    by the right-hand rule, nodes at ``x``) where p lies inside it (winding number > 1/2), else 0.
-    Cost: one pass over the triangles."""
-    winding = float(0.0)
+    """(winding number, distance (m) to the nearest triangle) of p for ``triangles[first:last]``
+    (a closed surface, outward by the right-hand rule, nodes at ``x``): the winding number is 1
+    inside, 0 outside. Cost: one pass over the triangles."""
+    solid = float(0.0)
     nearest = float(1.0e30)
     for t in range(first, last):
         ids = triangles[t]
         a = x[ids[0]]
         b = x[ids[1]]
         c = x[ids[2]]
-        winding += triangle_solid_angle(a - p, b - p, c - p)
+        solid += triangle_solid_angle(a - p, b - p, c - p)
         bary = closest_point_barycentric(a, b, c, p)
         nearest = wp.min(nearest, wp.length(bary[0] * a + bary[1] * b + bary[2] * c - p))
-    if winding * INV_4PI > 0.5:
+    return solid * INV_4PI, nearest
+
+
+@wp.func
+def depth_inside_surface(x: wp.array(dtype=wp.vec3), triangles: wp.array(dtype=wp.vec3i), first: int, last: int,
+                         p: wp.vec3):
+    """Distance (m) from p to the nearest of ``triangles[first:last]`` where p lies inside that
+    closed surface (winding number > 1/2), else 0 (``winding_and_distance``)."""
+    winding, nearest = winding_and_distance(x, triangles, first, last, p)
+    if winding > 0.5:
         return nearest
     return 0.0
