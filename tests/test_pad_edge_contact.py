@@ -107,7 +107,8 @@ def _search(model, edges, x, pos, rot, start=None, lag=None):
     for choose in (0, 1):
         wp.launch(kps.nearest_surface_triangles, edges.triangles.shape[0] * model.pads_per_world,
                   [*args, choose, edges.best_dist, edges.best_tri], device="cpu")
-    wp.launch(kpe.lag_edge_points, slots, [xw, xw, edges.triangles, edges.triangle_first, *pads, model.pad_half_extents,
+    wp.launch(kpe.lag_edge_points, slots, [xw, xw, edges.triangles, edges.triangle_first, *pads,
+                                           model.pad_half_extents,
                                            model.pads_per_world, edges.points, edges.point_pad, edges.point_share,
                                            edges.points_per_world, model.node_contact_stiffness,
                                            *lag_arrays,
@@ -240,7 +241,8 @@ def test_edge_point_force_is_minus_the_gradient_of_its_energy(slip):
     pad_fn = wp.zeros(4, dtype=float, device="cpu")
     pad_f = wp.zeros(4, dtype=wp.vec3, device="cpu")
     pen = wp.zeros(2, dtype=float, device="cpu")
-    wp.launch(kpe.evaluate_edge_points, slots, [xw, *args, edges.triangle_first, 1, residual, diag, hess, force, pad_fn, pad_f, pen],
+    wp.launch(kpe.evaluate_edge_points, slots,
+              [xw, *args, edges.triangle_first, 1, residual, diag, hess, force, pad_fn, pad_f, pen],
               device="cpu")
     f = residual.numpy().astype(np.float64)
     touched = np.flatnonzero(np.abs(f).sum(1) > 0)
@@ -484,13 +486,43 @@ def test_reported_penetration_is_how_deep_a_pressed_point_lies_inside_the_object
     t, top, side, z = _top_edge_triangle(edges, x)
     q = np.array([side + offset[0], top + offset[1], z])
     slot = 0  # the pad's first edge point: placed at q by the pad's position (no rotation)
-    pos = (q - edges.points.numpy()[slot] * HALF)[None]
+    pen, pad_fn = _reported_penetration(model, edges, x, q - edges.points.numpy()[slot] * HALF, [slot], t)
+    assert pad_fn > 0.0, where  # pressed: its plane depth is past the skin
+    skin = kpe.SKIN_KNEES * KNEE
+    assert pen == pytest.approx(max(expected - skin, 0.0), abs=2e-6), where
+
+
+@pytest.mark.parametrize("edge", [1.0, -1.0])
+def test_reported_penetration_is_the_same_whichever_point_runs_first(edge):
+    """Two pressed edge points of one pad on the same top-face triangle at the cuboid's +x (or -x)
+    edge, the pad's bottom 3 mm below the top face and straddling the edge: the bottom edge point
+    over the cube (6 mm in from its side) lies 3 mm inside it, the one on the far side of the pad
+    beside it, 3 mm behind the plane as well. The reading is the inside point's 3 mm less the skin
+    with either point first in the launch (mirrored: the points swap roles), so the kernel's skip
+    of points that cannot raise the reading does not depend on their order."""
+    model, edges, x, _, _ = _one_triangle_model()
+    t, top, side, z = _top_edge_triangle(edges, x, edge)
+    points = edges.points.numpy()
+    inner = -edge  # the pad's bottom edge point (unit x) over the cube
+    slots = [int(np.flatnonzero(np.isclose(points[:, 0], u) & np.isclose(points[:, 1], -1.0)
+                                & np.isclose(points[:, 2], 0.0, atol=0.2))[0]) for u in (inner, edge)]
+    over = np.array([side - edge * 0.006, top - 0.003, z])  # where the inner point lies
+    pen, pad_fn = _reported_penetration(model, edges, x, over - points[slots[0]] * HALF, slots, t)
+    assert pad_fn > 0.0
+    assert pen == pytest.approx(0.003 - kpe.SKIN_KNEES * KNEE, abs=2e-6)
+
+
+def _reported_penetration(model, edges, x, pad_position, slots, t):
+    """``evaluate_edge_points`` (recording) with the one pad at ``pad_position`` (no rotation) and
+    the edge points ``slots`` held against triangle t (normal +y, barycentric centre, 1e4 N/m, kept
+    depth the skin): (the world's reported penetration (m), the pad's normal force (N))."""
+    pos = np.asarray(pad_position, np.float64)[None]
     rot = np.array([[0.0, 0.0, 0.0, 1.0]])
     pads = tuple(wp.array(v.astype(np.float32), dtype=dt, device="cpu")
                  for v, dt in ((pos, wp.vec3), (rot, wp.quat), (pos, wp.vec3), (rot, wp.quat)))
     count = edges.points_per_world
     tri = np.full(count, -1, np.int32)
-    tri[slot] = t
+    tri[slots] = t
     edges.point_tri.assign(tri)
     edges.point_bary.assign(np.full((count, 3), 1.0 / 3.0, np.float32))
     edges.point_normal.assign(np.tile(np.float32([0.0, 1.0, 0.0]), (count, 1)))
@@ -501,25 +533,24 @@ def test_reported_penetration_is_how_deep_a_pressed_point_lies_inside_the_object
     n = model.num_nodes
     pad_fn = wp.zeros(1, dtype=float, device="cpu")
     pen = wp.zeros(1, dtype=float, device="cpu")
+    zeros = lambda dtype: wp.zeros(n, dtype=dtype, device="cpu")  # noqa: E731
     wp.launch(kpe.evaluate_edge_points, count,
               [xw, xw, edges.triangles, wp.ones(1, dtype=int, device="cpu"), *pads, model.pad_half_extents,
                model.pads_per_world, edges.points, edges.point_pad, count, edges.point_tri, edges.point_bary,
                edges.point_normal, edges.point_stiffness, edges.point_allowed, edges.point_friction, KNEE, MU, EPS,
-               edges.triangle_first, 1, wp.zeros(n, dtype=wp.vec3, device="cpu"),
-               wp.zeros(n, dtype=wp.mat33, device="cpu"),
-               edges.point_block, wp.zeros(n, dtype=wp.vec3, device="cpu"), pad_fn,
+               edges.triangle_first, 1, zeros(wp.vec3), zeros(wp.mat33), edges.point_block, zeros(wp.vec3), pad_fn,
                wp.zeros(1, dtype=wp.vec3, device="cpu"), pen], device="cpu")
-    assert pad_fn.numpy()[0] > 0.0, where  # pressed: its plane depth is past the skin
-    skin = kpe.SKIN_KNEES * KNEE
-    assert pen.numpy()[0] == pytest.approx(max(expected - skin, 0.0), abs=2e-6), where
+    return float(pen.numpy()[0]), float(pad_fn.numpy()[0])
 
 
-def _top_edge_triangle(edges, x):
-    """A top-face triangle of the cuboid at its +x edge: (triangle id, top y, +x face x, its mean z)."""
+def _top_edge_triangle(edges, x, edge=1.0):
+    """A top-face triangle of the cuboid at its +x (``edge`` 1) or -x (-1) edge: (triangle id, top y,
+    that side face's x, the triangle's mean z)."""
     tris = edges.triangles.numpy()
-    top, side = x[:, 1].max(), x[:, 0].max()
+    top, side = x[:, 1].max(), (x[:, 0] * edge).max() * edge
     corners = x[tris]
-    at_edge = np.flatnonzero(np.all(np.isclose(corners[:, :, 1], top), 1) & np.isclose(corners[:, :, 0].max(1), side))
+    at_edge = np.flatnonzero(np.all(np.isclose(corners[:, :, 1], top), 1)
+                             & np.isclose((corners[:, :, 0] * edge).max(1), side * edge))
     t = int(at_edge[0])
     return t, top, side, float(corners[t, :, 2].mean())
 

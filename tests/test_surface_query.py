@@ -26,15 +26,18 @@ NEAR = 2e-4
 
 @wp.kernel
 def _query(x: wp.array(dtype=wp.vec3), triangles: wp.array(dtype=wp.vec3i), first: wp.array(dtype=int),
-           world: wp.array(dtype=int), p: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
+           world: wp.array(dtype=int), p: wp.array(dtype=wp.vec3), out: wp.array(dtype=float),
+           winding: wp.array(dtype=float)):
     i = wp.tid()
     w = world[i]
     out[i] = sq.depth_inside_surface(x, triangles, first[w], first[w + 1], p[i])
+    winding[i] = sq.winding_number(x, triangles, first[w], first[w + 1], p[i])
 
 
 def _depths(name, points, world):
     """depth_inside_surface of ``points`` [K, 3] against world ``world`` [K] of a two-world model of
-    ``name`` (world 1 shifted by SHIFT): (depths [K], the mesh)."""
+    ``name`` (world 1 shifted by SHIFT): (depths [K], the mesh); checks on the way that
+    ``winding_number`` is 1 where the depth is > 0 and 0 elsewhere (float32 sums: 1e-3)."""
     mesh = make_object_mesh(name)
     model = build_model([mesh, mesh], [Material(youngs_modulus=1e6)] * 2, pad_half_extents=[HALF],
                         contact=ContactParams(edge_contact=True), device="cpu")
@@ -42,11 +45,14 @@ def _depths(name, points, world):
     x = model.rest_positions.numpy().astype(np.float64)
     x[model.world_nodes(1)] += SHIFT
     out = wp.zeros(len(points), dtype=float, device="cpu")
+    winding = wp.zeros(len(points), dtype=float, device="cpu")
     wp.launch(_query, len(points), [wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu"), edges.triangles,
                                     edges.triangle_first, wp.array(world.astype(np.int32), dtype=int, device="cpu"),
-                                    wp.array(points.astype(np.float32), dtype=wp.vec3, device="cpu"), out],
+                                    wp.array(points.astype(np.float32), dtype=wp.vec3, device="cpu"), out, winding],
               device="cpu")
-    return out.numpy().astype(np.float64), mesh
+    depth = out.numpy().astype(np.float64)
+    np.testing.assert_allclose(winding.numpy(), (depth > 0).astype(np.float64), atol=1e-3)
+    return depth, mesh
 
 
 def test_cuboid_inside_and_depth_against_the_box():

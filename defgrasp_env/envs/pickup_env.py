@@ -103,8 +103,9 @@ class DeformablePickupEnv(gym.Env):
     the pads.
 
     **Episode end**: terminated on success = feature point within ``success_tolerance`` (0.05 m) of
-    the goal, grasped and not pierced (no node 5 mm deep in a pad or the ground, no tet centroid 5 mm
-    deep in a pad), for ``success_hold_seconds`` (0.5 s);
+    the goal, grasped and not pierced (no node 5 mm deep in a pad or the ground, no pad edge 5 mm
+    beyond the 0.5 mm skin inside the object, no tet centroid 5 mm deep in a pad), for
+    ``success_hold_seconds`` (0.5 s);
     truncated after ``episode_seconds`` (15 s, via ``max_episode_steps``) or when the simulation
     diverges (``info["sim_diverged"]``: the state is then kept at its last finite value).
 
@@ -116,8 +117,8 @@ class DeformablePickupEnv(gym.Env):
     not the material between them), ``sim_diverged``,
     ``sim_converged`` (Newton met its tolerance in every substep), ``sim_penetrated`` (a node ended
     deeper than ``solver.penetration_bound``, 1 mm, in a pad or the ground, or a pad's edge that
-    deep inside the object, measured to its surface: ``penetration`` is the deepest of these over
-    the step's substeps); ``reset`` returns
+    much beyond the 0.5 mm skin inside the object, measured to its surface: ``penetration`` is the
+    deepest of these over the step's substeps); ``reset`` returns
     ``is_success``, ``object``, ``youngs_modulus`` (Pa) and ``replay_spec`` (a ``ReplaySpec``: seed
     or RNG state, options, object, material, initial pose and the reset that built the simulation;
     ``spec.reset(env)`` repeats the reset bit for bit).

@@ -15,8 +15,9 @@ REWARD_TERMS = ("reach", "grasp", "lift", "place", "success")
 #: Both tip normal forces above this (N) count as a grasp.
 GRASP_FORCE = 0.5
 #: Deepest penetration (m) beyond which the object counts as pierced: of a node in a pad or the
-#: ground, or of the object's material in a pad (``PickupScene.pad_embedding``: a pad sunk in
-#: between surface nodes or pushed into the object).
+#: ground, of a pad's edge inside the object beyond the 0.5 mm skin (``SolveStats.penetration``),
+#: or of the object's material in a pad (``PickupScene.pad_embedding``: a pad sunk in between
+#: surface nodes or pushed into the object).
 PIERCE_DEPTH = 0.005
 #: Distance scales (1/m) of the shaped reach and lift terms, ``1 - tanh(scale * distance)``: each
 #: term must still rise over the whole distance a learner covers, the reach from the start pose

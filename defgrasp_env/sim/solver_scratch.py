@@ -47,6 +47,8 @@ class EdgeContactScratch:
         points, point_pad, share, first = pad_edge_points(half) if on else (
             np.zeros((0, 3), np.float32), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(1, np.int32))
         slots = w * len(points)
+        if np.any(np.diff(tri_world) < 0):
+            raise ValueError("surface_triangles must list each world's triangles together, in world order")
         tri_first = np.searchsorted(tri_world, np.arange(w + 1)).astype(np.int32)
         return cls(
             triangles=wp.array(tris, dtype=wp.vec3i, device=d), triangle_world=wp.array(tri_world, dtype=int, device=d),

@@ -69,7 +69,7 @@ import warp as wp
 from .contact import friction_force, pad_slip, penalty_energy, penalty_force, penalty_stiffness
 from .energy import friction_potential
 from .pad_edge_search import NO_TRIANGLE, closest_point_barycentric
-from .surface_query import depth_inside_surface
+from .surface_query import depth_inside_surface, winding_number
 
 #: Free depth of a pad edge point behind the surface, in penalty knees (2 x 0.25 mm = 0.5 mm).
 SKIN_KNEES = 2.0
@@ -130,10 +130,11 @@ def lag_edge_points(
     pad kept from it, or a solve stopped unconverged) is pushed out by at most a knee per substep,
     not at once (pushed out at once, a pad swept at 2 m/s into a soft cuboid read 1 kN). A point
     deeper than the skin at the start that lies outside the object there (the winding number of its
-    world's surface, ``triangle_first`` [W+1]: ``surface_query.depth_inside_surface``) gets no
-    contact: it sits beside the object off a convex edge, behind the extended plane of a face it
-    does not touch, which its kept depth would otherwise push a knee's worth every substep (a
-    learner's pad hanging past a cube's edge, 7-12 mm behind the top face's plane). Also the
+    world's surface, ``triangle_first`` [W+1]: ``surface_query.winding_number``, one pass over the
+    world's triangles for every point deeper than the skin, so for every pressed point of a held
+    grasp) gets no contact: it sits beside the object off a convex edge, behind the extended plane
+    of a face it does not touch, which its kept depth would otherwise push a knee's worth every
+    substep (a learner's pad hanging past a cube's edge, 7-12 mm behind the top face's plane). Also the
     normal force (N) its friction is lagged on: the penalty force of its start depth beyond the
     depth it may keep (a held point's load: its start depth is its kept depth plus its load depth;
     at most a knee's worth, so less than the load of a point deeper than that, pushed back out)."""
@@ -176,8 +177,11 @@ def lag_edge_points(
     skin = SKIN_KNEES * knee
     if start > skin:
         # behind the triangle's plane beyond the skin at the start: in the object, or beside it (off
-        # a convex edge, behind the extended plane of a face), where it touches nothing
-        if depth_inside_surface(x_start, triangles, triangle_first[w], triangle_first[w + 1], q0) <= 0.0:
+        # a convex edge, behind the extended plane of a face), where it touches nothing. Projecting
+        # inside the triangle does not tell: at a convex edge the triangle's prism runs along the
+        # next face, and a tilted or bulged face puts it outside (tried: 3 pierced readings and
+        # other episodes in the 64 of the CPU evaluation)
+        if winding_number(x_start, triangles, triangle_first[w], triangle_first[w + 1], q0) <= 0.5:
             point_tri[slot] = -1
             return
     mean_edge = (wp.length(xb - xa) + wp.length(xc - xb) + wp.length(xa - xc)) / 3.0
@@ -349,12 +353,12 @@ def evaluate_edge_points(
     also the pad's normal force (N), the force on the pad (N) and, into the world's ``penetration``
     (m, an atomic maximum), how far a pressed point lies inside the object beyond the skin: its
     distance to the nearest surface triangle of its world (``triangle_first`` [W+1]: the world's
-    triangles), at most its depth behind its triangle's plane, where the surface's winding number
-    says it is inside (``surface_query.depth_inside_surface``), else nothing. The plane depth alone
-    over-reported: a point beside a cube's edge, outside it, read 7-12 mm behind the extended plane
-    of a face it was searched against. Only a point whose plane depth could raise the world's
-    reading so far is tested (one pass over its world's triangles), so the maximum is the same
-    whatever the order the points run in."""
+    triangles; at most its plane depth) where the surface's winding number says it is inside
+    (``surface_query.depth_inside_surface``), else nothing. The plane depth alone over-reported: a
+    point beside a cube's edge, outside it, read 7-12 mm behind the extended plane of a face it was
+    searched against. Only a point whose plane depth could raise the world's reading so far is
+    tested (one pass over its world's triangles), so the maximum is the same whatever the order the
+    points run in."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
