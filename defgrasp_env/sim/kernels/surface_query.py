@@ -57,4 +57,3 @@ def depth_inside_surface(x: wp.array(dtype=wp.vec3), triangles: wp.array(dtype=w
     if solid * INV_4PI > 0.5:
         return nearest
     return 0.0
-
