@@ -56,8 +56,8 @@ def feature_beyond_pad_faces(scene) -> np.ndarray:
     from defgrasp_env.envs.task import feature_beyond_pad_faces as beyond
 
     pads = scene.model.pads_per_world
-    pos = scene.state.pad_positions.numpy().reshape(scene.num_worlds, pads, 3).astype(np.float64)
-    quat = scene.state.pad_orientations.numpy().reshape(scene.num_worlds, pads, 4).astype(np.float64)
+    pos = scene.state.pad_positions.numpy().reshape(scene.num_worlds, pads, 3)
+    quat = scene.state.pad_orientations.numpy().reshape(scene.num_worlds, pads, 4)
     return beyond(scene.feature_points()[0], pos, quat)
 
 

@@ -79,7 +79,8 @@ def feature_beyond_pad_faces(feature: np.ndarray, pad_positions: np.ndarray, pad
     half = np.asarray(PAD_BOX_HALF_EXTENTS, np.float64)[1:]  # length, width (x: the closing axis)
     # the feature point in each pad's frame: R^T (feature - pad centre), [W, P, 3]
     rot = quat_to_matrix(np.asarray(pad_quats, np.float64))
-    local = np.einsum("wpji,wpj->wpi", rot, np.asarray(feature, np.float64)[:, None, :] - pad_positions)
+    offset = np.asarray(feature, np.float64)[:, None, :] - np.asarray(pad_positions, np.float64)
+    local = np.einsum("wpji,wpj->wpi", rot, offset)
     return np.maximum(np.abs(local[..., 1:]) - half, 0.0).max(axis=1)
 
 
@@ -142,12 +143,13 @@ class PickupTask:
     def evaluate(self, scene: PickupScene, stats, valid: np.ndarray) -> dict[str, np.ndarray]:
         """Reward terms [W] each, total reward, success/termination flags, after a step."""
         feat, _ = scene.feature_points()
-        tcp = scene.gripper.tcp_positions()
+        pad_pos, pad_quat = scene.gripper.pad_poses()
+        tcp = pad_pos.mean(axis=1)  # ``Gripper.tcp_positions`` of the same poses
         reach_dist = np.linalg.norm(tcp - feat, axis=1)
         goal_dist = np.linalg.norm(feat - self.goal, axis=1)
         grasped = np.all(scene.gripper.tip_force > GRASP_FORCE, axis=1)
         quality = grasp_quality(scene.gripper.pad_force_angles(), self.config.pad_friction,
-                                feature_beyond_pad_faces(feat, *scene.gripper.pad_poses()))
+                                feature_beyond_pad_faces(feat, pad_pos, pad_quat))
         # the hold's quality, 0 where nothing is held (or a diverged world's forces are not finite)
         held_well = np.where(grasped & np.isfinite(quality), quality, 0.0)
         embedding = scene.pad_embedding()

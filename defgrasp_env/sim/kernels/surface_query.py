@@ -41,19 +41,18 @@ def winding_number(x: wp.array(dtype=wp.vec3), triangles: wp.array(dtype=wp.vec3
 def depth_inside_surface(x: wp.array(dtype=wp.vec3), triangles: wp.array(dtype=wp.vec3i), first: int, last: int,
                          p: wp.vec3):
     """Distance (m) from p to the nearest of ``triangles[first:last]`` where p lies inside that
-    closed surface (winding number > 1/2), else 0. Degenerate (zero-area) triangles are left out of
-    the distance (their closest point is undefined; their solid angle is 0). Cost: one pass."""
-    solid = float(0.0)
+    closed surface (``winding_number`` > 1/2), else 0. Degenerate (zero-area) triangles are left out
+    of the distance (their closest point is undefined). Cost: one pass over the triangles, a second
+    for a point inside."""
+    if winding_number(x, triangles, first, last, p) <= 0.5:
+        return 0.0
     nearest = float(1.0e30)
     for t in range(first, last):
         ids = triangles[t]
         a = x[ids[0]]
         b = x[ids[1]]
         c = x[ids[2]]
-        solid += triangle_solid_angle(a - p, b - p, c - p)
         if wp.length(wp.cross(b - a, c - a)) > 0.0:
             bary = closest_point_barycentric(a, b, c, p)
             nearest = wp.min(nearest, wp.length(bary[0] * a + bary[1] * b + bary[2] * c - p))
-    if solid * INV_4PI > 0.5:
-        return nearest
-    return 0.0
+    return nearest
