@@ -357,8 +357,8 @@ def evaluate_edge_points(
     (``surface_query.depth_inside_surface``), else nothing. The plane depth alone over-reported: a
     point beside a cube's edge, outside it, read 7-12 mm behind the extended plane of a face it was
     searched against. Only a point whose plane depth could raise the world's reading so far is
-    tested (one pass over its world's triangles), so the maximum is the same whatever the order the
-    points run in."""
+    tested (one pass over its world's triangles, a second for one inside), so the maximum is the
+    same whatever the order the points run in."""
     slot = wp.tid()
     w = slot // points_per_world
     t = point_tri[slot]
