@@ -480,3 +480,67 @@ def test_resume_reads_a_setting_recorded_later_as_its_earlier_value(tmp_path):
     assert check_resume(tmp_path, {**settings, "learning_rate": 3e-4}) == [{"env_steps": 32, "wall_s": 1.5}]
     with pytest.raises(ValueError, match=r"learning_rate: saved 0.0003, given 0.0001"):
         check_resume(tmp_path, {**settings, "learning_rate": 1e-4})
+
+
+def test_ppo_policy_acts_as_the_training_wrappers_and_drives_gym_make(tmp_path):
+    """``PPOPolicy`` on raw observations returns the very actions of SB3's own pipeline (the run's
+    ``VecNormalize`` around the vector env, ``model.predict`` on its normalised observation, the
+    action set's components placed by ``ActionSubset``), bit for bit, for one observation and for a
+    batch; it drives ``gym.make`` to the end of an episode; bad folders and observations are refused."""
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import load_normalisation, make_vec_env, save_run, train
+
+    from defgrasp_env.rl.ppo_policy import PPOPolicy
+
+    model, curve = train(num_envs=2, timesteps=32, n_steps=8, minibatches=2, episode_seconds=0.3,
+                         actions="position-yaw-jaw", object="cuboid")
+    save_run(model, curve, tmp_path, "smoke")
+    policy = PPOPolicy.from_run(tmp_path)
+    assert policy.components == ("vx", "vy", "vz", "wy", "jaw") and policy.settings["actions"] == "position-yaw-jaw"
+
+    # the reference: the wrappers the run was trained in, statistics frozen as eval_ppo.py does
+    venv = load_normalisation(tmp_path, make_vec_env(2, 5, actions="position-yaw-jaw", gamma=0.8,
+                                                     object="cuboid", episode_seconds=0.3))
+    venv.training, venv.norm_reward = False, False
+    subset = venv.venv.venv  # VecNormalize -> VecMonitor -> ActionSubset
+    obs = venv.reset()
+    moved = 0
+    for _ in range(4):
+        raw = venv.get_original_obs()
+        chosen = np.concatenate([model.predict({k: v[i:i + 1] for k, v in obs.items()}, deterministic=True)[0]
+                                 for i in range(2)])
+        expected = subset.full_actions(chosen)
+        got = policy({k: raw[k] for k in ("agent_pos", "environment_state")})
+        assert got.dtype == np.float32 and got.shape == (2, 7)
+        np.testing.assert_array_equal(got, expected)
+        np.testing.assert_array_equal(policy({k: v[1] for k, v in raw.items()}), expected[1])  # one world
+        assert np.all(got[:, [3, 5]] == 0.0)  # the turns the set leaves out
+        moved += int(np.any(got != 0.0))
+        obs, *_ = venv.step(chosen)
+    assert moved == 4, "the test needs non-zero actions"
+
+    # gym.make keeps the registered time limit: give the run's 0.3 s (6 steps at 20 Hz) as the limit
+    env = gym.make("DeformablePickup-v0", object="cuboid", episode_seconds=0.3, max_episode_steps=6)
+    obs, _ = env.reset(seed=3)
+    policy.reset()
+    for steps in range(1, 100):
+        action = policy(obs)
+        assert env.action_space.contains(action)
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            break
+    assert steps == 6 or terminated
+
+    with pytest.raises(ValueError, match="environment_state"):
+        policy({"agent_pos": obs["agent_pos"]})
+    with pytest.raises(ValueError, match="shape"):
+        policy({"agent_pos": obs["agent_pos"][:5], "environment_state": obs["environment_state"]})
+    with pytest.raises(ValueError, match="finite"):
+        policy({"agent_pos": np.full(10, np.nan, np.float32), "environment_state": obs["environment_state"]})
+    with pytest.raises(TypeError, match="dict"):
+        policy(obs["agent_pos"])
+    (tmp_path / "vecnormalize.pkl").unlink()
+    with pytest.raises(FileNotFoundError, match="vecnormalize.pkl"):
+        PPOPolicy.from_run(tmp_path)

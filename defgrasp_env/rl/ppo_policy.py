@@ -1,0 +1,99 @@
+"""``PPOPolicy``: a saved PPO run (``benchmarks/train_ppo.py``'s folder) with the scripted expert's interface.
+
+    policy = PPOPolicy.from_run("datasets/output/ppo")
+    obs, _ = env.reset(seed=0); policy.reset()
+    action = policy(obs)            # float32 DELTA_ACTION [7] (or [N, 7] for a batch of observations)
+
+The run folder holds the Stable-Baselines3 model (``ppo.zip``), the observation normalisation it
+was trained with (``vecnormalize.pkl``, SB3's ``VecNormalize`` pickled without its env) and its
+settings (``run.json``: the action set among ``rl.action_subset.ACTION_SETS``, the env options).
+A call does what the training's wrappers did to an observation and an action: the observation
+is normalised with the saved running statistics (frozen), the policy's mean action is taken
+(``deterministic=True``, one world per forward pass as ``eval_ppo.py`` does, so an episode does not
+depend on the batch size) and its components are placed into the env's ``DELTA_ACTION``, the
+others zero (``ActionSubset``). Observations are the env's raw ones (``agent_pos`` [10],
+``environment_state`` [33]), from ``gym.make`` or a vector env.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+
+from ..layout import AGENT_POS, DELTA_ACTION, ENV_STATE
+from .action_subset import ACTION_SETS
+
+__all__ = ["PPOPolicy"]
+
+#: The observation keys and sizes a run's policy reads.
+_OBS_SIZES = {"agent_pos": AGENT_POS.size, "environment_state": ENV_STATE.size}
+
+
+class PPOPolicy:
+    """A trained SB3 PPO policy as ``policy(obs) -> action`` for ``DeformablePickup-v0`` (delta
+    actions, state observations).
+
+    ``settings``: the run's ``run.json`` (action set, env options: build the env they name, e.g.
+    ``gym.make("DeformablePickup-v0", object=..., youngs_modulus=...)``). The policy keeps no state
+    between steps; ``reset`` exists for the expert's interface."""
+
+    def __init__(self, model, normalizer, components, settings: dict | None = None):
+        names = DELTA_ACTION.names
+        unknown = [c for c in components if c not in names]
+        if unknown or not components:
+            raise ValueError(f"components must be names of {list(names)}, got {list(components)}")
+        if model.action_space.shape != (len(components),):
+            raise ValueError(f"the model's actions have shape {model.action_space.shape}, the action set "
+                             f"{list(components)} has {len(components)} components")
+        self.model = model
+        self.normalizer = normalizer
+        self.normalizer.training = False  # frozen statistics
+        self.components = tuple(components)
+        self._columns = np.array([names.index(c) for c in self.components])
+        self.settings = dict(settings or {})
+
+    @classmethod
+    def from_run(cls, folder: str | Path, device: str = "cpu") -> PPOPolicy:
+        """Load ``folder`` (``ppo.zip``, ``vecnormalize.pkl``, ``run.json``, as ``train_ppo.py`` and its
+        ``--out/best`` write them); ``device``: the torch device of the network."""
+        from stable_baselines3 import PPO
+
+        folder = Path(folder)
+        missing = [name for name in ("ppo.zip", "vecnormalize.pkl", "run.json") if not (folder / name).is_file()]
+        if missing:
+            raise FileNotFoundError(f"{folder} is not a train_ppo.py run folder: missing {missing}")
+        settings = json.loads((folder / "run.json").read_text())
+        actions = settings.get("actions", "full")
+        if actions not in ACTION_SETS:
+            raise ValueError(f"{folder / 'run.json'}: actions must be one of {sorted(ACTION_SETS)}, got {actions!r}")
+        with open(folder / "vecnormalize.pkl", "rb") as f:
+            normalizer = pickle.load(f)
+        return cls(PPO.load(folder / "ppo.zip", device=device), normalizer, ACTION_SETS[actions], settings)
+
+    def reset(self, mask=None) -> None:
+        """Start new episodes (all worlds or those in ``mask``): nothing to clear."""
+
+    def __call__(self, obs) -> np.ndarray:
+        if not isinstance(obs, dict):
+            raise TypeError(f"obs must be the env's observation dict, got {type(obs).__name__}")
+        missing = [k for k in _OBS_SIZES if k not in obs]
+        if missing:
+            raise ValueError(f"obs lacks {missing} (a PPO run reads {list(_OBS_SIZES)}: obs_type='state')")
+        arrays = {k: np.asarray(obs[k], dtype=np.float32) for k in _OBS_SIZES}
+        single = arrays["agent_pos"].ndim == 1
+        batch = {k: (v[None] if single else v) for k, v in arrays.items()}
+        n = len(batch["agent_pos"])
+        for k, size in _OBS_SIZES.items():
+            if batch[k].shape != (n, size):
+                raise ValueError(f"obs[{k!r}] must have shape ({size},) or (N, {size}), got {arrays[k].shape}")
+            if not np.all(np.isfinite(batch[k])):
+                raise ValueError(f"obs[{k!r}] must be finite")
+        normalized = self.normalizer.normalize_obs(batch)
+        chosen = np.concatenate([self.model.predict({k: v[i:i + 1] for k, v in normalized.items()},
+                                                    deterministic=True)[0] for i in range(n)])
+        full = np.zeros((n, DELTA_ACTION.size), np.float32)
+        full[:, self._columns] = chosen
+        return full[0] if single else full
