@@ -31,7 +31,7 @@ from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
 from . import ENV_ID
 from .envs.config import OBS_TYPES, RANDOM_OBJECT, PickupConfig
 from .sim.meshing import OBJECT_SHAPES
-from .layout import AGENT_POS, DELTA_ACTION, ENV_STATE
+from .layout import ACTION_LAYOUTS, AGENT_POS, ENV_STATE
 from .recording.lerobot_export import CAMERA_KEY
 
 __all__ = ["DefgraspEnvConfig"]
@@ -48,8 +48,10 @@ class DefgraspEnvConfig(EnvConfig):
     ``episode_seconds`` sets LeRobot's rollout length (``max_episode_steps``); ``edge_contact``:
     the pads' box edges held out of the object (``PickupConfig.edge_contact``, on by default;
     ``--env.edge_contact=false`` evaluates a policy in the node-only contact of data recorded before
-    2026-11-26); ``render_mode`` "rgb_array" gives the evaluation videos. Actions are the env's
-    delta actions [7] in [-1, 1].
+    2026-11-26); ``render_mode`` "rgb_array" gives the evaluation videos. ``action_mode``: the
+    env's actions, ``"delta"`` (``DELTA_ACTION`` [7] in [-1, 1], the default) or ``"absolute"``
+    (``ABSOLUTE_ACTION`` [8]: target flange pose and gap, for a policy trained on demonstrations
+    recorded with ``defgrasp-generate --action-mode absolute``).
     """
 
     task: str | None = ENV_ID
@@ -59,6 +61,7 @@ class DefgraspEnvConfig(EnvConfig):
     obs_type: str = "state"
     episode_seconds: float = PickupConfig.episode_seconds
     edge_contact: bool = PickupConfig.edge_contact
+    action_mode: str = PickupConfig.action_mode
     render_mode: str = "rgb_array"
     device: str = "cpu"
     features: dict[str, PolicyFeature] = field(default_factory=dict)
@@ -74,7 +77,8 @@ class DefgraspEnvConfig(EnvConfig):
                              f"got {self.object!r}")
         env_config = PickupConfig(**self._pickup_kwargs())
         camera = env_config.camera
-        self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(DELTA_ACTION.size,))}
+        self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION,
+                                               shape=(ACTION_LAYOUTS[env_config.action_mode].size,))}
         if self.obs_type in ("state", "pixels_agent_pos"):
             self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(AGENT_POS.size,))
         if self.obs_type == "state":
@@ -87,7 +91,7 @@ class DefgraspEnvConfig(EnvConfig):
     def _pickup_kwargs(self) -> dict:
         return dict(object=self.object, youngs_modulus=float(self.youngs_modulus), obs_type=self.obs_type,
                     control_hz=float(self.fps), episode_seconds=float(self.episode_seconds),
-                    edge_contact=self.edge_contact, device=self.device)
+                    edge_contact=self.edge_contact, action_mode=self.action_mode, device=self.device)
 
     @property
     def package_name(self) -> str:

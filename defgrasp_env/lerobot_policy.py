@@ -17,6 +17,8 @@ import pathlib
 import numpy as np
 import torch
 
+from .layout import ACTION_LAYOUTS
+
 __all__ = ["LeRobotPolicy"]
 
 
@@ -24,7 +26,9 @@ class LeRobotPolicy:
     """A pretrained LeRobot policy as ``policy(obs) -> action`` for ``DeformablePickup-v0``.
 
     ``obs``: the env's observation dict, one observation (``agent_pos`` [10], ...) or a batch ([N, 10],
-    ... as from ``gym.make_vec``). Returns float32 delta actions [7] or [N, 7] in [-1, 1] (clipped).
+    ... as from ``gym.make_vec``). Returns float32 actions in the layout the policy was trained on
+    (``action_layout``, by its action size): delta actions [7] or [N, 7] in [-1, 1], or absolute
+    actions [8] or [N, 8] (an env with ``action_mode="absolute"``), clipped to the layout's bounds.
     ``reset()`` clears the policy's action queue at every episode start; ``reset(mask)`` for a vector
     env is accepted when the policy keeps no state between steps (``n_action_steps == 1`` without
     temporal ensembling) or all worlds restart together, otherwise it raises ``ValueError`` (LeRobot
@@ -37,6 +41,14 @@ class LeRobotPolicy:
         self.postprocessor = postprocessor
         self.env_preprocessor = env_preprocessor
         self.num_worlds = 0
+        size = policy.config.output_features["action"].shape[0]
+        layouts = {layout.size: layout for layout in ACTION_LAYOUTS.values()}
+        if size not in layouts:
+            raise ValueError(f"the policy's actions have {size} entries; the env takes "
+                             f"{sorted(layouts)} (delta or absolute actions)")
+        #: the action layout the policy outputs (``DELTA_ACTION`` or ``ABSOLUTE_ACTION``)
+        self.action_layout = layouts[size]
+        self._low, self._high = (b.astype(np.float32) for b in self.action_layout.bounds())  # the env's Box
 
     @classmethod
     def from_pretrained(cls, path: str | pathlib.Path, device: str = "cpu") -> LeRobotPolicy:
@@ -97,17 +109,18 @@ class LeRobotPolicy:
         with torch.inference_mode():
             action = self.policy.select_action(x)
         action = self.postprocessor(action).to("cpu").numpy()
-        action = np.clip(action, -1.0, 1.0).astype(np.float32)
+        action = np.clip(action, self._low, self._high).astype(np.float32)
         return action[0] if single else action
 
 
 def save_untrained_act(path: str | pathlib.Path, *, seed: int = 0, dim_model: int = 32, chunk_size: int = 4,
-                       stats: dict | None = None) -> pathlib.Path:
+                       stats: dict | None = None, action_mode: str = "delta") -> pathlib.Path:
     """Write a randomly initialised, tiny ACT ``pretrained_model`` folder for the ``defgrasp`` env's
     state features (``observation.state`` [10], ``observation.environment_state`` [33], ``action``
     [7]), loadable by ``lerobot-eval --policy.path`` and ``LeRobotPolicy.from_pretrained``: for tests
     and smoke runs of the evaluation plumbing (it does not solve the task). ``stats``: per-feature
-    ``{"mean": [...], "std": [...]}`` for the normaliser (default: mean 0, std 1)."""
+    ``{"mean": [...], "std": [...]}`` for the normaliser (default: mean 0, std 1). ``action_mode``:
+    ``"absolute"`` gives an ``action`` [8] (the env's absolute actions) instead."""
     from lerobot.envs.utils import env_to_policy_features
     from lerobot.configs import FeatureType
     from lerobot.policies.act.configuration_act import ACTConfig
@@ -116,7 +129,7 @@ def save_untrained_act(path: str | pathlib.Path, *, seed: int = 0, dim_model: in
 
     from .lerobot_env import DefgraspEnvConfig
 
-    features = env_to_policy_features(DefgraspEnvConfig())
+    features = env_to_policy_features(DefgraspEnvConfig(action_mode=action_mode))
     config = ACTConfig(
         device="cpu", dim_model=dim_model, n_heads=2, dim_feedforward=2 * dim_model, n_encoder_layers=1,
         n_decoder_layers=1, n_vae_encoder_layers=1, chunk_size=chunk_size, n_action_steps=1,

@@ -140,3 +140,28 @@ def test_lerobot_eval_one_episode_matches_a_direct_rollout(tmp_path):
         done = term or trunc
     # float32 policy maths in two processes: equal to well below one step's reward
     assert overall["avg_sum_reward"] == pytest.approx(total, rel=1e-4, abs=1e-5)
+
+
+def test_absolute_action_mode_config_builds_an_absolute_env():
+    """``--env.action_mode=absolute``: the action feature is ``ABSOLUTE_ACTION`` [8] and LeRobot's
+    ``make_env`` builds an env that takes it; a bad mode is refused at construction."""
+    from defgrasp_env.layout import ABSOLUTE_ACTION
+
+    cfg = make_env_config("defgrasp", object="sphere", youngs_modulus=1e6, action_mode="absolute", episode_seconds=0.1)
+    assert cfg.features["action"].shape == (ABSOLUTE_ACTION.size,) and cfg.gym_kwargs["action_mode"] == "absolute"
+    assert env_to_policy_features(cfg)["action"].shape == (ABSOLUTE_ACTION.size,)
+    envs = make_env(cfg, n_envs=1)
+    vec = next(iter(next(iter(envs.values())).values()))
+    try:
+        obs, _ = vec.reset(seed=[0])
+        assert vec.single_action_space.shape == (ABSOLUTE_ACTION.size,)
+        wrist = obs["agent_pos"][0, :3]
+        action = ABSOLUTE_ACTION.pack(position=wrist[None] - [[0.0, 0.01, 0.0]], orientation=[[0.0, 0.0, 0.0, 1.0]],
+                                      gap=[[0.05]]).astype(np.float32)
+        obs, *_ = vec.step(action)
+        np.testing.assert_allclose(obs["agent_pos"][0, 1], wrist[1] - 0.01, atol=1e-4)  # moved 1 cm down
+        np.testing.assert_allclose(obs["agent_pos"][0, 7], 0.085 - 0.15 * 0.05, atol=1e-4)  # closing at 150 mm/s
+    finally:
+        vec.close()
+    with pytest.raises(ValueError, match="action_mode"):
+        DefgraspEnvConfig(action_mode="velocity")

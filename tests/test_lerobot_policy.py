@@ -55,3 +55,28 @@ def test_reset_mask_and_bad_input(policy, tmp_path):
         policy(np.zeros(43))
     with pytest.raises(FileNotFoundError):
         LeRobotPolicy.from_pretrained(tmp_path)
+
+
+def test_a_policy_of_absolute_actions_returns_them_within_their_bounds(tmp_path):
+    """An ACT whose action feature is ``ABSOLUTE_ACTION`` [8] (trained on ``--action-mode absolute``
+    demonstrations) returns [8] actions clipped to that layout's bounds (a gap in [0, 85 mm], not
+    [-1, 1]) and drives an ``action_mode="absolute"`` env."""
+    from defgrasp_env.layout import ABSOLUTE_ACTION
+
+    stats = {"action": {"mean": [0.0] * 8, "std": [1.0] * 7 + [0.2]}}  # gaps of ~0.2 m: some above 85 mm
+    stats |= {k: {"mean": [0.0] * n, "std": [1.0] * n}
+              for k, n in (("observation.state", 10), ("observation.environment_state", 33))}
+    policy = LeRobotPolicy.from_pretrained(save_untrained_act(tmp_path / "abs", seed=2, action_mode="absolute",
+                                                              stats=stats))
+    assert policy.action_layout is ABSOLUTE_ACTION
+    env = gym.make("DeformablePickup-v0", object="sphere", youngs_modulus=1e6, action_mode="absolute",
+                   max_episode_steps=3)
+    obs, _ = env.reset(seed=0)
+    policy.reset()
+    low, high = env.action_space.low, env.action_space.high  # the layout's bounds, float32
+    for _ in range(3):
+        action = policy(obs)
+        assert action.shape == (8,) and np.all(action >= low) and np.all(action <= high)
+        assert env.action_space.contains(action)
+        obs, _, term, trunc, _ = env.step(action)
+    assert trunc

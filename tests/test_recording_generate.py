@@ -153,3 +153,37 @@ def test_worlds_that_end_at_different_steps(tmp_path):
         assert ep.attrs["is_success"], path.name
         lengths.add(ep.num_steps)
     assert len(lengths) > 1, f"the episodes all took {lengths} steps: the test needs different lengths"
+
+
+def test_absolute_action_mode_records_the_expert_in_absolute_actions_and_refuses_mixing(tmp_path, capsys):
+    """``--action-mode absolute``: the episodes' actions are ``ABSOLUTE_ACTION`` [8] (the scripted
+    expert acts in the env's mode: target flange position within one period's travel of the wrist,
+    a unit top-down quaternion, a gap in the stroke), the file replays to the same states, and
+    resuming that folder in delta actions is refused (one action layout per dataset)."""
+    from defgrasp_env.layout import ABSOLUTE_ACTION, AGENT_POS
+    from defgrasp_env.recording import replay_episode
+
+    args = [str(tmp_path), "--objects", "sphere", "--moduli", "1e6", "--episodes", "1", "--max-steps", "8",
+            "--no-progress"]
+    assert generate_main(args + ["--action-mode", "absolute"]) == 0
+    path = tmp_path / "sphere_E1e6_000.h5"
+    ep = load_episode(path)
+    actions = ep["steps/action"]
+    assert actions.shape == (8, ABSOLUTE_ACTION.size)
+    wrist = AGENT_POS.get(ep["observations/agent_pos"][:-1], "wrist_position")
+    step = np.linalg.norm(ABSOLUTE_ACTION.get(actions, "position") - wrist, axis=1)
+    assert np.all(step <= 0.3 * 0.05 * np.sqrt(3) + 1e-6)  # max_linear_speed x dt, per component
+    quat = ABSOLUTE_ACTION.get(actions, "orientation")
+    np.testing.assert_allclose(np.linalg.norm(quat, axis=1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(quat[:, [0, 2]], 0.0, atol=1e-7)  # a turn about the vertical only
+    gap = ABSOLUTE_ACTION.get(actions, "gap")
+    assert np.all((gap >= 0) & (gap <= np.float32(0.085)))  # the stroke (float32 actions)
+    assert validate_path(tmp_path).ok
+    replay = replay_episode(path)
+    assert replay.max_position_error == 0.0
+
+    capsys.readouterr()
+    assert generate_main(args[:6] + ["2"] + args[7:]) == 2  # delta actions into the absolute folder
+    err = capsys.readouterr().err
+    assert "action_mode='absolute'" in err and "--action-mode absolute" in err
+    assert sorted(p.name for p in tmp_path.glob("*.h5")) == ["sphere_E1e6_000.h5"]

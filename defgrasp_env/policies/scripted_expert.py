@@ -4,7 +4,13 @@ It reads nothing but the observation dict of ``DeformablePickup-v0`` (``obs_type
 the layout of ``defgrasp_env.layout``, and the public gripper geometry of ``defgrasp_env.gripper``;
 it never touches the simulator. Works on one observation (``agent_pos`` [10], ``environment_state``
 [33]) or a batch ([N, 10], [N, 33], as from ``gym.make_vec``) and returns float32 delta actions
-(``DELTA_ACTION``) [7] or [N, 7].
+(``DELTA_ACTION``) [7] or [N, 7], or, for an env with ``action_mode="absolute"``, absolute actions
+(``ABSOLUTE_ACTION``) [8] or [N, 8]: the flange position one control period ahead on the same
+(speed- and acceleration-limited) path, the orientation it is turning to (the planned grasp yaw,
+held for the whole turn: the env turns toward it at ``max_angular_speed``, as the delta action's
+saturated rate does) and the jaw gap command. Both move the wrist alike, except that an absolute
+move is limited in norm to ``max_linear_speed`` where the delta action's components are limited
+each (a diagonal approach is up to sqrt 3 faster in delta actions).
 
 Phases (per world, explicit state; ``reset()`` restarts them):
 
@@ -41,8 +47,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from ..gripper import tcp_offset
-from ..layout import (AGENT_POS, DELTA_ACTION, ENV_STATE, JAW_GAP_MAX, JAW_GAP_MIN, NUM_KEYPOINTS,
-                      gap_to_jaw_command)
+from ..layout import (ABSOLUTE_ACTION, AGENT_POS, DELTA_ACTION, ENV_STATE, JAW_GAP_MAX, JAW_GAP_MIN,
+                      NUM_KEYPOINTS, gap_to_jaw_command)
 from .grasp_planning import PAD_HALF_LENGTH, plan_grasps
 
 __all__ = ["ExpertConfig", "ScriptedPickupExpert", "PHASE_NAMES", "RECOMMENDED_ENV_KWARGS"]
@@ -145,6 +151,39 @@ def _rotation_vector(q_target: np.ndarray, q: np.ndarray) -> np.ndarray:
     return r[:, :3] * np.where(s > 1e-12, angle / np.maximum(s, 1e-12), 2.0)[:, None]
 
 
+@dataclass(frozen=True)
+class WristCommand:
+    """One control period's command of the expert, per world: ``flange`` [N, 3] (m, world, where it
+    is), ``linear`` [N, 3] and ``angular`` [N, 3] (velocities in units of the env's speed limits,
+    components in [-1, 1]), ``target_quat`` [N, 4] (xyzw, the orientation it turns to) and ``gap``
+    [N] (m, the jaw gap command)."""
+
+    flange: np.ndarray
+    linear: np.ndarray
+    angular: np.ndarray
+    target_quat: np.ndarray
+    gap: np.ndarray
+
+
+def delta_action(command: WristCommand, config: ExpertConfig) -> np.ndarray:
+    """``DELTA_ACTION`` [N, 7]: the velocities and the jaw command of the gap."""
+    action = DELTA_ACTION.pack(linear_velocity=command.linear, angular_velocity=command.angular,
+                               jaw=gap_to_jaw_command(command.gap)[:, None])
+    return np.clip(action, -1.0, 1.0)
+
+
+def absolute_action(command: WristCommand, config: ExpertConfig) -> np.ndarray:
+    """``ABSOLUTE_ACTION`` [N, 8]: the flange position one period ahead at the commanded velocity,
+    the orientation turned to, and the gap."""
+    position = command.flange + command.linear * config.max_linear_speed * config.dt
+    gap = np.clip(command.gap, 0.0, JAW_GAP_MAX)[:, None]
+    return ABSOLUTE_ACTION.pack(position=position, orientation=command.target_quat, gap=gap)
+
+
+#: The action each env ``action_mode`` takes, from the expert's command.
+ACTION_PACKERS = {"delta": delta_action, "absolute": absolute_action}
+
+
 class ScriptedPickupExpert:
     """Scripted pick-up expert for ``DeformablePickup-v0`` (delta actions, state observations).
 
@@ -158,7 +197,11 @@ class ScriptedPickupExpert:
     ``phase`` [N] (int, see ``PHASE_NAMES``) and ``retries`` [N] expose the script's state.
     """
 
-    def __init__(self, config: ExpertConfig | None = None, **overrides):
+    def __init__(self, config: ExpertConfig | None = None, *, action_mode: str = "delta", **overrides):
+        if action_mode not in ACTION_PACKERS:
+            raise ValueError(f"action_mode must be one of {sorted(ACTION_PACKERS)}, got {action_mode!r}")
+        #: the env's ``action_mode`` the actions are for (``"delta"`` or ``"absolute"``)
+        self.action_mode = action_mode
         base = config if config is not None else ExpertConfig()
         if not isinstance(base, ExpertConfig):
             raise TypeError(f"config must be an ExpertConfig, got {type(base).__name__}")
@@ -173,12 +216,12 @@ class ScriptedPickupExpert:
         cfg = getattr(env.unwrapped, "config", None)
         if cfg is None:
             raise TypeError(f"{type(env).__name__} has no PickupConfig in .unwrapped.config")
-        if cfg.action_mode != "delta" or cfg.obs_type != "state":
-            raise ValueError(f"the expert needs action_mode='delta' and obs_type='state', got "
+        if cfg.action_mode not in ACTION_PACKERS or cfg.obs_type != "state":
+            raise ValueError(f"the expert needs action_mode in {sorted(ACTION_PACKERS)} and obs_type='state', got "
                              f"{cfg.action_mode!r}, {cfg.obs_type!r}")
         kw = dict(max_linear_speed=cfg.max_linear_speed, max_angular_speed=cfg.max_angular_speed,
                   control_hz=cfg.control_hz)
-        return cls(**{**kw, **overrides})
+        return cls(action_mode=cfg.action_mode, **{**kw, **overrides})
 
     # -- state ------------------------------------------------------------------------------
     def _alloc(self, n: int) -> None:
@@ -390,7 +433,7 @@ class ScriptedPickupExpert:
         linear, angular = v / c.max_linear_speed, omega / c.max_angular_speed
         linear /= np.maximum(np.abs(linear).max(axis=1, keepdims=True), 1.0)
         angular /= np.maximum(np.abs(angular).max(axis=1, keepdims=True), 1.0)
-        action = DELTA_ACTION.pack(linear_velocity=linear, angular_velocity=angular,
-                                   jaw=gap_to_jaw_command(gap_cmd)[:, None])
         self.phase = new_phase
-        return np.clip(action, -1.0, 1.0).astype(np.float32)
+        command = WristCommand(flange=flange, linear=linear, angular=angular, target_quat=_yaw_quat(target_yaw),
+                               gap=gap_cmd)
+        return ACTION_PACKERS[self.action_mode](command, c).astype(np.float32)

@@ -56,7 +56,8 @@ def _import_ray():
 
 
 def record_group(out: str, jobs: list[Job], policy_spec: str, max_steps: int | None, device: str,
-                 record_frames: bool, compression: str | None) -> list[tuple[str, bool | None]]:
+                 record_frames: bool, compression: str | None,
+                 action_mode: str = "delta") -> list[tuple[str, bool | None]]:
     """Body of one Ray task: record the ``jobs`` (of one (object, E)) whose files are missing into
     ``out``, together in one vector env when there are several (``generate.record_jobs``); return
     (file name, success) per job, success None when its file was there already."""
@@ -66,7 +67,8 @@ def record_group(out: str, jobs: list[Job], policy_spec: str, max_steps: int | N
     todo = [j for j in jobs if not (pathlib.Path(out) / j.name).exists()]
     result: dict[str, bool] = {}
     record_jobs(pathlib.Path(out), todo, policy_spec, max_steps, device, record_frames, compression,
-                on_episode=lambda job, success: result.__setitem__(job.name, success), worlds=max(len(todo), 1))
+                on_episode=lambda job, success: result.__setitem__(job.name, success), worlds=max(len(todo), 1),
+                action_mode=action_mode)
     return [(j.name, result.get(j.name)) for j in jobs]
 
 
@@ -130,7 +132,8 @@ def _start_ray(ray, address: str | None, workers: int | None) -> bool:
 def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
                  device: str = "cpu", record_frames: bool = False, compression: str | None = None,
                  progress: bool = True, *, address: str | None = None, workers: int | None = None,
-                 max_retries: int = DEFAULT_MAX_RETRIES, worlds: int = 1) -> list[pathlib.Path]:
+                 max_retries: int = DEFAULT_MAX_RETRIES, worlds: int = 1,
+                 action_mode: str = "delta") -> list[pathlib.Path]:
     """Record every job whose file is missing on a Ray cluster; return the files of all jobs.
 
     Args:
@@ -141,6 +144,7 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
         workers: at most this many tasks at once, each one episode or a group of ``worlds`` (None: as
             many as the cluster's CPUs or GPUs allow).
         max_retries: times Ray re-runs an episode whose worker process or node died.
+        action_mode: the env's action mode (``generate.record_jobs``).
     Raises:
         the first failed task's own exception (e.g. ``ValueError`` for a bad policy), or ``RuntimeError`` when a
         task's worker died more than ``max_retries`` times; files finished before stay.
@@ -173,7 +177,8 @@ def run_jobs_ray(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps
                                                   retry_exceptions=False)
             bar, on_episode = progress_bar(len(jobs), len(jobs) - len(todo), progress)
             _drain(ray, task, queue, pending, limit, ctrl_c.interrupted, on_episode, by_name, max_retries,
-                   (str(out.resolve()), policy_spec, max_steps, task_device, record_frames, compression))
+                   (str(out.resolve()), policy_spec, max_steps, task_device, record_frames, compression,
+                    action_mode))
         except BaseException:
             ctrl_c.stopping = True
             if not started:  # a Ray started here stops below with its workers; a cluster's keep running
@@ -194,11 +199,10 @@ def _drain(ray, task, queue: list[list[Job]], pending: list, limit: int, interru
     """Keep at most ``limit`` tasks pending until ``queue`` and ``pending`` are empty (``pending`` is
     updated in place, so the caller can cancel what is left); raise ``KeyboardInterrupt`` when
     ``interrupted`` is set."""
-    out, policy_spec, max_steps, task_device, record_frames, compression = task_args
+    out, *rest = task_args  # the arguments of record_group after its jobs
     while queue or pending:
         while queue and len(pending) < limit:
-            pending.append(task.remote(out, queue.pop(), policy_spec, max_steps, task_device, record_frames,
-                                       compression))
+            pending.append(task.remote(out, queue.pop(), *rest))
         done, pending[:] = ray.wait(pending, num_returns=1, timeout=INTERRUPT_POLL_S)
         if interrupted.is_set():  # tasks in ``done`` have published their files
             raise KeyboardInterrupt

@@ -109,17 +109,21 @@ def _reset_policy(policy, seed: int | list[int]) -> None:
 
 def record_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
                 device: str = "cpu", record_frames: bool = False, compression: str | None = None,
-                on_episode: Callable[[Job, bool], None] | None = None, worlds: int = 1) -> None:
+                on_episode: Callable[[Job, bool], None] | None = None, worlds: int = 1,
+                action_mode: str = "delta") -> None:
     """Record ``jobs`` into ``out`` (the recorder named by the job); ``on_episode(job, success)``
     after each. The one place where the recorder is driven: the serial run and each Ray task
     (``distributed.py``) call it. ``worlds`` 1: one env per (object, E), its episodes one after
     the other; > 1: the episodes of an (object, E) in native vector envs of up to ``worlds`` worlds,
     recorded together (each world's episode as a single env on its seed records it; the policy
-    must take a batch of observations, as the scripted expert and 'random' do)."""
+    must take a batch of observations, as the scripted expert and 'random' do). ``action_mode``: the
+    env's (``"delta"`` or ``"absolute"``, ``PickupConfig.action_mode``); the policy must act in it
+    (the scripted expert does either)."""
     if isinstance(worlds, bool) or not isinstance(worlds, int) or worlds < 1:
         raise ValueError(f"worlds must be an integer >= 1, got {worlds!r}")
     for group in job_groups(jobs, None if worlds == 1 else worlds):
-        kwargs = {"object": group[0].object, "youngs_modulus": group[0].youngs_modulus, "device": device}
+        kwargs = {"object": group[0].object, "youngs_modulus": group[0].youngs_modulus, "device": device,
+                  "action_mode": action_mode}
         if max_steps is not None:
             kwargs["max_episode_steps"] = max_steps
         if record_frames:
@@ -225,11 +229,11 @@ def progress_bar(total: int, finished: int, enabled: bool):
     return bar, on_episode
 
 
-def check_same_contact_model(out: pathlib.Path, jobs: list[Job]) -> None:
+def check_same_contact_model(out: pathlib.Path, jobs: list[Job], action_mode: str = "delta") -> None:
     """Resuming into ``out`` must record what an uninterrupted run would have: raise ValueError
     if an episode file already there was recorded with another pad contact model than today's
     default (``PickupConfig.edge_contact``, on since 2026-11-26; files from before lack the key and
-    were recorded without it), naming the file."""
+    were recorded without it) or in another ``action_mode`` than this run's, naming the file."""
     import h5py
 
     from ..envs.config import PickupConfig
@@ -240,19 +244,23 @@ def check_same_contact_model(out: pathlib.Path, jobs: list[Job]) -> None:
         path = out / job.name
         if path.exists():
             with h5py.File(path, "r") as f:
-                recorded = config_from_json(str(f.attrs["config_json"])).edge_contact
-            if recorded != default:
-                raise ValueError(f"{path} was recorded with edge_contact={recorded}, today's default is {default} "
-                                 "(pad edge contact): resuming would mix contact models in one dataset; "
+                recorded = config_from_json(str(f.attrs["config_json"]))
+            if recorded.edge_contact != default:
+                raise ValueError(f"{path} was recorded with edge_contact={recorded.edge_contact}, today's default is "
+                                 f"{default} (pad edge contact): resuming would mix contact models in one dataset; "
                                  "record into a new folder")
+            if recorded.action_mode != action_mode:
+                raise ValueError(f"{path} was recorded with action_mode={recorded.action_mode!r}, this run's is "
+                                 f"{action_mode!r}: resuming would mix action layouts in one dataset; pass "
+                                 f"--action-mode {recorded.action_mode} or record into a new folder")
             return  # one file tells: a run records all its files with one config
 
 
 def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
              device: str = "cpu", record_frames: bool = False, compression: str | None = None,
-             progress: bool = True, worlds: int = 1) -> list[pathlib.Path]:
-    """Record every job whose file is missing (``worlds`` episodes of an (object, E) at once, see
-    ``record_jobs``); return the files of all jobs."""
+             progress: bool = True, worlds: int = 1, action_mode: str = "delta") -> list[pathlib.Path]:
+    """Record every job whose file is missing (``worlds`` episodes of an (object, E) at once, in
+    ``action_mode``, see ``record_jobs``); return the files of all jobs."""
     from .atomic import check_writable_directory, remove_stale_temps
 
     check_writable_directory(out)
@@ -260,7 +268,8 @@ def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: in
     todo = [j for j in jobs if not (out / j.name).exists()]
     bar, on_episode = progress_bar(len(jobs), len(jobs) - len(todo), progress)
     try:
-        record_jobs(out, todo, policy_spec, max_steps, device, record_frames, compression, on_episode, worlds)
+        record_jobs(out, todo, policy_spec, max_steps, device, record_frames, compression, on_episode, worlds,
+                    action_mode)
     finally:
         if bar is not None:
             bar.close()
@@ -309,6 +318,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-steps", type=int, default=None, help="episode step limit (default: the env's 15 s)")
     p.add_argument("--policy", default=DEFAULT_POLICY, help="module:callable, or 'random'")
     p.add_argument("--frames", action="store_true", help="also record camera frames")
+    p.add_argument("--action-mode", choices=["delta", "absolute"], default="delta",
+                   help="the env's action mode (absolute: target flange pose and gap, e.g. for imitation)")
     p.add_argument("--compression", choices=["gzip", "lzf"], default=None)
     p.add_argument("--device", default="cpu")
     p.add_argument("--no-progress", action="store_true")
@@ -338,9 +349,10 @@ def main(argv: list[str] | None = None) -> int:
         from .distributed import run_jobs_ray
         record = partial(run_jobs_ray, address=None if args.ray == "local" else args.ray, workers=args.workers)
     try:
-        check_same_contact_model(args.out, jobs)
+        check_same_contact_model(args.out, jobs, args.action_mode)
         paths = record(args.out, jobs, args.policy, args.max_steps, args.device, args.frames,
-                       args.compression, progress=not args.no_progress, worlds=args.worlds)
+                       args.compression, progress=not args.no_progress, worlds=args.worlds,
+                       action_mode=args.action_mode)
     except KeyboardInterrupt:
         print("\ninterrupted: finished episodes are kept; run the same command again to resume", file=sys.stderr)
         return 130
