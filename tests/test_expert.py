@@ -286,3 +286,5 @@ def test_expert_in_absolute_actions_picks_as_in_delta_actions(name, youngs_modul
     assert np.abs(runs["delta"][2] - runs["absolute"][2]).max() < 3e-3
     with pytest.raises(ValueError, match="action_mode"):
         ScriptedPickupExpert(action_mode="velocity")
+    with pytest.raises(ValueError, match="action_mode comes from the env"):
+        ScriptedPickupExpert.from_env(env, action_mode="delta")

@@ -63,7 +63,7 @@ def test_a_policy_of_absolute_actions_returns_them_within_their_bounds(tmp_path)
     [-1, 1]) and drives an ``action_mode="absolute"`` env."""
     from defgrasp_env.layout import ABSOLUTE_ACTION
 
-    stats = {"action": {"mean": [0.0] * 8, "std": [1.0] * 7 + [0.2]}}  # gaps of ~0.2 m: some above 85 mm
+    stats = {"action": {"mean": [0.0] * 7 + [1.0], "std": [1.0] * 7 + [0.1]}}  # raw gaps ~1 m: over the stroke
     stats |= {k: {"mean": [0.0] * n, "std": [1.0] * n}
               for k, n in (("observation.state", 10), ("observation.environment_state", 33))}
     policy = LeRobotPolicy.from_pretrained(save_untrained_act(tmp_path / "abs", seed=2, action_mode="absolute",
@@ -77,6 +77,7 @@ def test_a_policy_of_absolute_actions_returns_them_within_their_bounds(tmp_path)
     for _ in range(3):
         action = policy(obs)
         assert action.shape == (8,) and np.all(action >= low) and np.all(action <= high)
+        assert action[7] == high[7]  # a raw ~1 m gap clipped to the 85 mm stroke
         assert env.action_space.contains(action)
         obs, _, term, trunc, _ = env.step(action)
     assert trunc

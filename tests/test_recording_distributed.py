@@ -180,3 +180,16 @@ def test_interrupted_ray_run_resumes_to_the_full_set(tmp_path):
     for name in NAMES:
         ep = load_episode(tmp_path / name)
         assert ep.replay["seed"] == jobs[name].seed and ep.num_steps == 40, name
+
+
+def test_ray_tasks_record_in_the_absolute_action_mode(local_ray, tmp_path):
+    """``--action-mode`` reaches the Ray tasks: the expert's episodes are recorded in absolute actions
+    [8], and each equals the serial run's in that mode."""
+    args = ["--objects", "sphere", "--moduli", "1e6", "--episodes", "2", "--max-steps", "3", "--no-progress",
+            "--action-mode", "absolute"]
+    assert generate_main([str(tmp_path / "ray"), *args, "--ray", "--workers", "2"]) == 0
+    assert generate_main([str(tmp_path / "serial"), *args]) == 0
+    for name in ("sphere_E1e6_000.h5", "sphere_E1e6_001.h5"):
+        (a, _), (b, _) = _contents(tmp_path / "ray" / name), _contents(tmp_path / "serial" / name)
+        assert a["steps/action"].shape == (3, 8) and np.array_equal(a["steps/action"], b["steps/action"])
+        assert np.array_equal(a["steps/node_positions"], b["steps/node_positions"])

@@ -160,6 +160,7 @@ def test_absolute_action_mode_records_the_expert_in_absolute_actions_and_refuses
     expert acts in the env's mode: target flange position within one period's travel of the wrist,
     a unit top-down quaternion, a gap in the stroke), the file replays to the same states, and
     resuming that folder in delta actions is refused (one action layout per dataset)."""
+    from defgrasp_env.envs.config import PickupConfig
     from defgrasp_env.layout import ABSOLUTE_ACTION, AGENT_POS
     from defgrasp_env.recording import replay_episode
 
@@ -172,7 +173,10 @@ def test_absolute_action_mode_records_the_expert_in_absolute_actions_and_refuses
     assert actions.shape == (8, ABSOLUTE_ACTION.size)
     wrist = AGENT_POS.get(ep["observations/agent_pos"][:-1], "wrist_position")
     step = np.linalg.norm(ABSOLUTE_ACTION.get(actions, "position") - wrist, axis=1)
-    assert np.all(step <= 0.3 * 0.05 * np.sqrt(3) + 1e-6)  # max_linear_speed x dt, per component
+    config = PickupConfig()
+    # the expert's velocity is limited in norm: one period's move at most max_linear_speed x dt (+ the
+    # float32 rounding of the recorded wrist position and action, ~1e-8 m)
+    assert np.all(step <= config.max_linear_speed * config.dt + 1e-6) and step.max() > 0.01
     quat = ABSOLUTE_ACTION.get(actions, "orientation")
     np.testing.assert_allclose(np.linalg.norm(quat, axis=1), 1.0, atol=1e-6)
     np.testing.assert_allclose(quat[:, [0, 2]], 0.0, atol=1e-7)  # a turn about the vertical only
@@ -186,4 +190,6 @@ def test_absolute_action_mode_records_the_expert_in_absolute_actions_and_refuses
     assert generate_main(args[:6] + ["2"] + args[7:]) == 2  # delta actions into the absolute folder
     err = capsys.readouterr().err
     assert "action_mode='absolute'" in err and "--action-mode absolute" in err
+    other = ["--objects", "cuboid"] + args[3:]  # another object's files: still one dataset
+    assert generate_main([args[0]] + other) == 2 and "action_mode='absolute'" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.glob("*.h5")) == ["sphere_E1e6_000.h5"]

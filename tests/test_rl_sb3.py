@@ -498,6 +498,7 @@ def test_ppo_policy_acts_as_the_training_wrappers_and_drives_gym_make(tmp_path):
                          actions="position-yaw-jaw", object="cuboid")
     save_run(model, curve, tmp_path, "smoke")
     policy = PPOPolicy.from_run(tmp_path)
+    stats = {k: (rms.mean.copy(), rms.var.copy()) for k, rms in policy.normalizer.obs_rms.items()}
     assert policy.components == ("vx", "vy", "vz", "wy", "jaw") and policy.settings["actions"] == "position-yaw-jaw"
 
     # the reference: the wrappers the run was trained in, statistics frozen as eval_ppo.py does
@@ -532,6 +533,8 @@ def test_ppo_policy_acts_as_the_training_wrappers_and_drives_gym_make(tmp_path):
         if terminated or truncated:
             break
     assert steps == 6 or terminated
+    for k, rms in policy.normalizer.obs_rms.items():  # acting never updates the run's statistics
+        assert np.array_equal(rms.mean, stats[k][0]) and np.array_equal(rms.var, stats[k][1])
 
     with pytest.raises(ValueError, match="environment_state"):
         policy({"agent_pos": obs["agent_pos"]})

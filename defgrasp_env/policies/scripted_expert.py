@@ -8,9 +8,9 @@ it never touches the simulator. Works on one observation (``agent_pos`` [10], ``
 (``ABSOLUTE_ACTION``) [8] or [N, 8]: the flange position one control period ahead on the same
 (speed- and acceleration-limited) path, the orientation it is turning to (the planned grasp yaw,
 held for the whole turn: the env turns toward it at ``max_angular_speed``, as the delta action's
-saturated rate does) and the jaw gap command. Both move the wrist alike, except that an absolute
-move is limited in norm to ``max_linear_speed`` where the delta action's components are limited
-each (a diagonal approach is up to sqrt 3 faster in delta actions).
+saturated rate does) and the jaw gap command. Both move the wrist alike: the expert's velocity is
+limited in norm to ``max_linear_speed``, which is what an absolute move allows (a delta action
+limits each component, so other delta policies may move diagonally up to sqrt 3 faster).
 
 Phases (per world, explicit state; ``reset()`` restarts them):
 
@@ -65,7 +65,8 @@ class ExpertConfig:
     """Tuning of the scripted expert (SI units; validated).
 
     ``max_linear_speed``, ``max_angular_speed`` and ``control_hz`` must equal the env's
-    ``PickupConfig`` values (they scale the normalised delta actions); use
+    ``PickupConfig`` values (they scale the normalised delta actions and an absolute action's
+    one-period move); use
     ``ScriptedPickupExpert.from_env(env)`` to copy them.
     """
 
@@ -175,7 +176,8 @@ def delta_action(command: WristCommand, config: ExpertConfig) -> np.ndarray:
 def absolute_action(command: WristCommand, config: ExpertConfig) -> np.ndarray:
     """``ABSOLUTE_ACTION`` [N, 8]: the flange position one period ahead at the commanded velocity,
     the orientation turned to, and the gap."""
-    position = command.flange + command.linear * config.max_linear_speed * config.dt
+    low, high = ABSOLUTE_ACTION.field("position").bounds()
+    position = np.clip(command.flange + command.linear * config.max_linear_speed * config.dt, low, high)
     gap = np.clip(command.gap, 0.0, JAW_GAP_MAX)[:, None]
     return ABSOLUTE_ACTION.pack(position=position, orientation=command.target_quat, gap=gap)
 
@@ -185,13 +187,15 @@ ACTION_PACKERS = {"delta": delta_action, "absolute": absolute_action}
 
 
 class ScriptedPickupExpert:
-    """Scripted pick-up expert for ``DeformablePickup-v0`` (delta actions, state observations).
+    """Scripted pick-up expert for ``DeformablePickup-v0`` (delta or absolute actions, state observations).
 
     ``expert(obs) -> action``: ``obs`` is the env's observation dict with ``agent_pos`` [10] or
     [N, 10] (flange position m, quaternion xyzw, jaw gap m, left/right tip normal force N) and
     ``environment_state`` [33] or [N, 33] (feature point m, its velocity m/s, goal m, 8 keypoints
-    m, all world frame, y up). Returns float32 [7] or [N, 7] in [-1, 1]: flange linear velocity,
-    angular velocity (world axis-angle rate), jaw command. Call ``reset()`` at every episode start
+    m, all world frame, y up). Returns float32 [7] or [N, 7] in [-1, 1] (``action_mode="delta"``):
+    flange linear velocity, angular velocity (world axis-angle rate), jaw command; or [8] or [N, 8]
+    (``"absolute"``): target flange position m, orientation xyzw, jaw gap m. ``from_env`` takes the
+    mode from the env's config. Call ``reset()`` at every episode start
     (``reset(mask)`` for the worlds of a vector env that were reset).
 
     ``phase`` [N] (int, see ``PHASE_NAMES``) and ``retries`` [N] expose the script's state.
@@ -216,6 +220,9 @@ class ScriptedPickupExpert:
         cfg = getattr(env.unwrapped, "config", None)
         if cfg is None:
             raise TypeError(f"{type(env).__name__} has no PickupConfig in .unwrapped.config")
+        if "action_mode" in overrides:
+            raise ValueError(f"action_mode comes from the env's config ({cfg.action_mode!r}); got "
+                             f"action_mode={overrides['action_mode']!r} as well")
         if cfg.action_mode not in ACTION_PACKERS or cfg.obs_type != "state":
             raise ValueError(f"the expert needs action_mode in {sorted(ACTION_PACKERS)} and obs_type='state', got "
                              f"{cfg.action_mode!r}, {cfg.obs_type!r}")

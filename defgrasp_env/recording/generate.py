@@ -229,31 +229,32 @@ def progress_bar(total: int, finished: int, enabled: bool):
     return bar, on_episode
 
 
-def check_same_contact_model(out: pathlib.Path, jobs: list[Job], action_mode: str = "delta") -> None:
-    """Resuming into ``out`` must record what an uninterrupted run would have: raise ValueError
-    if an episode file already there was recorded with another pad contact model than today's
-    default (``PickupConfig.edge_contact``, on since 2026-11-26; files from before lack the key and
-    were recorded without it) or in another ``action_mode`` than this run's, naming the file."""
+def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta") -> None:
+    """Resuming into ``out`` must record what an uninterrupted run would have, and a folder is one
+    dataset: raise ValueError if an episode file already there (any of them: a run records all its
+    files with one config) was recorded with another pad contact model than today's default
+    (``PickupConfig.edge_contact``, on since 2026-11-26; files from before lack the key and were
+    recorded without it) or in another ``action_mode`` than this run's, naming the file."""
     import h5py
 
     from ..envs.config import PickupConfig
     from .config_io import config_from_json
 
+    files = sorted(pathlib.Path(out).glob("*.h5")) if pathlib.Path(out).is_dir() else []
+    if not files:
+        return
+    path = files[0]
+    with h5py.File(path, "r") as f:
+        recorded = config_from_json(str(f.attrs["config_json"]))
     default = PickupConfig().edge_contact
-    for job in jobs:
-        path = out / job.name
-        if path.exists():
-            with h5py.File(path, "r") as f:
-                recorded = config_from_json(str(f.attrs["config_json"]))
-            if recorded.edge_contact != default:
-                raise ValueError(f"{path} was recorded with edge_contact={recorded.edge_contact}, today's default is "
-                                 f"{default} (pad edge contact): resuming would mix contact models in one dataset; "
-                                 "record into a new folder")
-            if recorded.action_mode != action_mode:
-                raise ValueError(f"{path} was recorded with action_mode={recorded.action_mode!r}, this run's is "
-                                 f"{action_mode!r}: resuming would mix action layouts in one dataset; pass "
-                                 f"--action-mode {recorded.action_mode} or record into a new folder")
-            return  # one file tells: a run records all its files with one config
+    if recorded.edge_contact != default:
+        raise ValueError(f"{path} was recorded with edge_contact={recorded.edge_contact}, today's default is "
+                         f"{default} (pad edge contact): resuming would mix contact models in one dataset; "
+                         "record into a new folder")
+    if recorded.action_mode != action_mode:
+        raise ValueError(f"{path} was recorded with action_mode={recorded.action_mode!r}, this run's is "
+                         f"{action_mode!r}: the folder would mix action layouts in one dataset; pass "
+                         f"--action-mode {recorded.action_mode} or record into a new folder")
 
 
 def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
@@ -349,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
         from .distributed import run_jobs_ray
         record = partial(run_jobs_ray, address=None if args.ray == "local" else args.ray, workers=args.workers)
     try:
-        check_same_contact_model(args.out, jobs, args.action_mode)
+        check_same_recording_config(args.out, args.action_mode)
         paths = record(args.out, jobs, args.policy, args.max_steps, args.device, args.frames,
                        args.compression, progress=not args.no_progress, worlds=args.worlds,
                        action_mode=args.action_mode)

@@ -37,20 +37,23 @@ class PPOPolicy:
     actions, state observations).
 
     ``settings``: the run's ``run.json`` (action set, env options: build the env they name, e.g.
-    ``gym.make("DeformablePickup-v0", object=..., youngs_modulus=...)``). The policy keeps no state
-    between steps; ``reset`` exists for the expert's interface."""
+    ``gym.make("DeformablePickup-v0", object=..., youngs_modulus=...)``; options left at their
+    default are absent there, and a run.json without ``edge_contact`` is a run trained without pad
+    edge contact, as ``eval_ppo.py`` reads it). ``normalizer``: SB3's ``VecNormalize`` of the run, used
+    through ``normalize_obs`` alone, which never updates its statistics (a live training env's
+    normaliser may be passed). The policy keeps
+    no state between steps; ``reset`` exists for the expert's interface."""
 
     def __init__(self, model, normalizer, components, settings: dict | None = None):
         names = DELTA_ACTION.names
         unknown = [c for c in components if c not in names]
-        if unknown or not components:
-            raise ValueError(f"components must be names of {list(names)}, got {list(components)}")
+        if unknown or not components or len(set(components)) != len(components):
+            raise ValueError(f"components must be distinct names of {list(names)}, got {list(components)}")
         if model.action_space.shape != (len(components),):
             raise ValueError(f"the model's actions have shape {model.action_space.shape}, the action set "
                              f"{list(components)} has {len(components)} components")
         self.model = model
-        self.normalizer = normalizer
-        self.normalizer.training = False  # frozen statistics
+        self.normalizer = normalizer  # read only: ``normalize_obs`` never updates its statistics
         self.components = tuple(components)
         self._columns = np.array([names.index(c) for c in self.components])
         self.settings = dict(settings or {})
@@ -89,8 +92,10 @@ class PPOPolicy:
         for k, size in _OBS_SIZES.items():
             if batch[k].shape != (n, size):
                 raise ValueError(f"obs[{k!r}] must have shape ({size},) or (N, {size}), got {arrays[k].shape}")
-            if not np.all(np.isfinite(batch[k])):
-                raise ValueError(f"obs[{k!r}] must be finite")
+            bad = ~np.isfinite(batch[k])
+            if bad.any():
+                raise ValueError(f"obs[{k!r}] must be finite, got {batch[k][bad][:3].tolist()} at "
+                                 f"{np.argwhere(bad)[:3].tolist()}")
         normalized = self.normalizer.normalize_obs(batch)
         chosen = np.concatenate([self.model.predict({k: v[i:i + 1] for k, v in normalized.items()},
                                                     deterministic=True)[0] for i in range(n)])
