@@ -43,10 +43,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import numpy as np  # noqa: E402
 
 from defgrasp_env.layout import AGENT_POS, ENV_STATE  # noqa: E402
+from defgrasp_env.rl.ppo_policy import run_env_options  # noqa: E402
 from train_ppo import load_normalisation, make_vec_env, parse_object  # noqa: E402
 
-#: ``run.json`` keys that are env options (passed to ``gym.make_vec``).
-ENV_OPTIONS = ("object", "youngs_modulus", "episode_seconds", "edge_contact")
 OUTCOMES = ("success", "at the goal, not held", "grasped, never at the goal", "never grasped")
 
 
@@ -63,23 +62,16 @@ def feature_beyond_pad_faces(scene) -> np.ndarray:
 
 def run_settings(run: pathlib.Path, env_overrides: dict) -> tuple[dict, dict, bool]:
     """The run's settings (``run.json``), the env options to evaluate with (the run's, read as
-    recorded files are, then ``env_overrides``: keys of ``ENV_OPTIONS``, None = the run's) and
+    recorded files are, then ``env_overrides``: keys of ``rl.ppo_policy.RUN_ENV_OPTIONS``, None = the
+    run's; ``rl.ppo_policy.run_env_options``) and
     whether world i holds the run's i-th object (``--fixed-world-objects`` runs, unless the object
     is overridden)."""
-    from defgrasp_env import PickupConfig
-    from defgrasp_env.recording.config_io import RECORDED_BEFORE_DEFAULT
-
     settings = json.loads((pathlib.Path(run) / "run.json").read_text())
-    unknown = sorted(set(env_overrides) - set(ENV_OPTIONS))
-    if unknown:
-        raise ValueError(f"env overrides must be among {ENV_OPTIONS}, got {unknown}")
     # a run.json lacks options left at their default, and edge_contact where it was off (every run
     # before it became the default on 2026-11-26): read as recorded files are
-    given = RECORDED_BEFORE_DEFAULT | {k: settings[k] for k in ENV_OPTIONS if k in settings}
-    given |= {k: v for k, v in env_overrides.items() if v is not None}
-    config = PickupConfig(**given)
+    options = run_env_options(settings, **env_overrides)
     fixed = bool(settings.get("fixed_world_objects", False)) and env_overrides.get("object") is None
-    return settings, {k: getattr(config, k) for k in ENV_OPTIONS}, fixed
+    return settings, options, fixed
 
 
 def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str = "cpu",

@@ -522,8 +522,11 @@ def test_ppo_policy_acts_as_the_training_wrappers_and_drives_gym_make(tmp_path):
         obs, *_ = venv.step(chosen)
     assert moved == 4, "the test needs non-zero actions"
 
-    # gym.make keeps the registered time limit: give the run's 0.3 s (6 steps at 20 Hz) as the limit
-    env = gym.make("DeformablePickup-v0", object="cuboid", episode_seconds=0.3, max_episode_steps=6)
+    # the run's env: its options as trained (E at its default, absent from run.json) and its 0.3 s
+    # episodes as the time limit (6 steps at 20 Hz; gym.make would keep the registered 300)
+    assert policy.env_kwargs == {"object": "cuboid", "youngs_modulus": 1e5, "episode_seconds": 0.3,
+                                 "edge_contact": True, "max_episode_steps": 6}
+    env = gym.make("DeformablePickup-v0", **policy.env_kwargs)
     obs, _ = env.reset(seed=3)
     policy.reset()
     for steps in range(1, 100):

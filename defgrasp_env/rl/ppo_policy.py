@@ -23,10 +23,29 @@ from pathlib import Path
 
 import numpy as np
 
+from ..envs.config import PickupConfig
 from ..layout import AGENT_POS, DELTA_ACTION, ENV_STATE
+from ..recording.config_io import RECORDED_BEFORE_DEFAULT
 from .action_subset import ACTION_SETS
 
-__all__ = ["PPOPolicy"]
+__all__ = ["PPOPolicy", "RUN_ENV_OPTIONS", "run_env_options"]
+
+#: The env options a run's ``run.json`` records (``train_ppo.py``'s env arguments).
+RUN_ENV_OPTIONS = ("object", "youngs_modulus", "episode_seconds", "edge_contact")
+
+
+def run_env_options(settings: dict, **overrides) -> dict:
+    """The env options (``RUN_ENV_OPTIONS``) of a run's ``run.json`` ``settings`` as the run was
+    trained with: an option left at its default is absent there (the default), and a run.json
+    without ``edge_contact`` is a run trained before pad edge contact became the default (off), as
+    recorded files are read (``recording.config_io``). ``overrides`` (None: the run's) replace
+    them; the result is validated by ``PickupConfig``."""
+    unknown = sorted(set(overrides) - set(RUN_ENV_OPTIONS))
+    if unknown:
+        raise ValueError(f"env overrides must be among {RUN_ENV_OPTIONS}, got {unknown}")
+    given = RECORDED_BEFORE_DEFAULT | {k: settings[k] for k in RUN_ENV_OPTIONS if k in settings}
+    config = PickupConfig(**(given | {k: v for k, v in overrides.items() if v is not None}))
+    return {k: getattr(config, k) for k in RUN_ENV_OPTIONS}
 
 #: The observation keys and sizes a run's policy reads.
 _OBS_SIZES = {"agent_pos": AGENT_POS.size, "environment_state": ENV_STATE.size}
@@ -36,10 +55,9 @@ class PPOPolicy:
     """A trained SB3 PPO policy as ``policy(obs) -> action`` for ``DeformablePickup-v0`` (delta
     actions, state observations).
 
-    ``settings``: the run's ``run.json`` (action set, env options: build the env they name, e.g.
-    ``gym.make("DeformablePickup-v0", object=..., youngs_modulus=...)``; options left at their
-    default are absent there, and a run.json without ``edge_contact`` is a run trained without pad
-    edge contact, as ``eval_ppo.py`` reads it). ``normalizer``: SB3's ``VecNormalize`` of the run, used
+    ``settings``: the run's ``run.json`` (action set, env options); ``env_kwargs``: the options of
+    the env the run was trained in, for ``gym.make("DeformablePickup-v0", **policy.env_kwargs)``
+    (``run_env_options``, with the episode length as ``max_episode_steps``). ``normalizer``: SB3's ``VecNormalize`` of the run, used
     through ``normalize_obs`` alone, which never updates its statistics (a live training env's
     normaliser may be passed). The policy keeps
     no state between steps; ``reset`` exists for the expert's interface."""
@@ -75,6 +93,13 @@ class PPOPolicy:
         with open(folder / "vecnormalize.pkl", "rb") as f:
             normalizer = pickle.load(f)
         return cls(PPO.load(folder / "ppo.zip", device=device), normalizer, ACTION_SETS[actions], settings)
+
+    @property
+    def env_kwargs(self) -> dict:
+        """``gym.make`` keyword arguments of the run's env: its options (``run_env_options``) and
+        ``max_episode_steps`` from its episode length (``gym.make`` keeps the registered limit)."""
+        options = run_env_options(self.settings)
+        return options | {"max_episode_steps": PickupConfig(**options).max_episode_steps}
 
     def reset(self, mask=None) -> None:
         """Start new episodes (all worlds or those in ``mask``): nothing to clear."""
