@@ -240,7 +240,9 @@ def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta") -
     from ..envs.config import PickupConfig
     from .config_io import config_from_json
 
-    files = sorted(pathlib.Path(out).glob("*.h5")) if pathlib.Path(out).is_dir() else []
+    from .reader import list_episodes
+
+    files = list_episodes(out) if pathlib.Path(out).is_dir() else []
     if not files:
         return
     path = files[0]
