@@ -11,7 +11,7 @@ import pytest
 
 import defgrasp_env  # noqa: F401  (registers the env)
 from defgrasp_env.gripper import GAP_MAX
-from defgrasp_env.layout import AGENT_POS, DELTA_ACTION
+from defgrasp_env.layout import ABSOLUTE_ACTION, AGENT_POS, DELTA_ACTION
 from defgrasp_env.policies import PHASE_NAMES, ExpertConfig, ScriptedPickupExpert, plan_grasps
 
 POLICIES = pathlib.Path(defgrasp_env.__file__).parent / "policies"
@@ -270,7 +270,8 @@ def test_expert_in_absolute_actions_picks_as_in_delta_actions(name, youngs_modul
     runs = {}
     for mode in ("delta", "absolute"):
         env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=youngs_modulus, action_mode=mode)
-        expert = ScriptedPickupExpert.from_env(env)
+        # the jaw closing at the delta expert's rate (test_expert_absolute_close_lead: the default)
+        expert = ScriptedPickupExpert.from_env(env, absolute_close_lead=1)
         assert expert.action_mode == mode
         obs, _ = env.reset(seed=0)
         path = []
@@ -286,5 +287,38 @@ def test_expert_in_absolute_actions_picks_as_in_delta_actions(name, youngs_modul
     assert np.abs(runs["delta"][2] - runs["absolute"][2]).max() < 3e-3
     with pytest.raises(ValueError, match="action_mode"):
         ScriptedPickupExpert(action_mode="velocity")
+    with pytest.raises(ValueError, match="absolute_close_lead must be >= 1"):
+        ScriptedPickupExpert(absolute_close_lead=0)
     with pytest.raises(ValueError, match="action_mode comes from the env"):
         ScriptedPickupExpert.from_env(env, action_mode="delta")
+
+
+def test_expert_absolute_close_lead():
+    """In absolute actions the jaw command of the slow close and the squeeze leads the observed gap
+    by ``absolute_close_lead`` (3) periods of the delta expert's closing rate (20 mm/s at 20 Hz:
+    3 mm), so that an imitation learner sees a command it can tell from the gap it observes; the
+    soft rope (E = 1e4, the cell ACT stalled on) is still picked, squeezed harder than at 1 mm a step
+    (measured 4.3 N peak, gap 2.7 mm; bound 6 N, below the 20 N grip limit, and > 1 mm: not crushed
+    to the jaws' minimum)."""
+    env = gym.make("DeformablePickup-v0", object="rope", youngs_modulus=1e4, action_mode="absolute")
+    expert = ScriptedPickupExpert.from_env(env)
+    assert expert.config.absolute_close_lead == 3
+    obs, _ = env.reset(seed=0)
+    leads, peak = [], 0.0
+    for _ in range(200):
+        action = expert(obs)
+        gap = obs["agent_pos"][7]
+        lead = gap - ABSOLUTE_ACTION.get(action[None], "gap")[0, 0]
+        if 1e-4 < lead < 0.01:  # closing slowly or squeezing (fast closing moves tens of mm)
+            leads.append(lead)
+        obs, _, term, trunc, info = env.step(action)
+        peak = max(peak, float(obs["agent_pos"][8:10].max()))
+        if term or trunc:
+            break
+    assert info["is_success"]
+    # the slow close and squeeze commands 3 x 20 mm/s x 50 ms inside the gap (float32 observation and
+    # action: 1 um), none at the delta rate's 1 mm (the other leads: the fast close's end, the hold)
+    leads = np.array(leads)
+    assert np.sum(np.abs(leads - 3 * 0.02 / 20.0) < 1e-6) >= 3
+    assert not np.any(np.abs(leads - 0.02 / 20.0) < 1e-4)
+    assert peak < 6.0 and obs["agent_pos"][7] > 1e-3

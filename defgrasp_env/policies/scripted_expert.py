@@ -8,7 +8,8 @@ it never touches the simulator. Works on one observation (``agent_pos`` [10], ``
 (``ABSOLUTE_ACTION``) [8] or [N, 8]: the flange position one control period ahead on the same
 (speed- and acceleration-limited) path, the orientation it is turning to (the planned grasp yaw,
 held for the whole turn: the env turns toward it at ``max_angular_speed``, as the delta action's
-saturated rate does) and the jaw gap command. Both move the wrist alike: the expert's velocity is
+saturated rate does) and the jaw gap command (leading the gap by ``absolute_close_lead`` periods
+of its closing rate while it closes slowly or squeezes). Both move the wrist alike: the expert's velocity is
 limited in norm to ``max_linear_speed``, which is what an absolute move allows (a delta action
 limits each component, so other delta policies may move diagonally up to sqrt 3 faster).
 
@@ -95,6 +96,12 @@ class ExpertConfig:
     approach_margin: float = 0.008       # m, fast closing stops this far outside the estimate
     slow_close_speed: float = 0.02       # m/s, closing speed from there to the contact
     squeeze_speed: float = 0.02          # m/s, closing speed while squeezing to grip_force
+    # control periods by which the jaw command of the slow close and the squeeze leads the current
+    # gap in absolute actions (delta actions: 1 period, the rate above). A command one period
+    # (1 mm) inside the gap is within a learner's regression error of the gap it observes: ACT
+    # trained on such absolute demonstrations commanded the gap it saw and stalled on the soft rope
+    # and torus at 0.2 N (benchmarks/RESULTS.md, 2026-11-26); 3 periods close 3 mm a step there.
+    absolute_close_lead: int = 3
     hover_clearance: float = 0.02        # m, pad bottoms above the object's top before descending
     descend_speed: float = 0.2           # m/s
     lift_speed: float = 0.25             # m/s
@@ -115,6 +122,8 @@ class ExpertConfig:
             else:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                     raise ValueError(f"{f.name} must be a finite number in (0, inf), got {v!r}")
+        if self.absolute_close_lead < 1:
+            raise ValueError(f"absolute_close_lead must be >= 1 control period, got {self.absolute_close_lead}")
         if not self.regrip_fraction < 1.0 or not self.offset_filter <= 1.0:
             raise ValueError(f"regrip_fraction must be in (0, 1) and offset_filter in (0, 1], got "
                              f"{self.regrip_fraction}, {self.offset_filter}")
@@ -378,10 +387,11 @@ class ScriptedPickupExpert:
         self._contact_gap[first] = gap[first]
         fast = ph & outside & ~touching
         gap_cmd[fast] = np.maximum(self._plan_width[fast] + c.approach_margin, JAW_GAP_MIN)
+        lead = c.absolute_close_lead if self.action_mode == "absolute" else 1
         slow = ph & ~outside & ~touching
-        gap_cmd[slow] = gap[slow] - c.slow_close_speed * dt
+        gap_cmd[slow] = gap[slow] - c.slow_close_speed * dt * lead
         squeeze = ph & touching & (f_min < c.grip_force)
-        gap_cmd[squeeze] = gap[squeeze] - c.squeeze_speed * dt
+        gap_cmd[squeeze] = gap[squeeze] - c.squeeze_speed * dt * lead
         held = ph & (f_min >= c.grip_force)
         gap_cmd[held] = self._hold_gap(gap)[held]
         self._counter = np.where(held, self._counter + 1, np.where(ph, 0, self._counter))
