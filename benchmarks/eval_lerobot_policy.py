@@ -9,7 +9,9 @@ in this process with the cell's command line so that Warp's kernels load once):
 
 Success is LeRobot's ``pc_success`` (``info["is_success"]`` at the episode's end) from each cell's
 ``eval_info.json``. Printed: the table with the scripted expert's rate (``success_table.py``, the
-same env defaults) and the paper's human rate beside each cell, plus timing. ``--append`` adds the
+same env defaults) and the paper's human rate beside each cell, plus timing (also written to
+``OUT/report.md``); ``OUT/episodes.json`` keeps every found cell's episodes in order (success, reward
+sum and maximum; the cell's episodes are lerobot-eval's of ``--seed``). ``--append`` adds the
 report to ``benchmarks/RESULTS.md`` with the machine.
 
     python benchmarks/eval_lerobot_policy.py CKPT --episodes 5 --out datasets/output/eval_act
@@ -68,9 +70,14 @@ def pool_cell(dirs: list[pathlib.Path]) -> dict | None:
     infos = [json.loads((d / "eval_info.json").read_text()) for d in dirs if (d / "eval_info.json").is_file()]
     if not infos:
         return None
-    successes = [s for i in infos for task in i["per_task"] for s in task["metrics"]["successes"]]
+    def per_episode(key):
+        return [x for i in infos for task in i["per_task"] for x in task["metrics"][key]]
+
+    successes = per_episode("successes")
     return {"pc_success": 100.0 * sum(successes) / len(successes), "n_episodes": len(successes),
-            "successes": sum(successes), "eval_s": sum(i["overall"]["eval_s"] for i in infos)}
+            "successes": sum(successes), "eval_s": sum(i["overall"]["eval_s"] for i in infos),
+            "episodes": {"successes": successes, "sum_rewards": per_episode("sum_rewards"),
+                         "max_rewards": per_episode("max_rewards")}}
 
 
 def format_report(cells: dict, wall: float, ckpt: str, train_note: str) -> str:
@@ -135,6 +142,10 @@ def main(argv=None) -> int:
     pooled = {cell: pool_cell([d / cell_name(*cell) for d in [out, *map(pathlib.Path, args.pool)]])
               for cell in ((o, e) for o in OBJECTS for e in MODULI)}
     cells = {cell: c for cell, c in pooled.items() if c is not None}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "episodes.json").write_text(json.dumps(
+        {"checkpoint": args.checkpoint, "seed": args.seed, "lerobot_eval_args": extra,
+         "cells": {cell_name(*cell): c["episodes"] for cell, c in cells.items()}}, indent=1) + "\n")
     if len(cells) < len(OBJECTS) * len(MODULI):
         print(f"{len(cells)} of {len(OBJECTS) * len(MODULI)} cells found: no table yet")
         return 0

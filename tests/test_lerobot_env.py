@@ -165,3 +165,26 @@ def test_absolute_action_mode_config_builds_an_absolute_env():
         vec.close()
     with pytest.raises(ValueError, match="action_mode"):
         DefgraspEnvConfig(action_mode="velocity")
+
+
+def test_eval_lerobot_policy_script_keeps_every_episode(tmp_path):
+    """``benchmarks/eval_lerobot_policy.py`` (the success table's script) runs lerobot-eval for one
+    cell and writes ``episodes.json`` with that cell's episodes in order, equal to lerobot-eval's own
+    ``eval_info.json``; with 1 of the 20 cells it prints no table."""
+    from defgrasp_env.lerobot_policy import save_untrained_act
+
+    ckpt = save_untrained_act(tmp_path / "act", seed=5)
+    out = tmp_path / "eval"
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "eval_lerobot_policy.py"), str(ckpt), "--episodes", "2",
+           "--batch-size", "2", "--objects", "cuboid", "--moduli", "1e6", "--seed", "7", "--out", str(out),
+           "--env.episode_seconds=0.2"]
+    res = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=_subprocess_env(), timeout=900)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "1 of 20 cells found: no table yet" in res.stdout
+    kept = json.loads((out / "episodes.json").read_text())
+    assert kept["seed"] == 7 and kept["lerobot_eval_args"] == ["--env.episode_seconds=0.2"]
+    metrics = json.loads((out / "cuboid_E1e+06" / "eval_info.json").read_text())["per_task"][0]["metrics"]
+    assert list(kept["cells"]) == ["cuboid_E1e+06"]
+    cell = kept["cells"]["cuboid_E1e+06"]
+    assert cell["successes"] == metrics["successes"] == [False, False]
+    assert cell["sum_rewards"] == metrics["sum_rewards"] and cell["max_rewards"] == metrics["max_rewards"]
