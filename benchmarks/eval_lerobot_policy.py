@@ -11,7 +11,9 @@ Success is LeRobot's ``pc_success`` (``info["is_success"]`` at the episode's end
 ``eval_info.json``. Printed: the table with the scripted expert's rate (``success_table.py``, the
 same env defaults) and the paper's human rate beside each cell, plus timing (also written to
 ``OUT/report.md``); ``OUT/episodes.json`` keeps every found cell's episodes in order (success, reward
-sum and maximum; the cell's episodes are lerobot-eval's of ``--seed``). ``--append`` adds the
+sum and maximum, and the folders they came from; ``seed`` and ``lerobot_eval_args`` there are
+this call's, which ran the cells in ``cells_run``: pooled or earlier cells keep their own, in their
+folders' ``eval_info.json``). ``--append`` adds the
 report to ``benchmarks/RESULTS.md`` with the machine.
 
     python benchmarks/eval_lerobot_policy.py CKPT --episodes 5 --out datasets/output/eval_act
@@ -66,18 +68,23 @@ def eval_cell(ckpt: str, obj: str, e: float, episodes: int, batch: int, seed: in
 
 
 def pool_cell(dirs: list[pathlib.Path]) -> dict | None:
-    """Success rate, episode count and time of one cell over the ``eval_info.json`` files in ``dirs``."""
-    infos = [json.loads((d / "eval_info.json").read_text()) for d in dirs if (d / "eval_info.json").is_file()]
+    """Success rate, episode count and time of one cell over the ``eval_info.json`` files in ``dirs``,
+    and under ``"episodes"`` its episodes in order (``successes``, ``sum_rewards``, ``max_rewards``
+    lists, and the ``folders`` they were read from)."""
+    found = [d for d in dirs if (d / "eval_info.json").is_file()]
+    infos = [json.loads((d / "eval_info.json").read_text()) for d in found]
     if not infos:
         return None
-    def per_episode(key):
+
+    def per_episode(key: str) -> list:
+        """LeRobot's per-episode metric ``key`` over all the cell's files, in order."""
         return [x for i in infos for task in i["per_task"] for x in task["metrics"][key]]
 
     successes = per_episode("successes")
     return {"pc_success": 100.0 * sum(successes) / len(successes), "n_episodes": len(successes),
             "successes": sum(successes), "eval_s": sum(i["overall"]["eval_s"] for i in infos),
             "episodes": {"successes": successes, "sum_rewards": per_episode("sum_rewards"),
-                         "max_rewards": per_episode("max_rewards")}}
+                         "max_rewards": per_episode("max_rewards"), "folders": [str(d) for d in found]}}
 
 
 def format_report(cells: dict, wall: float, ckpt: str, train_note: str) -> str:
@@ -129,13 +136,13 @@ def main(argv=None) -> int:
     objects = args.objects.split(",")
     moduli = [float(x) for x in args.moduli.split(",")]
     out = pathlib.Path(args.out)
-    cells = {}
+    ran = []
     for obj in objects if args.episodes > 0 else []:
         for e in moduli:
             t = time.perf_counter()
-            cells[(obj, e)] = eval_cell(args.checkpoint, obj, e, args.episodes, args.batch_size, args.seed,
-                                        out, extra)
-            print(f"{obj:9s} E={e:.0e}: success {cells[(obj, e)]['pc_success']:.0f} % "
+            overall = eval_cell(args.checkpoint, obj, e, args.episodes, args.batch_size, args.seed, out, extra)
+            ran.append((obj, e))
+            print(f"{obj:9s} E={e:.0e}: success {overall['pc_success']:.0f} % "
                   f"({time.perf_counter() - t:.0f} s)", flush=True)
     # the table pools every cell's episodes found in --out and the --pool folders (parallel runs over
     # other objects, or earlier passes with other seeds)
@@ -144,8 +151,9 @@ def main(argv=None) -> int:
     cells = {cell: c for cell, c in pooled.items() if c is not None}
     out.mkdir(parents=True, exist_ok=True)
     (out / "episodes.json").write_text(json.dumps(
-        {"checkpoint": args.checkpoint, "seed": args.seed, "lerobot_eval_args": extra,
-         "cells": {cell_name(*cell): c["episodes"] for cell, c in cells.items()}}, indent=1) + "\n")
+        {"checkpoint": args.checkpoint, "cells_run": [cell_name(*c) for c in ran], "seed": args.seed,
+         "lerobot_eval_args": extra, "cells": {cell_name(*cell): c["episodes"] for cell, c in cells.items()}},
+        indent=1) + "\n")
     if len(cells) < len(OBJECTS) * len(MODULI):
         print(f"{len(cells)} of {len(OBJECTS) * len(MODULI)} cells found: no table yet")
         return 0

@@ -183,8 +183,10 @@ def test_eval_lerobot_policy_script_keeps_every_episode(tmp_path):
     assert "1 of 20 cells found: no table yet" in res.stdout
     kept = json.loads((out / "episodes.json").read_text())
     assert kept["seed"] == 7 and kept["lerobot_eval_args"] == ["--env.episode_seconds=0.2"]
+    assert kept["cells_run"] == ["cuboid_E1e+06"]
     metrics = json.loads((out / "cuboid_E1e+06" / "eval_info.json").read_text())["per_task"][0]["metrics"]
     assert list(kept["cells"]) == ["cuboid_E1e+06"]
     cell = kept["cells"]["cuboid_E1e+06"]
     assert cell["successes"] == metrics["successes"] == [False, False]
     assert cell["sum_rewards"] == metrics["sum_rewards"] and cell["max_rewards"] == metrics["max_rewards"]
+    assert cell["folders"] == [str(out / "cuboid_E1e+06")]

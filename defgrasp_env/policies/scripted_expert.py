@@ -8,10 +8,11 @@ it never touches the simulator. Works on one observation (``agent_pos`` [10], ``
 (``ABSOLUTE_ACTION``) [8] or [N, 8]: the flange position one control period ahead on the same
 (speed- and acceleration-limited) path, the orientation it is turning to (the planned grasp yaw,
 held for the whole turn: the env turns toward it at ``max_angular_speed``, as the delta action's
-saturated rate does) and the jaw gap command (leading the gap by ``absolute_close_lead`` periods
-of its closing rate while it closes slowly or squeezes). Both move the wrist alike: the expert's velocity is
-limited in norm to ``max_linear_speed``, which is what an absolute move allows (a delta action
-limits each component, so other delta policies may move diagonally up to sqrt 3 faster).
+saturated rate does) and the jaw gap command (leading the gap by ``absolute_close_lead``
+periods of its closing rate while it closes slowly or squeezes). Both move the wrist alike: the
+expert's velocity is limited in norm to ``max_linear_speed``, which is what an absolute move
+allows (a delta action limits each component, so other delta policies may move diagonally up to
+sqrt 3 faster).
 
 Phases (per world, explicit state; ``reset()`` restarts them):
 
@@ -101,6 +102,8 @@ class ExpertConfig:
     # (1 mm) inside the gap is within a learner's regression error of the gap it observes: ACT
     # trained on such absolute demonstrations commanded the gap it saw and stalled on the soft rope
     # and torus at 0.2 N (benchmarks/RESULTS.md, 2026-11-26); 3 periods close 3 mm a step there.
+    # Near the jaw's minimum the command may fall below 0; the absolute action clips it to 0 (shut).
+    # The lift's slow re-grip (0.5 mm a step) is not led.
     absolute_close_lead: int = 3
     hover_clearance: float = 0.02        # m, pad bottoms above the object's top before descending
     descend_speed: float = 0.2           # m/s
@@ -114,6 +117,10 @@ class ExpertConfig:
     max_retries: int = 2
 
     def __post_init__(self) -> None:
+        if isinstance(self.absolute_close_lead, bool) or not isinstance(self.absolute_close_lead, int) \
+                or self.absolute_close_lead < 1:
+            raise ValueError(f"absolute_close_lead must be an integer >= 1 (control periods), got "
+                             f"{self.absolute_close_lead!r}")
         for f in fields(self):
             v = getattr(self, f.name)
             if f.type in ("int", int):
@@ -122,8 +129,6 @@ class ExpertConfig:
             else:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                     raise ValueError(f"{f.name} must be a finite number in (0, inf), got {v!r}")
-        if self.absolute_close_lead < 1:
-            raise ValueError(f"absolute_close_lead must be >= 1 control period, got {self.absolute_close_lead}")
         if not self.regrip_fraction < 1.0 or not self.offset_filter <= 1.0:
             raise ValueError(f"regrip_fraction must be in (0, 1) and offset_filter in (0, 1], got "
                              f"{self.regrip_fraction}, {self.offset_filter}")
