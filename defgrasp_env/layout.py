@@ -20,6 +20,10 @@ component names, unit and bounds (world frame, y up, SI units, quaternions xyzw)
 ``ABSOLUTE_ACTION`` [8] (``action_mode="absolute"``, used by teleoperation)
     ``position`` (3, m, target flange position) | ``orientation`` (4, xyzw) | ``gap`` (1, m, in
     [0, ``JAW_GAP_MAX``]; the jaw stops at ``JAW_GAP_MIN``).
+``TOPDOWN_ACTION`` [5] (``action_mode="topdown"``, top-down grasping)
+    ``linear_velocity`` (3, x ``max_linear_speed`` m/s, in [-1, 1], as ``DELTA_ACTION``) | ``yaw``
+    (1, rad, in [-pi, pi]: the target orientation, flange pointing down turned by ``yaw`` about
+    world +y) | ``jaw`` (1, in [-1, 1], as ``DELTA_ACTION``).
 
 The jaw range is the modelled 2F-85's: ``JAW_GAP_MAX`` = 85 mm (its stroke) open, ``JAW_GAP_MIN``
 = 1.5 mm closed (``defgrasp_env.gripper.linkage``).
@@ -35,7 +39,7 @@ from .gripper import GAP_MAX, GAP_MIN
 
 __all__ = [
     "ABSOLUTE_ACTION", "ACTION_LAYOUTS", "AGENT_POS", "DELTA_ACTION", "ENV_STATE", "Field", "JAW_GAP_MAX",
-    "JAW_GAP_MIN", "NUM_KEYPOINTS", "VectorLayout", "gap_to_jaw_command", "jaw_command_to_gap",
+    "JAW_GAP_MIN", "NUM_KEYPOINTS", "TOPDOWN_ACTION", "VectorLayout", "gap_to_jaw_command", "jaw_command_to_gap",
 ]
 
 #: Jaw gap range (m) between the pad inner faces: closed ... open (the 2F-85's 85 mm stroke).
@@ -159,8 +163,13 @@ ABSOLUTE_ACTION = VectorLayout("absolute action", (
     Field("orientation", ("qx", "qy", "qz", "qw"), "1", -1.0, 1.0),
     Field("gap", ("gap",), "m", 0.0, JAW_GAP_MAX),
 ))
+TOPDOWN_ACTION = VectorLayout("top-down action", (
+    Field("linear_velocity", ("vx", "vy", "vz"), "max_linear_speed", -1.0, 1.0),
+    Field("yaw", ("yaw",), "rad", -np.pi, np.pi),
+    Field("jaw", ("jaw",), "1 (-1 open, +1 closed)", -1.0, 1.0),
+))
 #: The action layout of each ``action_mode``.
-ACTION_LAYOUTS = {"delta": DELTA_ACTION, "absolute": ABSOLUTE_ACTION}
+ACTION_LAYOUTS = {"delta": DELTA_ACTION, "absolute": ABSOLUTE_ACTION, "topdown": TOPDOWN_ACTION}
 
 
 def jaw_command_to_gap(command):

@@ -49,9 +49,10 @@ class DefgraspEnvConfig(EnvConfig):
     the pads' box edges held out of the object (``PickupConfig.edge_contact``, on by default;
     ``--env.edge_contact=false`` evaluates a policy in the node-only contact of data recorded before
     2026-11-26); ``render_mode`` "rgb_array" gives the evaluation videos. ``action_mode``: the
-    env's actions, ``"delta"`` (``DELTA_ACTION`` [7] in [-1, 1], the default) or ``"absolute"``
-    (``ABSOLUTE_ACTION`` [8]: target flange pose and gap, for a policy trained on demonstrations
-    recorded with ``defgrasp-generate --action-mode absolute``).
+    env's actions, ``"delta"`` (``DELTA_ACTION`` [7] in [-1, 1], the default), ``"absolute"``
+    (``ABSOLUTE_ACTION`` [8]: target flange pose and gap) or ``"topdown"`` (``TOPDOWN_ACTION`` [5]:
+    velocities, target yaw, jaw), for a policy trained on demonstrations recorded with
+    ``defgrasp-generate --action-mode`` of that name.
     """
 
     task: str | None = ENV_ID

@@ -8,7 +8,7 @@ from gymnasium.vector import AutoresetMode
 
 import defgrasp_env  # noqa: F401  (registers the env)
 from defgrasp_env.envs.task import REWARD_TERMS
-from defgrasp_env.layout import AGENT_POS, DELTA_ACTION, ENV_STATE
+from defgrasp_env.layout import AGENT_POS, DELTA_ACTION, ENV_STATE, TOPDOWN_ACTION
 from defgrasp_env.sim.meshing import OBJECT_SHAPES
 
 ENV_ID = "DeformablePickup-v0"
@@ -200,6 +200,30 @@ def test_absolute_action_mode_moves_toward_target():
     for _ in range(3):
         obs, *_ = env.step(action)
     np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"), target, atol=1e-4)  # 1 cm at 0.3 m/s: reached
+
+
+def test_topdown_action_mode_turns_to_the_target_yaw():
+    """``action_mode="topdown"``: velocities as delta actions, the yaw a target turned to at the rate
+    limit (1.5 rad/s x 50 ms = 0.075 rad a step, the shortest way) and held; the flange stays
+    pointing down (turned about world +y only). Checked on the flange quaternion (float32: 1e-6)."""
+    env = gym.make(ENV_ID, action_mode="topdown")
+    assert env.action_space.shape == (TOPDOWN_ACTION.size,)
+    obs, _ = env.reset(seed=0)
+    start = AGENT_POS.get(obs["agent_pos"], "wrist_position").astype(float)
+    yaws = []
+    for k in range(14):
+        target = 0.6 if k < 10 else -0.3
+        action = TOPDOWN_ACTION.pack(linear_velocity=[0.0, 0.0, 0.0], yaw=[target], jaw=[-1.0]).astype(np.float32)
+        obs, *_ = env.step(action)
+        q = AGENT_POS.get(obs["agent_pos"], "wrist_quat").astype(float)
+        np.testing.assert_allclose(q[[0, 2]], 0.0, atol=1e-6)  # a turn about +y alone
+        yaws.append(2 * np.arctan2(q[1], q[3]))
+    expected = [min(0.075 * (k + 1), 0.6) for k in range(10)] + [0.6 - 0.075 * k for k in range(1, 5)]
+    np.testing.assert_allclose(yaws, expected, atol=1e-6)
+    np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"), start, atol=1e-6)
+    # a velocity moves the flange as the delta action does: 0.3 m/s x 50 ms along +z
+    obs, *_ = env.step(TOPDOWN_ACTION.pack(linear_velocity=[0.0, 0.0, 1.0], yaw=[yaws[-1]], jaw=[-1.0]).astype(np.float32))
+    np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"), start + [0.0, 0.0, 0.015], atol=1e-6)
 
 
 @pytest.mark.parametrize("kwargs, message", [

@@ -12,7 +12,8 @@ import pytest
 import defgrasp_env  # noqa: F401  (registers the env)
 from defgrasp_env import gripper
 from defgrasp_env.layout import (ABSOLUTE_ACTION, ACTION_LAYOUTS, AGENT_POS, DELTA_ACTION, ENV_STATE, JAW_GAP_MAX,
-                                 JAW_GAP_MIN, NUM_KEYPOINTS, gap_to_jaw_command, jaw_command_to_gap)
+                                 JAW_GAP_MIN, NUM_KEYPOINTS, TOPDOWN_ACTION, gap_to_jaw_command,
+                                 jaw_command_to_gap)
 
 ROOT = pathlib.Path(defgrasp_env.__file__).resolve().parents[1]
 
@@ -39,10 +40,13 @@ def test_jaw_encode_decode_round_trip():
 
 
 def test_layouts_are_contiguous_named_and_round_trip():
-    assert (AGENT_POS.size, ENV_STATE.size, DELTA_ACTION.size, ABSOLUTE_ACTION.size) == (10, 33, 7, 8)
+    assert (AGENT_POS.size, ENV_STATE.size, DELTA_ACTION.size, ABSOLUTE_ACTION.size, TOPDOWN_ACTION.size) == (
+        10, 33, 7, 8, 5)
+    # LeRobotPolicy and the LeRobot export tell the action layouts apart by their sizes
+    assert len({layout.size for layout in ACTION_LAYOUTS.values()}) == len(ACTION_LAYOUTS)
     assert ENV_STATE.field("keypoints").size == 3 * NUM_KEYPOINTS
     rng = np.random.default_rng(0)
-    for layout in (AGENT_POS, ENV_STATE, DELTA_ACTION, ABSOLUTE_ACTION):
+    for layout in (AGENT_POS, ENV_STATE, *ACTION_LAYOUTS.values()):
         assert len(set(layout.names)) == layout.size
         stops = [layout.slice(f.name) for f in layout.fields]
         assert stops[0].start == 0 and stops[-1].stop == layout.size
@@ -60,7 +64,7 @@ def test_layouts_are_contiguous_named_and_round_trip():
         AGENT_POS.slice("gap")
 
 
-@pytest.mark.parametrize("mode", ["delta", "absolute"])
+@pytest.mark.parametrize("mode", ["delta", "absolute", "topdown"])
 def test_env_spaces_and_observations_follow_the_layout(mode):
     env = gym.make("DeformablePickup-v0", action_mode=mode)
     layout = ACTION_LAYOUTS[mode]
@@ -77,10 +81,10 @@ def test_env_spaces_and_observations_follow_the_layout(mode):
     np.testing.assert_array_equal(ENV_STATE.get(obs["environment_state"], "goal"), np.float32([0, 0.6, 0]))
     # command the jaw wider than open, then closed: the gap stays in the 2F-85's range
     wide = layout.pack(**{f.name: np.zeros(f.size) for f in layout.fields})
-    if mode == "delta":
-        wide[DELTA_ACTION.slice("jaw")] = -1.0
+    if mode in ("delta", "topdown"):  # zero velocities (and yaw 0: the start's)
+        wide[layout.slice("jaw")] = -1.0
         close = wide.copy()
-        close[DELTA_ACTION.slice("jaw")] = 1.0
+        close[layout.slice("jaw")] = 1.0
     else:
         wide[ABSOLUTE_ACTION.slice("position")] = flange[0]
         wide[ABSOLUTE_ACTION.slice("orientation")] = quat[0]

@@ -81,3 +81,26 @@ def test_a_policy_of_absolute_actions_returns_them_within_their_bounds(tmp_path)
         assert env.action_space.contains(action)
         obs, _, term, trunc, _ = env.step(action)
     assert trunc
+
+
+def test_a_policy_of_topdown_actions_drives_a_topdown_env(tmp_path):
+    """An ACT whose action feature is ``TOPDOWN_ACTION`` [5] (``--action-mode topdown``
+    demonstrations) is recognised by its size, returns [5] actions within that layout's bounds (a
+    yaw in [-pi, pi] rad) and drives an ``action_mode="topdown"`` env."""
+    from defgrasp_env.layout import TOPDOWN_ACTION
+
+    stats = {"action": {"mean": [0.0] * 5, "std": [1.0, 1.0, 1.0, 10.0, 1.0]}}  # raw yaws over pi: clipped
+    stats |= {k: {"mean": [0.0] * n, "std": [1.0] * n}
+              for k, n in (("observation.state", 10), ("observation.environment_state", 33))}
+    policy = LeRobotPolicy.from_pretrained(save_untrained_act(tmp_path / "td", seed=4, action_mode="topdown",
+                                                              stats=stats))
+    assert policy.action_layout is TOPDOWN_ACTION
+    env = gym.make("DeformablePickup-v0", object="sphere", youngs_modulus=1e6, action_mode="topdown",
+                   max_episode_steps=3)
+    obs, _ = env.reset(seed=0)
+    policy.reset()
+    for _ in range(3):
+        action = policy(obs)
+        assert action.shape == (5,) and env.action_space.contains(action)
+        obs, _, term, trunc, _ = env.step(action)
+    assert trunc

@@ -193,3 +193,36 @@ def test_absolute_action_mode_records_the_expert_in_absolute_actions_and_refuses
     other = ["--objects", "cuboid"] + args[3:]  # another object's files: still one dataset
     assert generate_main([args[0]] + other) == 2 and "action_mode='absolute'" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.glob("*.h5")) == ["sphere_E1e6_000.h5"]
+
+
+def test_topdown_action_mode_records_the_expert_in_topdown_actions(tmp_path):
+    """``--action-mode topdown``: the episodes' actions are ``TOPDOWN_ACTION`` [5] with its column
+    names (velocities and jaw in [-1, 1], the planned yaw in rad, held while the wrist turns), the
+    file validates and replays bit for bit, and its LeRobot export names the action columns so."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from defgrasp_env.layout import AGENT_POS, TOPDOWN_ACTION
+    from defgrasp_env.recording import replay_episode
+    from defgrasp_env.recording.lerobot_export import to_lerobot
+
+    out = tmp_path / "eps"
+    args = [str(out), "--objects", "rope", "--moduli", "1e6", "--episodes", "1", "--max-steps", "12",
+            "--no-progress", "--action-mode", "topdown"]
+    assert generate_main(args) == 0
+    path = out / "rope_E1e6_000.h5"
+    ep = load_episode(path)
+    actions = ep["steps/action"]
+    assert actions.shape == (12, TOPDOWN_ACTION.size)
+    low, high = TOPDOWN_ACTION.bounds()
+    assert np.all(actions >= low.astype(np.float32)) and np.all(actions <= high.astype(np.float32))
+    yaw = TOPDOWN_ACTION.get(actions, "yaw")[:, 0]
+    assert np.ptp(yaw) == 0.0 and abs(yaw[0]) > 0.1  # the rope's planned turn, one target throughout
+    quat = AGENT_POS.get(ep["observations/agent_pos"], "wrist_quat")
+    wrist_yaw = 2 * np.arctan2(quat[:, 1], quat[:, 3])
+    assert abs(wrist_yaw[-1] - yaw[0]) < abs(wrist_yaw[0] - yaw[0])  # turning toward it
+    assert validate_path(out).ok
+    assert replay_episode(path).max_position_error == 0.0
+    dst = tmp_path / "lr"
+    to_lerobot(out, dst, repo_id="test/topdown")
+    ds = LeRobotDataset("test/topdown", root=dst)
+    assert ds.features["action"]["names"] == list(TOPDOWN_ACTION.names) and ds[0]["action"].shape == (5,)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from ..gripper import Gripper
-from ..layout import ABSOLUTE_ACTION, DELTA_ACTION, jaw_command_to_gap
+from ..layout import ABSOLUTE_ACTION, DELTA_ACTION, TOPDOWN_ACTION, jaw_command_to_gap
 from ..transforms import axis_angle_to_quat, quat_multiply, quat_normalize
 from .config import PickupConfig
 
@@ -46,29 +46,51 @@ def absolute_targets(gripper: Gripper, config: PickupConfig, action: np.ndarray)
     d = ABSOLUTE_ACTION.get(action, "position") - pos
     dist = np.linalg.norm(d, axis=1, keepdims=True)
     step = np.minimum(1.0, config.max_linear_speed * config.dt / np.maximum(dist, 1e-12))
+    return pos + d * step, turn_toward(quat, target_quat, config), ABSOLUTE_ACTION.get(action, "gap")[:, 0]
+
+
+def turn_toward(quat: np.ndarray, target_quat: np.ndarray, config: PickupConfig) -> np.ndarray:
+    """Orientations [W, 4] (xyzw) one control period from ``quat`` toward ``target_quat`` (both
+    [W, 4] xyzw, world; the target unit length): the shortest way, no faster than
+    ``max_angular_speed``."""
     rel = quat_multiply(target_quat, quat * np.array([-1, -1, -1, 1.0]))
     rel = np.where(rel[:, 3:4] < 0, -rel, rel)
     angle = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), rel[:, 3])
     frac = np.minimum(1.0, config.max_angular_speed * config.dt / np.maximum(angle, 1e-12))
     axis = rel[:, :3] / np.maximum(np.linalg.norm(rel[:, :3], axis=1, keepdims=True), 1e-12)
     new_quat = quat_multiply(axis_angle_to_quat(axis * (angle * frac)[:, None]), quat)
-    return pos + d * step, quat_normalize(new_quat), ABSOLUTE_ACTION.get(action, "gap")[:, 0]
+    return quat_normalize(new_quat)
 
 
-#: Largest flange move of one control period, in units of (``max_linear_speed`` dt,
-#: ``max_angular_speed`` dt), per ``action_mode``: a delta action moves each axis by up to the speed
-#: limit (a norm of up to sqrt 3 of it); an absolute action's move is rate-limited in norm.
-STEP_NORM_FACTOR = {"delta": math.sqrt(3.0), "absolute": 1.0}
+def topdown_targets(gripper: Gripper, config: PickupConfig, action: np.ndarray):
+    """Targets for top-down actions [W, 5] (``TOPDOWN_ACTION``): the flange moves by the velocities
+    times ``dt`` from where it is (as a delta action) and turns toward the flange-down orientation of
+    the ``yaw`` (rad) about world +y no faster than ``max_angular_speed`` (as an absolute action,
+    which also turns roll and pitch back to pointing down); the jaw command decodes to a gap."""
+    pos, quat = gripper.flange_pose()
+    target_pos = pos + TOPDOWN_ACTION.get(action, "linear_velocity") * config.max_linear_speed * config.dt
+    yaw = TOPDOWN_ACTION.get(action, "yaw")[:, 0]
+    target_quat = axis_angle_to_quat(np.stack([np.zeros_like(yaw), yaw, np.zeros_like(yaw)], axis=1))
+    gap = jaw_command_to_gap(TOPDOWN_ACTION.get(action, "jaw")[:, 0])
+    return target_pos, turn_toward(quat, target_quat, config), gap
+
+
+#: Largest flange translation and rotation of one control period, in units of
+#: (``max_linear_speed`` dt, ``max_angular_speed`` dt), per ``action_mode``: a delta velocity moves
+#: each axis by up to the speed limit (a norm of up to sqrt 3 of it); an absolute move and a turn
+#: toward a target orientation are rate-limited in norm.
+STEP_NORM_FACTOR = {"delta": (math.sqrt(3.0), math.sqrt(3.0)), "absolute": (1.0, 1.0),
+                    "topdown": (math.sqrt(3.0), 1.0)}
 
 
 def max_flange_step(config: PickupConfig) -> tuple[float, float]:
     """Largest flange translation (m) and rotation (rad) one control period of ``config`` can make."""
-    factor = STEP_NORM_FACTOR[config.action_mode]
-    return factor * config.max_linear_speed * config.dt, factor * config.max_angular_speed * config.dt
+    linear, angular = STEP_NORM_FACTOR[config.action_mode]
+    return linear * config.max_linear_speed * config.dt, angular * config.max_angular_speed * config.dt
 
 
 #: The decoder of each ``action_mode``.
-DECODERS = {"delta": delta_targets, "absolute": absolute_targets}
+DECODERS = {"delta": delta_targets, "absolute": absolute_targets, "topdown": topdown_targets}
 
 
 def targets(gripper: Gripper, config: PickupConfig, actions: np.ndarray):

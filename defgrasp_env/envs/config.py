@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from ..gripper import GripperConfig
+from ..layout import ACTION_LAYOUTS
 from ..render.camera import Camera
 from ..sim.materials import Material, check_range
 from ..sim.meshing import OBJECT_SHAPES
@@ -18,7 +19,7 @@ from ..sim.solver import SolverConfig
 from ..wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT
 
 OBS_TYPES = ("state", "pixels_agent_pos", "pixels")
-ACTION_MODES = ("delta", "absolute")
+ACTION_MODES = tuple(ACTION_LAYOUTS)
 RANDOM_OBJECT = "random"
 
 

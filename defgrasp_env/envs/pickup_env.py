@@ -80,6 +80,12 @@ class DeformablePickupEnv(gym.Env):
       * ``"absolute"`` (``ABSOLUTE_ACTION``): Box [8] = target flange position (3, m), orientation
         quaternion xyzw (4), jaw gap (1, m, [0, 0.085]); reached at most at the speed limits (used
         by teleoperation).
+      * ``"topdown"`` (``TOPDOWN_ACTION``): Box [5] = flange linear velocity (3, as ``"delta"``),
+        target yaw (1, rad, [-pi, pi]: the flange pointing down, turned about world +y; turned to at
+        most at ``max_angular_speed``, roll and pitch back to pointing down), jaw command (1, as
+        ``"delta"``): top-down grasping with the wrist's turn as a target (for imitation: a learner
+        regresses a held target yaw, where the delta expert's saturated turn rate flips sign with the
+        object's orientation).
       Out-of-range values are clipped to the box; NaN/inf or a wrong shape raise ``ValueError``.
 
     **Observation space** (Dict, float32 unless noted; LeRobot's sim-env keys; ``AGENT_POS`` and

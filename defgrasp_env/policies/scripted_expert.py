@@ -12,7 +12,9 @@ saturated rate does) and the jaw gap command (leading the gap by ``absolute_clos
 periods of its closing rate while it closes slowly or squeezes). Both move the wrist alike: the
 expert's velocity is limited in norm to ``max_linear_speed``, which is what an absolute move
 allows (a delta action limits each component, so other delta policies may move diagonally up to
-sqrt 3 faster).
+sqrt 3 faster). For an env with ``action_mode="topdown"`` it returns ``TOPDOWN_ACTION`` [5] or
+[N, 5]: the delta action's velocities and jaw command with the planned yaw (rad) in place of the
+angular velocity.
 
 Phases (per world, explicit state; ``reset()`` restarts them):
 
@@ -50,7 +52,7 @@ import numpy as np
 
 from ..gripper import tcp_offset
 from ..layout import (ABSOLUTE_ACTION, AGENT_POS, DELTA_ACTION, ENV_STATE, JAW_GAP_MAX, JAW_GAP_MIN,
-                      NUM_KEYPOINTS, gap_to_jaw_command)
+                      NUM_KEYPOINTS, TOPDOWN_ACTION, gap_to_jaw_command)
 from .grasp_planning import PAD_HALF_LENGTH, plan_grasps
 
 __all__ = ["ExpertConfig", "ScriptedPickupExpert", "PHASE_NAMES", "RECOMMENDED_ENV_KWARGS"]
@@ -196,8 +198,19 @@ def absolute_action(command: WristCommand, config: ExpertConfig) -> np.ndarray:
     return ABSOLUTE_ACTION.pack(position=position, orientation=command.target_quat, gap=gap)
 
 
+def topdown_action(command: WristCommand, config: ExpertConfig) -> np.ndarray:
+    """``TOPDOWN_ACTION`` [N, 5]: the velocities (as ``delta_action``), the yaw (rad, about world +y,
+    in [-pi, pi]) of the orientation turned to, and the jaw command of the gap."""
+    q = command.target_quat  # a turn about +y from flange-down: (0, sin(yaw / 2), 0, cos(yaw / 2))
+    yaw = (2.0 * np.arctan2(q[:, 1], q[:, 3]) + np.pi) % (2.0 * np.pi) - np.pi
+    action = TOPDOWN_ACTION.pack(linear_velocity=command.linear, yaw=yaw[:, None],
+                                 jaw=gap_to_jaw_command(command.gap)[:, None])
+    low, high = TOPDOWN_ACTION.bounds()
+    return np.clip(action, low, high)
+
+
 #: The action each env ``action_mode`` takes, from the expert's command.
-ACTION_PACKERS = {"delta": delta_action, "absolute": absolute_action}
+ACTION_PACKERS = {"delta": delta_action, "absolute": absolute_action, "topdown": topdown_action}
 
 
 class ScriptedPickupExpert:

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..layout import ACTION_LAYOUTS
+
 DEFAULT_POLICY = "defgrasp_env.policies:ScriptedPickupExpert"
 
 
@@ -117,7 +119,7 @@ def record_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps:
     the other; > 1: the episodes of an (object, E) in native vector envs of up to ``worlds`` worlds,
     recorded together (each world's episode as a single env on its seed records it; the policy
     must take a batch of observations, as the scripted expert and 'random' do). ``action_mode``: the
-    env's (``"delta"`` or ``"absolute"``, ``PickupConfig.action_mode``); the policy must act in it
+    env's (``"delta"``, ``"absolute"`` or ``"topdown"``, ``PickupConfig.action_mode``); the policy must act in it
     (the scripted expert does either)."""
     if isinstance(worlds, bool) or not isinstance(worlds, int) or worlds < 1:
         raise ValueError(f"worlds must be an integer >= 1, got {worlds!r}")
@@ -321,8 +323,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-steps", type=int, default=None, help="episode step limit (default: the env's 15 s)")
     p.add_argument("--policy", default=DEFAULT_POLICY, help="module:callable, or 'random'")
     p.add_argument("--frames", action="store_true", help="also record camera frames")
-    p.add_argument("--action-mode", choices=["delta", "absolute"], default="delta",
-                   help="the env's action mode (absolute: target flange pose and gap, e.g. for imitation)")
+    p.add_argument("--action-mode", choices=list(ACTION_LAYOUTS), default="delta",
+                   help="the env's action mode (absolute: target flange pose and gap; topdown: velocities, "
+                        "target yaw and jaw; e.g. for imitation)")
     p.add_argument("--compression", choices=["gzip", "lzf"], default=None)
     p.add_argument("--device", default="cpu")
     p.add_argument("--no-progress", action="store_true")
