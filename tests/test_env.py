@@ -222,7 +222,8 @@ def test_topdown_action_mode_turns_to_the_target_yaw():
     np.testing.assert_allclose(yaws, expected, atol=1e-6)
     np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"), start, atol=1e-6)
     # a velocity moves the flange as the delta action does: 0.3 m/s x 50 ms along +z
-    obs, *_ = env.step(TOPDOWN_ACTION.pack(linear_velocity=[0.0, 0.0, 1.0], yaw=[yaws[-1]], jaw=[-1.0]).astype(np.float32))
+    forward = TOPDOWN_ACTION.pack(linear_velocity=[0.0, 0.0, 1.0], yaw=[yaws[-1]], jaw=[-1.0])
+    obs, *_ = env.step(forward.astype(np.float32))
     np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"), start + [0.0, 0.0, 0.015], atol=1e-6)
 
 

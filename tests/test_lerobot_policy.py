@@ -57,50 +57,32 @@ def test_reset_mask_and_bad_input(policy, tmp_path):
         LeRobotPolicy.from_pretrained(tmp_path)
 
 
-def test_a_policy_of_absolute_actions_returns_them_within_their_bounds(tmp_path):
-    """An ACT whose action feature is ``ABSOLUTE_ACTION`` [8] (trained on ``--action-mode absolute``
-    demonstrations) returns [8] actions clipped to that layout's bounds (a gap in [0, 85 mm], not
-    [-1, 1]) and drives an ``action_mode="absolute"`` env."""
-    from defgrasp_env.layout import ABSOLUTE_ACTION
+@pytest.mark.parametrize("mode, size, clipped, mean, std", [
+    # raw gaps ~1 m: over the 85 mm stroke
+    ("absolute", 8, 7, [0.0] * 7 + [1.0], [1.0] * 7 + [0.1]),
+    # raw yaws ~10 rad: over pi
+    ("topdown", 5, 3, [0.0, 0.0, 0.0, 10.0, 0.0], [1.0, 1.0, 1.0, 0.1, 1.0]),
+])
+def test_a_policy_of_other_actions_returns_them_within_their_bounds(tmp_path, mode, size, clipped, mean, std):
+    """An ACT whose action feature is ``ABSOLUTE_ACTION`` [8] or ``TOPDOWN_ACTION`` [5] (trained on
+    ``--action-mode absolute`` / ``topdown`` demonstrations) is recognised by its size, returns its
+    actions clipped to that layout's bounds (a gap in [0, 85 mm], a yaw in [-pi, pi] rad, not
+    [-1, 1]) and drives an env of that ``action_mode``."""
+    from defgrasp_env.layout import ACTION_LAYOUTS
 
-    stats = {"action": {"mean": [0.0] * 7 + [1.0], "std": [1.0] * 7 + [0.1]}}  # raw gaps ~1 m: over the stroke
+    stats = {"action": {"mean": mean, "std": std}}
     stats |= {k: {"mean": [0.0] * n, "std": [1.0] * n}
               for k, n in (("observation.state", 10), ("observation.environment_state", 33))}
-    policy = LeRobotPolicy.from_pretrained(save_untrained_act(tmp_path / "abs", seed=2, action_mode="absolute",
-                                                              stats=stats))
-    assert policy.action_layout is ABSOLUTE_ACTION
-    env = gym.make("DeformablePickup-v0", object="sphere", youngs_modulus=1e6, action_mode="absolute",
-                   max_episode_steps=3)
+    policy = LeRobotPolicy.from_pretrained(save_untrained_act(tmp_path / mode, seed=2, action_mode=mode, stats=stats))
+    assert policy.action_layout is ACTION_LAYOUTS[mode]
+    env = gym.make("DeformablePickup-v0", object="sphere", youngs_modulus=1e6, action_mode=mode, max_episode_steps=3)
     obs, _ = env.reset(seed=0)
     policy.reset()
     low, high = env.action_space.low, env.action_space.high  # the layout's bounds, float32
     for _ in range(3):
         action = policy(obs)
-        assert action.shape == (8,) and np.all(action >= low) and np.all(action <= high)
-        assert action[7] == high[7]  # a raw ~1 m gap clipped to the 85 mm stroke
+        assert action.shape == (size,) and np.all(action >= low) and np.all(action <= high)
+        assert action[clipped] == high[clipped]  # a raw value over the bound, clipped to it
         assert env.action_space.contains(action)
-        obs, _, term, trunc, _ = env.step(action)
-    assert trunc
-
-
-def test_a_policy_of_topdown_actions_drives_a_topdown_env(tmp_path):
-    """An ACT whose action feature is ``TOPDOWN_ACTION`` [5] (``--action-mode topdown``
-    demonstrations) is recognised by its size, returns [5] actions within that layout's bounds (a
-    yaw in [-pi, pi] rad) and drives an ``action_mode="topdown"`` env."""
-    from defgrasp_env.layout import TOPDOWN_ACTION
-
-    stats = {"action": {"mean": [0.0] * 5, "std": [1.0, 1.0, 1.0, 10.0, 1.0]}}  # raw yaws over pi: clipped
-    stats |= {k: {"mean": [0.0] * n, "std": [1.0] * n}
-              for k, n in (("observation.state", 10), ("observation.environment_state", 33))}
-    policy = LeRobotPolicy.from_pretrained(save_untrained_act(tmp_path / "td", seed=4, action_mode="topdown",
-                                                              stats=stats))
-    assert policy.action_layout is TOPDOWN_ACTION
-    env = gym.make("DeformablePickup-v0", object="sphere", youngs_modulus=1e6, action_mode="topdown",
-                   max_episode_steps=3)
-    obs, _ = env.reset(seed=0)
-    policy.reset()
-    for _ in range(3):
-        action = policy(obs)
-        assert action.shape == (5,) and env.action_space.contains(action)
         obs, _, term, trunc, _ = env.step(action)
     assert trunc
