@@ -23,7 +23,8 @@ component names, unit and bounds (world frame, y up, SI units, quaternions xyzw)
 ``TOPDOWN_ACTION`` [5] (``action_mode="topdown"``, top-down grasping)
     ``linear_velocity`` (3, x ``max_linear_speed`` m/s, in [-1, 1], as ``DELTA_ACTION``) | ``yaw``
     (1, rad, in [-pi, pi]: the target orientation, flange pointing down turned by ``yaw`` about
-    world +y) | ``jaw`` (1, in [-1, 1], as ``DELTA_ACTION``).
+    world +y; -pi and pi are the same target, which a learned regression near them would
+    average) | ``jaw`` (1, in [-1, 1], as ``DELTA_ACTION``).
 
 The jaw range is the modelled 2F-85's: ``JAW_GAP_MAX`` = 85 mm (its stroke) open, ``JAW_GAP_MIN``
 = 1.5 mm closed (``defgrasp_env.gripper.linkage``).

@@ -27,8 +27,9 @@ class LeRobotPolicy:
 
     ``obs``: the env's observation dict, one observation (``agent_pos`` [10], ...) or a batch ([N, 10],
     ... as from ``gym.make_vec``). Returns float32 actions in the layout the policy was trained on
-    (``action_layout``, by its action size): delta actions [7] or [N, 7] in [-1, 1], or absolute
-    actions [8] or [N, 8] (an env with ``action_mode="absolute"``), clipped to the layout's bounds.
+    (``action_layout``, by its action size): delta actions [7] or [N, 7] in [-1, 1], absolute
+    actions [8] or [N, 8] (an env with ``action_mode="absolute"``) or top-down actions [5] or [N, 5]
+    (``action_mode="topdown"``), clipped to the layout's bounds.
     ``reset()`` clears the policy's action queue at every episode start; ``reset(mask)`` for a vector
     env is accepted when the policy keeps no state between steps (``n_action_steps == 1`` without
     temporal ensembling) or all worlds restart together, otherwise it raises ``ValueError`` (LeRobot
@@ -45,8 +46,8 @@ class LeRobotPolicy:
         layouts = {layout.size: layout for layout in ACTION_LAYOUTS.values()}
         if size not in layouts:
             raise ValueError(f"the policy's actions have {size} entries; the env takes "
-                             f"{sorted(layouts)} (delta or absolute actions)")
-        #: the action layout the policy outputs (``DELTA_ACTION`` or ``ABSOLUTE_ACTION``)
+                             f"{sorted(layouts)} (top-down, delta or absolute actions)")
+        #: the action layout the policy outputs (``DELTA_ACTION``, ``ABSOLUTE_ACTION`` or ``TOPDOWN_ACTION``)
         self.action_layout = layouts[size]
         self._low, self._high = (b.astype(np.float32) for b in self.action_layout.bounds())  # the env's Box
 
@@ -120,7 +121,8 @@ def save_untrained_act(path: str | pathlib.Path, *, seed: int = 0, dim_model: in
     [7]), loadable by ``lerobot-eval --policy.path`` and ``LeRobotPolicy.from_pretrained``: for tests
     and smoke runs of the evaluation plumbing (it does not solve the task). ``stats``: per-feature
     ``{"mean": [...], "std": [...]}`` for the normaliser (default: mean 0, std 1). ``action_mode``:
-    ``"absolute"`` gives an ``action`` [8] (the env's absolute actions) instead."""
+    ``"absolute"`` gives an ``action`` [8] (the env's absolute actions), ``"topdown"`` one of [5],
+    instead."""
     from lerobot.envs.utils import env_to_policy_features
     from lerobot.configs import FeatureType
     from lerobot.policies.act.configuration_act import ACTConfig

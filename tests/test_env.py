@@ -1,5 +1,7 @@
 """DeformablePickup-v0: Gymnasium API checks, determinism, vector == single, resets, validation."""
 
+import math
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -225,6 +227,35 @@ def test_topdown_action_mode_turns_to_the_target_yaw():
     forward = TOPDOWN_ACTION.pack(linear_velocity=[0.0, 0.0, 1.0], yaw=[yaws[-1]], jaw=[-1.0])
     obs, *_ = env.step(forward.astype(np.float32))
     np.testing.assert_allclose(AGENT_POS.get(obs["agent_pos"], "wrist_position"), start + [0.0, 0.0, 0.015], atol=1e-6)
+
+
+@pytest.mark.parametrize("mode, translation, rotation", [
+    ("delta", math.sqrt(3) * 0.3 / 20, math.sqrt(3) * 1.5 / 20),  # each component at its limit
+    ("absolute", 0.3 / 20, 1.5 / 20),                            # rate-limited in norm
+    ("topdown", math.sqrt(3) * 0.3 / 20, 1.5 / 20),              # delta velocities, a turn to a target
+])
+def test_largest_flange_step_of_each_action_mode(mode, translation, rotation):
+    """``max_flange_step`` (m, rad a control period at 0.3 m/s, 1.5 rad/s, 20 Hz), which sizes the
+    substeps, is the largest move each mode's decoder makes."""
+    from defgrasp_env.envs.actions import max_flange_step
+    from defgrasp_env.envs.config import PickupConfig
+
+    assert max_flange_step(PickupConfig(action_mode=mode)) == pytest.approx((translation, rotation), rel=1e-12)
+
+
+def test_turn_toward_takes_the_shortest_way_across_pi():
+    """From yaw 3.0 to a target of -3.0 rad the shortest turn is +0.28 rad through pi: one period
+    turns +0.075 rad (to 3.075, i.e. -3.208), not -0.075 the long way."""
+    from defgrasp_env.envs.actions import turn_toward
+    from defgrasp_env.envs.config import PickupConfig
+    from defgrasp_env.transforms import axis_angle_to_quat
+
+    quat = axis_angle_to_quat(np.array([[0.0, 3.0, 0.0]]))
+    target = axis_angle_to_quat(np.array([[0.0, -3.0, 0.0]]))
+    q = turn_toward(quat, target, PickupConfig())[0]
+    assert abs(q[0]) < 1e-12 and abs(q[2]) < 1e-12
+    yaw = 2 * np.arctan2(q[1], q[3])
+    assert (yaw - 3.075 + np.pi) % (2 * np.pi) - np.pi == pytest.approx(0.0, abs=1e-12)
 
 
 @pytest.mark.parametrize("kwargs, message", [

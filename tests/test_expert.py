@@ -269,7 +269,8 @@ def test_expert_in_absolute_and_topdown_actions_picks_as_in_delta_actions(name, 
     (rope) and 1.1 mm (stiff cube) at most; bound 3 mm, a tenth of the objects' size. The absolute
     expert here closes at the delta rate (``absolute_close_lead=1``; its default 3 has its own test).
     In top-down actions (``TOPDOWN_ACTION`` [5]: the delta velocities and jaw, the planned yaw as a
-    target turned to at the rate limit) the same: measured 0.08 mm (rope) and 0.13 mm (stiff cube)."""
+    target turned to at the rate limit) the same: measured 0.08 mm (rope) and 0.13 mm (stiff cube);
+    bound 1 mm (no jaw command round trip differs from the delta episode's)."""
     runs = {}
     for mode in ("delta", "absolute", "topdown"):
         env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=youngs_modulus, action_mode=mode)
@@ -287,9 +288,9 @@ def test_expert_in_absolute_and_topdown_actions_picks_as_in_delta_actions(name, 
                 break
         runs[mode] = (bool(info["is_success"]), len(path), np.array(path))
     assert runs["delta"][0]
-    for mode in ("absolute", "topdown"):
+    for mode, bound in (("absolute", 3e-3), ("topdown", 1e-3)):
         assert runs[mode][:2] == runs["delta"][:2]
-        assert np.abs(runs["delta"][2] - runs[mode][2]).max() < 3e-3
+        assert np.abs(runs["delta"][2] - runs[mode][2]).max() < bound
     with pytest.raises(ValueError, match="action_mode"):
         ScriptedPickupExpert(action_mode="velocity")
     for bad in (0, 2.5, True):
@@ -342,3 +343,22 @@ def test_expert_absolute_close_lead(name, youngs_modulus):
         actions = [e(obs) for e in experts]
         np.testing.assert_array_equal(actions[0], actions[1])
         obs, *_ = delta_env.step(actions[0])
+
+
+def test_topdown_action_packs_the_planned_yaw_wrapped_to_its_bounds():
+    """The top-down packer turns the expert's target orientation (a turn about +y; the plan may
+    reach +-3 pi / 2 from a wrist already turned) into the yaw in [-pi, pi] of the same rotation,
+    not a clipped one; velocities and jaw as the delta action's."""
+    from defgrasp_env.layout import TOPDOWN_ACTION, gap_to_jaw_command
+    from defgrasp_env.policies.scripted_expert import ExpertConfig, WristCommand, topdown_action
+    from defgrasp_env.transforms import axis_angle_to_quat
+
+    yaw = np.array([4.0, -4.0, 0.3])
+    command = WristCommand(flange=np.zeros((3, 3)), linear=np.array([[0.5, -1.0, 0.0]] * 3), angular=np.zeros((3, 3)),
+                           target_quat=axis_angle_to_quat(np.stack([0 * yaw, yaw, 0 * yaw], axis=1)),
+                           gap=np.array([0.04, 0.0015, 0.085]))
+    action = topdown_action(command, ExpertConfig())
+    np.testing.assert_allclose(TOPDOWN_ACTION.get(action, "yaw")[:, 0], [4.0 - 2 * np.pi, 2 * np.pi - 4.0, 0.3],
+                               atol=1e-12)
+    np.testing.assert_array_equal(TOPDOWN_ACTION.get(action, "linear_velocity"), command.linear)
+    np.testing.assert_allclose(TOPDOWN_ACTION.get(action, "jaw")[:, 0], gap_to_jaw_command(command.gap), atol=1e-12)

@@ -44,6 +44,10 @@ def test_layouts_are_contiguous_named_and_round_trip():
         10, 33, 7, 8, 5)
     # LeRobotPolicy and the LeRobot export tell the action layouts apart by their sizes
     assert len({layout.size for layout in ACTION_LAYOUTS.values()}) == len(ACTION_LAYOUTS)
+    # every action mode has its decoder, step bound and expert packer
+    from defgrasp_env.envs.actions import DECODERS, STEP_NORM_FACTOR
+    from defgrasp_env.policies.scripted_expert import ACTION_PACKERS
+    assert set(DECODERS) == set(STEP_NORM_FACTOR) == set(ACTION_PACKERS) == set(ACTION_LAYOUTS)
     assert ENV_STATE.field("keypoints").size == 3 * NUM_KEYPOINTS
     rng = np.random.default_rng(0)
     for layout in (AGENT_POS, ENV_STATE, *ACTION_LAYOUTS.values()):

@@ -109,8 +109,9 @@ def observation_spaces(config: PickupConfig) -> spaces.Dict:
 
 
 def action_space(config: PickupConfig) -> spaces.Box:
-    """Action space of one world: ``DELTA_ACTION`` [-1, 1]^7 or ``ABSOLUTE_ACTION`` (pos(3) m, quat
-    xyzw(4), gap(1) m), see ``defgrasp_env.layout``."""
+    """Action space of one world: ``DELTA_ACTION`` [-1, 1]^7, ``ABSOLUTE_ACTION`` (pos(3) m, quat
+    xyzw(4), gap(1) m) or ``TOPDOWN_ACTION`` (velocity(3) in [-1, 1], yaw(1) rad, jaw(1) in [-1, 1]),
+    see ``defgrasp_env.layout``."""
     return _box(ACTION_LAYOUTS[config.action_mode])
 
 

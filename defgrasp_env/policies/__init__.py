@@ -1,6 +1,7 @@
 """Policies for ``DeformablePickup-v0`` that act from observations only.
 
-``ScriptedPickupExpert``: a phase-scripted top-down pick-up expert (delta or absolute actions, batched).
+``ScriptedPickupExpert``: a phase-scripted top-down pick-up expert (delta, absolute or top-down actions,
+batched).
 """
 
 from .grasp_planning import GraspPlan, plan_grasps

@@ -69,8 +69,8 @@ class ExpertConfig:
     """Tuning of the scripted expert (SI units; validated).
 
     ``max_linear_speed``, ``max_angular_speed`` and ``control_hz`` must equal the env's
-    ``PickupConfig`` values (they scale the normalised delta actions and an absolute action's
-    one-period move); use
+    ``PickupConfig`` values (they scale the normalised delta and top-down actions and an absolute
+    action's one-period move); use
     ``ScriptedPickupExpert.from_env(env)`` to copy them.
     """
 
@@ -100,7 +100,8 @@ class ExpertConfig:
     slow_close_speed: float = 0.02       # m/s, closing speed from there to the contact
     squeeze_speed: float = 0.02          # m/s, closing speed while squeezing to grip_force
     # control periods by which the jaw command of the slow close and the squeeze leads the current
-    # gap in absolute actions (delta actions: 1 period, the rate above). A command one period
+    # gap in absolute actions (delta and top-down actions, whose jaw command is the same: 1 period,
+    # the rate above; ACT on delta demonstrations did not stall on it). A command one period
     # (1 mm) inside the gap is within a learner's regression error of the gap it observes: ACT
     # trained on such absolute demonstrations commanded the gap it saw and stalled on the soft rope
     # and torus at 0.2 N (benchmarks/RESULTS.md, 2026-11-26); 3 periods close 3 mm a step there.
@@ -214,14 +215,16 @@ ACTION_PACKERS = {"delta": delta_action, "absolute": absolute_action, "topdown":
 
 
 class ScriptedPickupExpert:
-    """Scripted pick-up expert for ``DeformablePickup-v0`` (delta or absolute actions, state observations).
+    """Scripted pick-up expert for ``DeformablePickup-v0`` (delta, absolute or top-down actions, state
+    observations).
 
     ``expert(obs) -> action``: ``obs`` is the env's observation dict with ``agent_pos`` [10] or
     [N, 10] (flange position m, quaternion xyzw, jaw gap m, left/right tip normal force N) and
     ``environment_state`` [33] or [N, 33] (feature point m, its velocity m/s, goal m, 8 keypoints
     m, all world frame, y up). Returns float32 [7] or [N, 7] in [-1, 1] (``action_mode="delta"``):
     flange linear velocity, angular velocity (world axis-angle rate), jaw command; or [8] or [N, 8]
-    (``"absolute"``): target flange position m, orientation xyzw, jaw gap m. ``from_env`` takes the
+    (``"absolute"``): target flange position m, orientation xyzw, jaw gap m; or [5] or [N, 5]
+    (``"topdown"``): the delta linear velocity, the target yaw rad, the jaw command. ``from_env`` takes the
     mode from the env's config. Call ``reset()`` at every episode start
     (``reset(mask)`` for the worlds of a vector env that were reset).
 
@@ -231,7 +234,7 @@ class ScriptedPickupExpert:
     def __init__(self, config: ExpertConfig | None = None, *, action_mode: str = "delta", **overrides):
         if action_mode not in ACTION_PACKERS:
             raise ValueError(f"action_mode must be one of {sorted(ACTION_PACKERS)}, got {action_mode!r}")
-        #: the env's ``action_mode`` the actions are for (``"delta"`` or ``"absolute"``)
+        #: the env's ``action_mode`` the actions are for (``"delta"``, ``"absolute"`` or ``"topdown"``)
         self.action_mode = action_mode
         base = config if config is not None else ExpertConfig()
         if not isinstance(base, ExpertConfig):

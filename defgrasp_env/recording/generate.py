@@ -119,8 +119,8 @@ def record_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps:
     the other; > 1: the episodes of an (object, E) in native vector envs of up to ``worlds`` worlds,
     recorded together (each world's episode as a single env on its seed records it; the policy
     must take a batch of observations, as the scripted expert and 'random' do). ``action_mode``: the
-    env's (``"delta"``, ``"absolute"`` or ``"topdown"``, ``PickupConfig.action_mode``); the policy must act in it
-    (the scripted expert does either)."""
+    env's (``"delta"``, ``"absolute"`` or ``"topdown"``, ``PickupConfig.action_mode``); the policy
+    must act in it (the scripted expert acts in any)."""
     if isinstance(worlds, bool) or not isinstance(worlds, int) or worlds < 1:
         raise ValueError(f"worlds must be an integer >= 1, got {worlds!r}")
     for group in job_groups(jobs, None if worlds == 1 else worlds):
