@@ -346,17 +346,14 @@ def test_expert_absolute_close_lead(name, youngs_modulus):
 
 
 def test_topdown_action_packs_the_planned_yaw_wrapped_to_its_bounds():
-    """The top-down packer turns the expert's target orientation (a turn about +y; the plan may
-    reach +-3 pi / 2 from a wrist already turned) into the yaw in [-pi, pi] of the same rotation,
-    not a clipped one; velocities and jaw as the delta action's."""
+    """The top-down packer turns the expert's target yaw (about +y; the plan may reach +-3 pi / 2
+    from a wrist already turned) into the yaw in [-pi, pi] of the same rotation, not a clipped one;
+    velocities and jaw as the delta action's."""
     from defgrasp_env.layout import TOPDOWN_ACTION, gap_to_jaw_command
     from defgrasp_env.policies.scripted_expert import ExpertConfig, WristCommand, topdown_action
-    from defgrasp_env.transforms import axis_angle_to_quat
-
     yaw = np.array([4.0, -4.0, 0.3])
     command = WristCommand(flange=np.zeros((3, 3)), linear=np.array([[0.5, -1.0, 0.0]] * 3), angular=np.zeros((3, 3)),
-                           target_quat=axis_angle_to_quat(np.stack([0 * yaw, yaw, 0 * yaw], axis=1)),
-                           gap=np.array([0.04, 0.0015, 0.085]))
+                           target_yaw=yaw, gap=np.array([0.04, 0.0015, 0.085]))
     action = topdown_action(command, ExpertConfig())
     np.testing.assert_allclose(TOPDOWN_ACTION.get(action, "yaw")[:, 0], [4.0 - 2 * np.pi, 2 * np.pi - 4.0, 0.3],
                                atol=1e-12)

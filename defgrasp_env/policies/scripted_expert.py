@@ -173,13 +173,13 @@ def _rotation_vector(q_target: np.ndarray, q: np.ndarray) -> np.ndarray:
 class WristCommand:
     """One control period's command of the expert, per world: ``flange`` [N, 3] (m, world, where it
     is), ``linear`` [N, 3] and ``angular`` [N, 3] (velocities in units of the env's speed limits,
-    components in [-1, 1]), ``target_quat`` [N, 4] (xyzw, the orientation it turns to) and ``gap``
-    [N] (m, the jaw gap command)."""
+    components in [-1, 1]), ``target_yaw`` [N] (rad about world +y from flange-down: the orientation
+    it turns to) and ``gap`` [N] (m, the jaw gap command)."""
 
     flange: np.ndarray
     linear: np.ndarray
     angular: np.ndarray
-    target_quat: np.ndarray
+    target_yaw: np.ndarray
     gap: np.ndarray
 
 
@@ -196,14 +196,13 @@ def absolute_action(command: WristCommand, config: ExpertConfig) -> np.ndarray:
     low, high = ABSOLUTE_ACTION.field("position").bounds()
     position = np.clip(command.flange + command.linear * config.max_linear_speed * config.dt, low, high)
     gap = np.clip(command.gap, 0.0, JAW_GAP_MAX)[:, None]
-    return ABSOLUTE_ACTION.pack(position=position, orientation=command.target_quat, gap=gap)
+    return ABSOLUTE_ACTION.pack(position=position, orientation=_yaw_quat(command.target_yaw), gap=gap)
 
 
 def topdown_action(command: WristCommand, config: ExpertConfig) -> np.ndarray:
     """``TOPDOWN_ACTION`` [N, 5]: the velocities (as ``delta_action``), the yaw (rad, about world +y,
     in [-pi, pi]) of the orientation turned to, and the jaw command of the gap."""
-    q = command.target_quat  # a turn about +y from flange-down: (0, sin(yaw / 2), 0, cos(yaw / 2))
-    yaw = (2.0 * np.arctan2(q[:, 1], q[:, 3]) + np.pi) % (2.0 * np.pi) - np.pi
+    yaw = (command.target_yaw + np.pi) % (2.0 * np.pi) - np.pi  # the plan may reach +-3 pi / 2
     action = TOPDOWN_ACTION.pack(linear_velocity=command.linear, yaw=yaw[:, None],
                                  jaw=gap_to_jaw_command(command.gap)[:, None])
     low, high = TOPDOWN_ACTION.bounds()
@@ -224,8 +223,8 @@ class ScriptedPickupExpert:
     m, all world frame, y up). Returns float32 [7] or [N, 7] in [-1, 1] (``action_mode="delta"``):
     flange linear velocity, angular velocity (world axis-angle rate), jaw command; or [8] or [N, 8]
     (``"absolute"``): target flange position m, orientation xyzw, jaw gap m; or [5] or [N, 5]
-    (``"topdown"``): the delta linear velocity, the target yaw rad, the jaw command. ``from_env`` takes the
-    mode from the env's config. Call ``reset()`` at every episode start
+    (``"topdown"``): the delta linear velocity, the target yaw rad, the jaw command. ``from_env``
+    takes the mode from the env's config. Call ``reset()`` at every episode start
     (``reset(mask)`` for the worlds of a vector env that were reset).
 
     ``phase`` [N] (int, see ``PHASE_NAMES``) and ``retries`` [N] expose the script's state.
@@ -472,6 +471,5 @@ class ScriptedPickupExpert:
         linear /= np.maximum(np.abs(linear).max(axis=1, keepdims=True), 1.0)
         angular /= np.maximum(np.abs(angular).max(axis=1, keepdims=True), 1.0)
         self.phase = new_phase
-        command = WristCommand(flange=flange, linear=linear, angular=angular, target_quat=_yaw_quat(target_yaw),
-                               gap=gap_cmd)
+        command = WristCommand(flange=flange, linear=linear, angular=angular, target_yaw=target_yaw, gap=gap_cmd)
         return ACTION_PACKERS[self.action_mode](command, c).astype(np.float32)
