@@ -11,10 +11,10 @@ Success is LeRobot's ``pc_success`` (``info["is_success"]`` at the episode's end
 ``eval_info.json``. Printed: the table with the scripted expert's rate (``success_table.py``, the
 same env defaults) and the paper's human rate beside each cell, plus timing (also written to
 ``OUT/report.md``); ``OUT/episodes.json`` keeps every found cell's episodes in order (success, reward
-sum and maximum, and the folders they came from; ``seed`` and ``lerobot_eval_args`` there are
-this call's, which ran the cells in ``cells_run``: pooled or earlier cells keep their own, in their
-folders' ``eval_info.json``). ``--append`` adds the
-report to ``benchmarks/RESULTS.md`` with the machine.
+sum and maximum, the folders they came from and each folder's ``lerobot-eval`` command line, which
+the cell run keeps in the folder as ``lerobot_eval_command.json``; ``seed`` and ``lerobot_eval_args``
+there are this call's, which ran the cells in ``cells_run``, None and [] for a table-only call).
+``--append`` adds the report to ``benchmarks/RESULTS.md`` with the machine.
 
     python benchmarks/eval_lerobot_policy.py CKPT --episodes 5 --out datasets/output/eval_act
     python benchmarks/eval_lerobot_policy.py CKPT --objects torus --moduli 1e4 --policy.n_action_steps=1
@@ -44,6 +44,10 @@ from success_table import MODULI, OBJECTS, human_rate, modulus_label  # noqa: E4
 EXPERT_RATE = 1.0
 
 
+#: Each cell folder's record of the ``lerobot-eval`` command line that filled it (a JSON list).
+COMMAND_FILE = "lerobot_eval_command.json"
+
+
 def cell_name(obj: str, e: float) -> str:
     return f"{obj}_E{e:.0e}"
 
@@ -64,13 +68,15 @@ def eval_cell(ckpt: str, obj: str, e: float, episodes: int, batch: int, seed: in
         eval_main()
     finally:
         sys.argv = saved
+    (cell_dir / COMMAND_FILE).write_text(json.dumps(argv) + "\n")
     return json.loads((cell_dir / "eval_info.json").read_text())["overall"]
 
 
 def pool_cell(dirs: list[pathlib.Path]) -> dict | None:
     """Success rate, episode count and time of one cell over the ``eval_info.json`` files in ``dirs``,
     and under ``"episodes"`` its episodes in order (``successes``, ``sum_rewards``, ``max_rewards``
-    lists, and the ``folders`` they were read from)."""
+    lists, the ``folders`` they were read from and each folder's ``lerobot-eval`` command line,
+    ``commands``: None for a folder without its ``COMMAND_FILE``)."""
     found = [d for d in dirs if (d / "eval_info.json").is_file()]
     infos = [json.loads((d / "eval_info.json").read_text()) for d in found]
     if not infos:
@@ -84,7 +90,9 @@ def pool_cell(dirs: list[pathlib.Path]) -> dict | None:
     return {"pc_success": 100.0 * sum(successes) / len(successes), "n_episodes": len(successes),
             "successes": sum(successes), "eval_s": sum(i["overall"]["eval_s"] for i in infos),
             "episodes": {"successes": successes, "sum_rewards": per_episode("sum_rewards"),
-                         "max_rewards": per_episode("max_rewards"), "folders": [str(d) for d in found]}}
+                         "max_rewards": per_episode("max_rewards"), "folders": [str(d) for d in found],
+                         "commands": [json.loads((d / COMMAND_FILE).read_text()) if (d / COMMAND_FILE).is_file()
+                                      else None for d in found]}}
 
 
 def format_report(cells: dict, wall: float, ckpt: str, train_note: str) -> str:
@@ -151,8 +159,8 @@ def main(argv=None) -> int:
     cells = {cell: c for cell, c in pooled.items() if c is not None}
     out.mkdir(parents=True, exist_ok=True)
     (out / "episodes.json").write_text(json.dumps(
-        {"checkpoint": args.checkpoint, "cells_run": [cell_name(*c) for c in ran], "seed": args.seed,
-         "lerobot_eval_args": extra, "cells": {cell_name(*cell): c["episodes"] for cell, c in cells.items()}},
+        {"checkpoint": args.checkpoint, "cells_run": [cell_name(*c) for c in ran], "seed": args.seed if ran else None,
+         "lerobot_eval_args": extra if ran else [], "cells": {cell_name(*cell): c["episodes"] for cell, c in cells.items()}},
         indent=1) + "\n")
     if len(cells) < len(OBJECTS) * len(MODULI):
         print(f"{len(cells)} of {len(OBJECTS) * len(MODULI)} cells found: no table yet")

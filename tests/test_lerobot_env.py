@@ -170,7 +170,8 @@ def test_absolute_action_mode_config_builds_an_absolute_env():
 def test_eval_lerobot_policy_script_keeps_every_episode(tmp_path):
     """``benchmarks/eval_lerobot_policy.py`` (the success table's script) runs lerobot-eval for one
     cell and writes ``episodes.json`` with that cell's episodes in order, equal to lerobot-eval's own
-    ``eval_info.json``; with 1 of the 20 cells it prints no table."""
+    ``eval_info.json``, and the cell's lerobot-eval command line; with 1 of the 20 cells it prints no
+    table; a table-only call afterwards keeps the cell's command."""
     from defgrasp_env.lerobot_policy import save_untrained_act
 
     ckpt = save_untrained_act(tmp_path / "act", seed=5)
@@ -190,3 +191,12 @@ def test_eval_lerobot_policy_script_keeps_every_episode(tmp_path):
     assert cell["successes"] == metrics["successes"] == [False, False]
     assert cell["sum_rewards"] == metrics["sum_rewards"] and cell["max_rewards"] == metrics["max_rewards"]
     assert cell["folders"] == [str(out / "cuboid_E1e+06")]
+    (command,) = cell["commands"]
+    assert command[0] == "lerobot-eval" and "--seed=7" in command and command[-1] == "--env.episode_seconds=0.2"
+    # a table-only call (no episodes) keeps each cell's own command and records no seed of its own
+    res = subprocess.run(cmd[:3] + ["--episodes", "0", "--out", str(out)], capture_output=True, text=True, cwd=ROOT,
+                         env=_subprocess_env(), timeout=900)
+    assert res.returncode == 0, res.stderr[-3000:]
+    kept = json.loads((out / "episodes.json").read_text())
+    assert kept["seed"] is None and kept["lerobot_eval_args"] == [] and kept["cells_run"] == []
+    assert kept["cells"]["cuboid_E1e+06"]["commands"] == [command]
