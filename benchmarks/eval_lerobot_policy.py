@@ -159,8 +159,9 @@ def main(argv=None) -> int:
     cells = {cell: c for cell, c in pooled.items() if c is not None}
     out.mkdir(parents=True, exist_ok=True)
     (out / "episodes.json").write_text(json.dumps(
-        {"checkpoint": args.checkpoint, "cells_run": [cell_name(*c) for c in ran], "seed": args.seed if ran else None,
-         "lerobot_eval_args": extra if ran else [], "cells": {cell_name(*cell): c["episodes"] for cell, c in cells.items()}},
+        {"checkpoint": args.checkpoint, "cells_run": [cell_name(*c) for c in ran],
+         "seed": args.seed if ran else None, "lerobot_eval_args": extra if ran else [],
+         "cells": {cell_name(*cell): c["episodes"] for cell, c in cells.items()}},
         indent=1) + "\n")
     if len(cells) < len(OBJECTS) * len(MODULI):
         print(f"{len(cells)} of {len(OBJECTS) * len(MODULI)} cells found: no table yet")
