@@ -118,6 +118,18 @@ class VectorLayout:
             raise ValueError(f"{self.name} must have {self.size} entries in its last axis, got shape {v.shape}")
         return v[..., self.slice(name)]
 
+    def columns(self, field_names) -> np.ndarray:
+        """Indices (int [n]) of the entries of the fields ``field_names`` (a non-empty sequence of
+        distinct field names of this layout), in the layout's order whatever the order given:
+        ``vector[..., layout.columns(names)]`` keeps those fields."""
+        names = list(field_names)
+        known = [f.name for f in self.fields]
+        unknown = [n for n in names if n not in known]
+        if not names or unknown or len(set(names)) != len(names):
+            raise ValueError(f"{self.name} fields must be a non-empty list of distinct names out of {known}, "
+                             f"got {names}" + (f" (unknown: {unknown})" if unknown else ""))
+        return np.concatenate([np.arange(self.size)[self.slice(f.name)] for f in self.fields if f.name in names])
+
     def pack(self, **values) -> np.ndarray:
         """float64 vector(s) [..., size] from one array per field (all fields, leading axes broadcast)."""
         missing = [f.name for f in self.fields if f.name not in values]

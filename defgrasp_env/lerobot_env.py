@@ -23,9 +23,11 @@ from __future__ import annotations
 import pathlib
 from dataclasses import dataclass, field
 
-from lerobot.configs import FeatureType, PolicyFeature
+import numpy as np
+from lerobot.configs import FeatureType, PipelineFeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.processor import PolicyProcessorPipeline, RenameObservationsProcessorStep
+from lerobot.processor import (ObservationProcessorStep, PolicyProcessorPipeline, ProcessorStepRegistry,
+                               RenameObservationsProcessorStep)
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
 
 from . import ENV_ID
@@ -34,7 +36,7 @@ from .sim.meshing import OBJECT_SHAPES
 from .layout import ACTION_LAYOUTS, AGENT_POS, ENV_STATE
 from .recording.lerobot_export import CAMERA_KEY
 
-__all__ = ["DefgraspEnvConfig"]
+__all__ = ["DefgraspEnvConfig", "SelectStateColumnsStep"]
 
 
 @EnvConfig.register_subclass("defgrasp")
@@ -52,7 +54,10 @@ class DefgraspEnvConfig(EnvConfig):
     env's actions, ``"delta"`` (``DELTA_ACTION`` [7] in [-1, 1], the default), ``"absolute"``
     (``ABSOLUTE_ACTION`` [8]: target flange pose and gap) or ``"topdown"`` (``TOPDOWN_ACTION`` [5]:
     velocities, target yaw, jaw), for a policy trained on demonstrations recorded with
-    ``defgrasp-generate --action-mode`` of that name.
+    ``defgrasp-generate --action-mode`` of that name. ``state_fields``: the ``AGENT_POS`` fields
+    the policy's ``observation.state`` holds (default all [10]), for a policy trained on a dataset
+    exported with ``defgrasp-dataset to-lerobot --state-fields`` (e.g.
+    ``--env.state_fields='[wrist_position,jaw_gap,tip_normal_force]'``: no wrist orientation [6]).
     """
 
     task: str | None = ENV_ID
@@ -65,6 +70,7 @@ class DefgraspEnvConfig(EnvConfig):
     action_mode: str = PickupConfig.action_mode
     render_mode: str = "rgb_array"
     device: str = "cpu"
+    state_fields: list[str] | None = None
     features: dict[str, PolicyFeature] = field(default_factory=dict)
     features_map: dict[str, str] = field(default_factory=lambda: {
         ACTION: ACTION, "agent_pos": OBS_STATE, "environment_state": OBS_ENV_STATE, "pixels": CAMERA_KEY})
@@ -80,14 +86,21 @@ class DefgraspEnvConfig(EnvConfig):
         camera = env_config.camera
         self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION,
                                                shape=(ACTION_LAYOUTS[env_config.action_mode].size,))}
+        if self.state_fields is not None:
+            AGENT_POS.columns(self.state_fields)  # names checked at parse time
         if self.obs_type in ("state", "pixels_agent_pos"):
-            self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(AGENT_POS.size,))
+            self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(len(self.state_columns),))
         if self.obs_type == "state":
             self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV,
                                                                shape=(ENV_STATE.size,))
         if self.obs_type in ("pixels", "pixels_agent_pos"):
             self.features["pixels"] = PolicyFeature(type=FeatureType.VISUAL,
                                                     shape=(camera.height, camera.width, 3))
+
+    @property
+    def state_columns(self) -> np.ndarray:
+        """Indices (int [n]) of the ``agent_pos`` entries ``observation.state`` keeps (``state_fields``)."""
+        return np.arange(AGENT_POS.size) if self.state_fields is None else AGENT_POS.columns(self.state_fields)
 
     def _pickup_kwargs(self) -> dict:
         return dict(object=self.object, youngs_modulus=float(self.youngs_modulus), obs_type=self.obs_type,
@@ -110,6 +123,36 @@ class DefgraspEnvConfig(EnvConfig):
 
     def get_env_processors(self):
         """LeRobot turns a single ``pixels`` array into ``observation.image``; rename it to the
-        dataset's camera key. State observations pass through unchanged."""
-        rename = RenameObservationsProcessorStep(rename_map={OBS_IMAGE: CAMERA_KEY})
-        return PolicyProcessorPipeline(steps=[rename]), PolicyProcessorPipeline(steps=[])
+        dataset's camera key. ``observation.state`` keeps the ``state_fields`` columns (all by
+        default); the environment state passes through unchanged."""
+        steps = [RenameObservationsProcessorStep(rename_map={OBS_IMAGE: CAMERA_KEY})]
+        if self.state_fields is not None:
+            steps.append(SelectStateColumnsStep(columns=self.state_columns.tolist()))
+        return PolicyProcessorPipeline(steps=steps), PolicyProcessorPipeline(steps=[])
+
+
+@ProcessorStepRegistry.register(name="defgrasp_select_state_columns")
+@dataclass
+class SelectStateColumnsStep(ObservationProcessorStep):
+    """Keeps the entries ``columns`` (ints, in order) of ``observation.state`` [..., 10] along its
+    last axis, as ``defgrasp-dataset to-lerobot --state-fields`` keeps them in a dataset."""
+
+    columns: list[int] = field(default_factory=list)
+
+    def observation(self, observation):
+        if OBS_STATE in observation:
+            state = observation[OBS_STATE]
+            if state.shape[-1] != AGENT_POS.size:
+                raise ValueError(f"{OBS_STATE} must have {AGENT_POS.size} entries (agent_pos) before the column "
+                                 f"selection, got shape {tuple(state.shape)}")
+            observation = {**observation, OBS_STATE: state[..., self.columns]}
+        return observation
+
+    def get_config(self) -> dict:
+        return {"columns": list(self.columns)}
+
+    def transform_features(self, features):
+        obs = dict(features[PipelineFeatureType.OBSERVATION])
+        if OBS_STATE in obs:
+            obs[OBS_STATE] = PolicyFeature(type=obs[OBS_STATE].type, shape=(len(self.columns),))
+        return {**features, PipelineFeatureType.OBSERVATION: obs}

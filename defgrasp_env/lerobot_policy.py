@@ -52,11 +52,14 @@ class LeRobotPolicy:
         self._low, self._high = (b.astype(np.float32) for b in self.action_layout.bounds())  # the env's Box
 
     @classmethod
-    def from_pretrained(cls, path: str | pathlib.Path, device: str = "cpu") -> LeRobotPolicy:
+    def from_pretrained(cls, path: str | pathlib.Path, device: str = "cpu", state_fields=None) -> LeRobotPolicy:
         """Load a ``pretrained_model`` folder written by ``lerobot-train`` (config, weights and the
-        saved pre/post-processors) onto ``device``."""
+        saved pre/post-processors) onto ``device``. ``state_fields``: the ``AGENT_POS`` fields the
+        policy's ``observation.state`` was trained on (``defgrasp-dataset to-lerobot
+        --state-fields``; default all); checked against the policy's state size."""
         from lerobot.configs.policies import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+        from lerobot.utils.constants import OBS_STATE
 
         from .lerobot_env import DefgraspEnvConfig
 
@@ -68,7 +71,13 @@ class LeRobotPolicy:
         policy = get_policy_class(config.type).from_pretrained(path, config=config)
         pre, post = make_pre_post_processors(config, pretrained_path=str(path),
                                              preprocessor_overrides={"device_processor": {"device": device}})
-        env_pre, _ = DefgraspEnvConfig().get_env_processors()
+        env_config = DefgraspEnvConfig(state_fields=None if state_fields is None else list(state_fields))
+        state = config.input_features.get(OBS_STATE)
+        if state is not None and tuple(state.shape) != (len(env_config.state_columns),):
+            raise ValueError(f"{path}: the policy's {OBS_STATE} has shape {tuple(state.shape)}, the state_fields "
+                             f"{env_config.state_fields or 'all'} give ({len(env_config.state_columns)},); pass the "
+                             "fields its dataset was exported with (to-lerobot --state-fields)")
+        env_pre, _ = env_config.get_env_processors()
         return cls(policy, pre, post, env_pre)
 
     def reset(self, mask=None) -> None:
@@ -115,14 +124,14 @@ class LeRobotPolicy:
 
 
 def save_untrained_act(path: str | pathlib.Path, *, seed: int = 0, dim_model: int = 32, chunk_size: int = 4,
-                       stats: dict | None = None, action_mode: str = "delta") -> pathlib.Path:
+                       stats: dict | None = None, action_mode: str = "delta", state_fields=None) -> pathlib.Path:
     """Write a randomly initialised, tiny ACT ``pretrained_model`` folder for the ``defgrasp`` env's
     state features (``observation.state`` [10], ``observation.environment_state`` [33], ``action``
     [7]), loadable by ``lerobot-eval --policy.path`` and ``LeRobotPolicy.from_pretrained``: for tests
     and smoke runs of the evaluation plumbing (it does not solve the task). ``stats``: per-feature
     ``{"mean": [...], "std": [...]}`` for the normaliser (default: mean 0, std 1). ``action_mode``:
     ``"absolute"`` gives an ``action`` [8] (the env's absolute actions), ``"topdown"`` one of [5],
-    instead."""
+    instead; ``state_fields`` an ``observation.state`` of those ``AGENT_POS`` fields only."""
     from lerobot.envs.utils import env_to_policy_features
     from lerobot.configs import FeatureType
     from lerobot.policies.act.configuration_act import ACTConfig
@@ -131,7 +140,7 @@ def save_untrained_act(path: str | pathlib.Path, *, seed: int = 0, dim_model: in
 
     from .lerobot_env import DefgraspEnvConfig
 
-    features = env_to_policy_features(DefgraspEnvConfig(action_mode=action_mode))
+    features = env_to_policy_features(DefgraspEnvConfig(action_mode=action_mode, state_fields=state_fields))
     config = ACTConfig(
         device="cpu", dim_model=dim_model, n_heads=2, dim_feedforward=2 * dim_model, n_encoder_layers=1,
         n_decoder_layers=1, n_vae_encoder_layers=1, chunk_size=chunk_size, n_action_steps=1,

@@ -176,3 +176,15 @@ def test_recorders_and_lerobot_name_columns_by_the_layout():
     for key, feature in features.items():
         assert np.asarray(frame[key]).shape == feature["shape"], key
         assert np.asarray(frame[key]).dtype == np.dtype(feature["dtype"]), key
+
+
+def test_columns_select_fields_in_layout_order_and_reject_bad_names():
+    cols = AGENT_POS.columns(["tip_normal_force", "wrist_position", "jaw_gap"])  # any order given
+    assert cols.tolist() == [0, 1, 2, 7, 8, 9]
+    assert [AGENT_POS.names[i] for i in cols] == ["wrist_x", "wrist_y", "wrist_z", "jaw_gap",
+                                                   "left_tip_normal_force", "right_tip_normal_force"]
+    vec = AGENT_POS.pack(wrist_position=[1, 2, 3], wrist_quat=[4, 5, 6, 7], jaw_gap=[8], tip_normal_force=[9, 10])
+    assert vec[cols].tolist() == [1, 2, 3, 8, 9, 10]
+    for bad in (["wrist_yaw"], [], ["jaw_gap", "jaw_gap"]):
+        with pytest.raises(ValueError, match="agent_pos fields must be a non-empty list of distinct names"):
+            AGENT_POS.columns(bad)

@@ -84,6 +84,29 @@ def test_make_env_builds_and_steps_like_a_direct_env():
     vec.close()
 
 
+def test_state_fields_select_the_columns_the_policy_sees():
+    """``state_fields`` (a dataset exported with ``--state-fields``): the config's ``agent_pos``
+    feature has the chosen fields' size, and LeRobot's path (``make_env`` -> ``preprocess_observation``
+    -> the config's env processor) hands the policy exactly those columns of the env's ``agent_pos``;
+    a bad field name fails at construction."""
+    from lerobot.envs.utils import preprocess_observation
+
+    cfg = DefgraspEnvConfig(object="sphere", youngs_modulus=1e6, episode_seconds=0.25,
+                            state_fields=["wrist_position", "jaw_gap", "tip_normal_force"])
+    assert env_to_policy_features(cfg)["observation.state"].shape == (6,)
+    vec = make_env(cfg, n_envs=1)["defgrasp"][0]
+    obs, _ = vec.reset(seed=[3])
+    obs, *_ = vec.step(np.array([[0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0]], np.float32))
+    env_pre, _ = cfg.get_env_processors()
+    state = env_pre(preprocess_observation(obs))["observation.state"].numpy()
+    full = obs["agent_pos"]
+    np.testing.assert_array_equal(state, full[:, [0, 1, 2, 7, 8, 9]])
+    assert np.all(np.abs(full[:, 3:7]).sum(axis=1) > 0.5)  # the left-out quaternion was there
+    vec.close()
+    with pytest.raises(ValueError, match="unknown: \\['quat'\\]"):
+        DefgraspEnvConfig(state_fields=["quat"])
+
+
 def test_reset_accepts_framework_options_and_rejects_typos():
     env = gym.make("DeformablePickup-v0")
     env.reset(seed=0, options={"lerobot_new_rollout": True, "object": "cuboid"})
@@ -171,19 +194,22 @@ def test_eval_lerobot_policy_script_keeps_every_episode(tmp_path):
     """``benchmarks/eval_lerobot_policy.py`` (the success table's script) runs lerobot-eval for one
     cell and writes ``episodes.json`` with that cell's episodes in order, equal to lerobot-eval's own
     ``eval_info.json``, and the cell's lerobot-eval command line; with 1 of the 20 cells it prints no
-    table; a table-only call afterwards keeps the cell's command."""
+    table; a table-only call afterwards keeps the cell's command. The policy reads a state without
+    the wrist orientation, so lerobot-eval parses ``--env.state_fields`` (it fails on the state's
+    size otherwise)."""
     from defgrasp_env.lerobot_policy import save_untrained_act
 
-    ckpt = save_untrained_act(tmp_path / "act", seed=5)
+    ckpt = save_untrained_act(tmp_path / "act", seed=5, state_fields=["wrist_position", "jaw_gap", "tip_normal_force"])
     out = tmp_path / "eval"
+    lerobot_args = ["--env.episode_seconds=0.2", "--env.state_fields=[wrist_position,jaw_gap,tip_normal_force]"]
     cmd = [sys.executable, str(ROOT / "benchmarks" / "eval_lerobot_policy.py"), str(ckpt), "--episodes", "2",
            "--batch-size", "2", "--objects", "cuboid", "--moduli", "1e6", "--seed", "7", "--out", str(out),
-           "--env.episode_seconds=0.2"]
+           *lerobot_args]
     res = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=_subprocess_env(), timeout=900)
     assert res.returncode == 0, res.stderr[-3000:]
     assert "1 of 20 cells found: no table yet" in res.stdout
     kept = json.loads((out / "episodes.json").read_text())
-    assert kept["seed"] == 7 and kept["lerobot_eval_args"] == ["--env.episode_seconds=0.2"]
+    assert kept["seed"] == 7 and kept["lerobot_eval_args"] == lerobot_args
     assert kept["cells_run"] == ["cuboid_E1e+06"]
     metrics = json.loads((out / "cuboid_E1e+06" / "eval_info.json").read_text())["per_task"][0]["metrics"]
     assert list(kept["cells"]) == ["cuboid_E1e+06"]
@@ -192,7 +218,7 @@ def test_eval_lerobot_policy_script_keeps_every_episode(tmp_path):
     assert cell["sum_rewards"] == metrics["sum_rewards"] and cell["max_rewards"] == metrics["max_rewards"]
     assert cell["folders"] == [str(out / "cuboid_E1e+06")]
     (command,) = cell["commands"]
-    assert command[0] == "lerobot-eval" and "--seed=7" in command and command[-1] == "--env.episode_seconds=0.2"
+    assert command[0] == "lerobot-eval" and "--seed=7" in command and command[-2:] == lerobot_args
     # a table-only call (no episodes) keeps each cell's own command and records no seed of its own
     res = subprocess.run(cmd[:3] + ["--episodes", "0", "--out", str(out)], capture_output=True, text=True, cwd=ROOT,
                          env=_subprocess_env(), timeout=900)

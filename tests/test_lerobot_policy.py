@@ -86,3 +86,23 @@ def test_a_policy_of_other_actions_returns_them_within_their_bounds(tmp_path, mo
         assert env.action_space.contains(action)
         obs, _, term, trunc, _ = env.step(action)
     assert trunc
+
+
+def test_a_policy_without_the_wrist_orientation_ignores_it_and_reads_the_rest(tmp_path):
+    """An ACT trained on ``observation.state`` = wrist position, gap and tip forces [6] (a dataset
+    exported with ``--state-fields``): loaded with those fields, its action does not change when
+    only the wrist quaternion of the observation changes, and does when the gap changes; loaded
+    without them it is refused with the sizes named."""
+    fields = ["wrist_position", "jaw_gap", "tip_normal_force"]
+    ckpt = save_untrained_act(tmp_path / "nq", seed=4, state_fields=fields)
+    with pytest.raises(ValueError, match=r"shape \(6,\).*give \(10,\)"):
+        LeRobotPolicy.from_pretrained(ckpt)
+    policy = LeRobotPolicy.from_pretrained(ckpt, state_fields=fields)
+    obs, _ = gym.make("DeformablePickup-v0").reset(seed=0)
+    turned = {**obs, "agent_pos": obs["agent_pos"].copy()}
+    turned["agent_pos"][3:7] = [0.0, np.sin(0.6), 0.0, np.cos(0.6)]  # another yaw
+    narrower = {**obs, "agent_pos": obs["agent_pos"].copy()}
+    narrower["agent_pos"][7] -= 0.03
+    base = policy(obs)
+    np.testing.assert_array_equal(policy(turned), base)
+    assert np.abs(policy(narrower) - base).max() > 1e-4

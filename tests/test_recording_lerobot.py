@@ -76,3 +76,26 @@ def test_plot_writes_the_four_fig5_panels(episodes, tmp_path):
     assert (tmp_path / "cli.png").stat().st_size > 10_000
     with pytest.raises(ValueError, match="png"):
         plot_episode(ep, tmp_path / "fig5.pdf")
+
+
+def test_to_lerobot_state_fields_keep_those_columns_and_names(episodes, tmp_path):
+    """``--state-fields`` writes ``observation.state`` as the chosen agent_pos columns of the files
+    (the wrist orientation left out here), named by the layout; unknown fields are refused before
+    anything is written."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from defgrasp_env.layout import AGENT_POS
+
+    fields = ["wrist_position", "jaw_gap", "tip_normal_force"]
+    assert dataset_cli(["to-lerobot", str(episodes), str(tmp_path / "lr"), "--state-fields", *fields]) == 0
+    ds = LeRobotDataset("defgrasp/lr", root=tmp_path / "lr")
+    assert ds.features["observation.state"]["shape"] == (6,)
+    assert ds.features["observation.state"]["names"] == ["wrist_x", "wrist_y", "wrist_z", "jaw_gap",
+                                                         "left_tip_normal_force", "right_tip_normal_force"]
+    got = torch.cat([b["observation.state"] for b in torch.utils.data.DataLoader(ds, batch_size=8)]).numpy()
+    full = np.concatenate([load_episode(p)["observations/agent_pos"][:-1] for p in sorted(episodes.glob("*.h5"))])
+    keep = [AGENT_POS.names.index(n) for n in ds.features["observation.state"]["names"]]
+    np.testing.assert_allclose(got, full[:, keep], rtol=1e-6, atol=1e-7)
+    with pytest.raises(ValueError, match="unknown: \\['wrist_yaw'\\]"):
+        to_lerobot(episodes, tmp_path / "bad", state_fields=["wrist_position", "wrist_yaw"])
+    assert not (tmp_path / "bad").exists()

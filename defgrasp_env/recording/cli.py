@@ -37,7 +37,7 @@ def _to_lerobot(args) -> int:
     from .lerobot_export import to_lerobot
 
     ds = to_lerobot(args.src, args.dst, repo_id=args.repo_id, task=args.task, use_videos=args.videos,
-                    progress=True)
+                    progress=True, state_fields=args.state_fields)
     print(f"wrote LeRobot dataset {ds.repo_id} to {args.dst}: {ds.meta.total_episodes} episode(s), "
           f"{ds.meta.total_frames} frame(s) at {ds.meta.fps} fps")
     return 0
@@ -82,6 +82,9 @@ def _to_lerobot_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repo-id", default=None, help="LeRobot repo id (default defgrasp/<dst name>)")
     p.add_argument("--task", default=None, help="task string (default: per episode, from object and E)")
     p.add_argument("--videos", action="store_true", help="store camera frames as MP4 instead of PNG")
+    p.add_argument("--state-fields", nargs="+", default=None, metavar="FIELD",
+                   help="the agent_pos fields observation.state keeps (default all: wrist_position wrist_quat "
+                        "jaw_gap tip_normal_force); evaluate with --env.state_fields='[...]' alike")
 
 
 def _plot_args(p: argparse.ArgumentParser) -> None:

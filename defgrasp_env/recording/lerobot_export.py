@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import pathlib
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -105,7 +105,8 @@ def lerobot_features(layout: FrameShape, names: dict, use_videos: bool) -> dict:
 
 
 def to_lerobot(src: str | os.PathLike, dst: str | os.PathLike, repo_id: str | None = None,
-               task: str | None = None, use_videos: bool = False, progress: bool = False):
+               task: str | None = None, use_videos: bool = False, progress: bool = False,
+               state_fields=None):
     """Convert the episode file(s) at ``src`` (file or directory) into a new LeRobot dataset at ``dst``.
 
     Args:
@@ -113,6 +114,10 @@ def to_lerobot(src: str | os.PathLike, dst: str | os.PathLike, repo_id: str | No
         repo_id: LeRobot repo id (default ``defgrasp/<dst name>``).
         task: task string for every frame (default: :func:`default_task` per episode).
         use_videos: store images as MP4 (needs a working video encoder); default PNG images.
+        state_fields: the ``AGENT_POS`` fields ``observation.state`` keeps (names, e.g.
+            ``["wrist_position", "jaw_gap", "tip_normal_force"]``; kept in the layout's order);
+            default all. A policy trained on such a dataset is evaluated with the same
+            ``DefgraspEnvConfig.state_fields`` (``--env.state_fields``).
 
     Returns:
         The finalized ``LeRobotDataset``.
@@ -127,13 +132,22 @@ def to_lerobot(src: str | os.PathLike, dst: str | os.PathLike, repo_id: str | No
         raise FileExistsError(f"{dst}: LeRobot dataset folder exists already; choose a new one (nothing was changed)")
     episodes = [load_episode(p, _KEYS, missing_ok=True) for p in paths]
     layout = _frame_shape(episodes)
+    names = dict(episodes[0].names)
+    columns = None
+    if state_fields is not None:
+        columns = AGENT_POS.columns(state_fields)
+        if layout.state_dim != AGENT_POS.size:
+            raise ValueError(f"{episodes[0].path}: agent_pos has {layout.state_dim} columns, not AGENT_POS's "
+                             f"{AGENT_POS.size}; state_fields selects AGENT_POS fields")
+        layout = replace(layout, state_dim=len(columns))
+        names["observations/agent_pos"] = [AGENT_POS.names[i] for i in columns]
     repo_id = repo_id or f"defgrasp/{dst.name}"
-    features = lerobot_features(layout, episodes[0].names, use_videos)
+    features = lerobot_features(layout, names, use_videos)
     ds = LeRobotDataset.create(repo_id, layout.fps, features, root=dst, robot_type=ROBOT_TYPE,
                                use_videos=use_videos, video_backend="pyav")
     try:
         for ep in _progress(episodes, progress):
-            _add_episode(ds, ep, task or default_task(ep))
+            _add_episode(ds, ep, task or default_task(ep), columns)
         ds.finalize()
     except BaseException:
         ds.finalize()
@@ -150,9 +164,11 @@ def _progress(items, enabled: bool):
     return tqdm(items, desc="to-lerobot", unit="episode")
 
 
-def _add_episode(ds, ep: Episode, task: str) -> None:
+def _add_episode(ds, ep: Episode, task: str, columns: np.ndarray | None) -> None:
     t = ep.num_steps
     state = ep["observations/agent_pos"].astype(np.float32)
+    if columns is not None:
+        state = state[:, columns]
     env_state = ep["observations/environment_state"].astype(np.float32)
     action = ep["steps/action"].astype(np.float32)
     reward = ep["steps/reward"].astype(np.float32)
