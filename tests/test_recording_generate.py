@@ -67,6 +67,33 @@ def test_resuming_a_dataset_recorded_without_edge_contact_is_refused(tmp_path, c
     assert hashlib.sha256(first.read_bytes()).hexdigest() == digest
 
 
+def test_files_name_their_policy_and_resuming_with_another_is_refused(tmp_path, capsys):
+    """Every file keeps the ``--policy`` that chose its actions (attribute ``policy``, the default
+    expert's spec when none is given); resuming the folder with another policy exits 2 naming both
+    and writes nothing, and a folder of files from before the attribute resumes as before."""
+    import h5py
+
+    from defgrasp_env.recording.generate import DEFAULT_POLICY
+
+    args = [str(tmp_path), "--objects", "cuboid", "--moduli", "1e4", "--episodes", "1", "--max-steps", "2",
+            "--no-progress"]
+    assert generate_main(args) == 0
+    first = tmp_path / "cuboid_E1e4_000.h5"
+    assert load_episode(first).attrs["policy"] == DEFAULT_POLICY
+    assert validate_path(first).ok
+    capsys.readouterr()
+    more = args[:6] + ["2"] + args[7:]
+    assert generate_main(more + ["--policy", "random"]) == 2
+    err = capsys.readouterr().err
+    assert f"recorded by the policy {DEFAULT_POLICY!r}, this run's is 'random'" in err and "--policy" in err
+    assert sorted(p.name for p in tmp_path.glob("*.h5")) == ["cuboid_E1e4_000.h5"]
+    with h5py.File(first, "r+") as f:  # as written before the attribute existed
+        del f.attrs["policy"]
+    assert validate_path(first).ok
+    assert generate_main(more + ["--policy", "random"]) == 0
+    assert load_episode(tmp_path / "cuboid_E1e4_001.h5").attrs["policy"] == "random"
+
+
 def test_bad_policy_is_reported(tmp_path, capsys):
     assert generate_main([str(tmp_path), "--objects", "cuboid", "--moduli", "1e5", "--policy", "nope:thing",
                           "--no-progress"]) == 2

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import h5py
 import numpy as np
 
-from .schema import FIELDS, INFO_GROUP, ROOT_ATTRS, shape_text
+from .schema import FIELDS, INFO_GROUP, OPTIONAL_ROOT_ATTRS, ROOT_ATTRS, shape_text
 
 QUAT_TOLERANCE = 1e-3
 REPLAY_KEYS = ("seed", "rng_state", "options", "scene_origin")
@@ -48,9 +48,10 @@ class Inspection:
 
 
 def _check_attrs(attrs: dict, out: Inspection) -> None:
-    for name, (typ, _) in ROOT_ATTRS.items():
+    for name, (typ, _) in (ROOT_ATTRS | OPTIONAL_ROOT_ATTRS).items():
         if name not in attrs:
-            out.errors.append(f"root attribute {name!r} is missing")
+            if name in ROOT_ATTRS:
+                out.errors.append(f"root attribute {name!r} is missing")
             continue
         v = attrs[name]
         ok = isinstance(v, typ) and not (typ is int and isinstance(v, bool))

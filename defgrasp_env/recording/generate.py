@@ -153,7 +153,7 @@ def _record_one_by_one(out, group: list[Job], kwargs: dict, policy_spec: str, re
     from .recorder import HDF5Recorder
 
     env = HDF5Recorder(gym.make(ENV_ID, **kwargs), out, record_frames=record_frames, compression=compression,
-                       save_unfinished=False)
+                       save_unfinished=False, policy=policy_spec)
     policy = load_policy(policy_spec, env)
     try:
         for job in group:
@@ -188,7 +188,7 @@ def _record_together(out, group: list[Job], kwargs: dict, policy_spec: str, reco
     n = len(group)
     env = VectorHDF5Recorder(gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
                                           autoreset_mode=AutoresetMode.DISABLED, **kwargs),
-                             out, compression=compression, save_unfinished=False)
+                             out, compression=compression, save_unfinished=False, policy=policy_spec)
     try:
         policy = load_policy(policy_spec, env)
         for w, job in enumerate(group):
@@ -231,12 +231,14 @@ def progress_bar(total: int, finished: int, enabled: bool):
     return bar, on_episode
 
 
-def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta") -> None:
+def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta", policy: str | None = None) -> None:
     """Resuming into ``out`` must record what an uninterrupted run would have, and a folder is one
     dataset: raise ValueError if an episode file already there (any of them: a run records all its
     files with one config) was recorded with another pad contact model than today's default
     (``PickupConfig.edge_contact``, on since 2026-11-26; files from before lack the key and were
-    recorded without it) or in another ``action_mode`` than this run's, naming the file."""
+    recorded without it), in another ``action_mode`` than this run's, or by another ``policy``
+    (its ``policy`` attribute; files from before 2026-11-27 lack it and are not checked), naming
+    the file."""
     import h5py
 
     from ..envs.config import PickupConfig
@@ -250,6 +252,7 @@ def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta") -
     path = files[0]
     with h5py.File(path, "r") as f:
         recorded = config_from_json(str(f.attrs["config_json"]))
+        recorded_policy = f.attrs.get("policy")
     default = PickupConfig().edge_contact
     if recorded.edge_contact != default:
         raise ValueError(f"{path} was recorded with edge_contact={recorded.edge_contact}, today's default is "
@@ -259,6 +262,10 @@ def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta") -
         raise ValueError(f"{path} was recorded with action_mode={recorded.action_mode!r}, this run's is "
                          f"{action_mode!r}: the folder would mix action layouts in one dataset; pass "
                          f"--action-mode {recorded.action_mode} or record into a new folder")
+    if policy is not None and recorded_policy is not None and str(recorded_policy) != policy:
+        raise ValueError(f"{path} was recorded by the policy {str(recorded_policy)!r}, this run's is {policy!r}: "
+                         f"the folder would mix policies in one dataset; pass --policy {recorded_policy} or record "
+                         "into a new folder")
 
 
 def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,
@@ -355,7 +362,7 @@ def main(argv: list[str] | None = None) -> int:
         from .distributed import run_jobs_ray
         record = partial(run_jobs_ray, address=None if args.ray == "local" else args.ray, workers=args.workers)
     try:
-        check_same_recording_config(args.out, args.action_mode)
+        check_same_recording_config(args.out, args.action_mode, args.policy)
         paths = record(args.out, jobs, args.policy, args.max_steps, args.device, args.frames,
                        args.compression, progress=not args.no_progress, worlds=args.worlds,
                        action_mode=args.action_mode)

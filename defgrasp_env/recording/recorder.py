@@ -32,6 +32,8 @@ class HDF5Recorder(gym.Wrapper):
         name_template: file name with an ``{index}`` field; existing names are skipped.
         save_unfinished: what ``reset()``/``close()`` do with an episode cut short: save it
             (``end_reason`` "reset"/"close") or discard it.
+        policy: what chooses the actions (``defgrasp-generate``'s ``--policy``, ``"teleop"``),
+            stored in every file as the ``policy`` attribute; None: not stored.
 
     Attributes:
         paths: files written so far (in order). ``last_path``: the latest one or None.
@@ -39,7 +41,7 @@ class HDF5Recorder(gym.Wrapper):
 
     def __init__(self, env: gym.Env, directory: str | os.PathLike, *, record_frames: bool = False,
                  compression: str | None = None, name_template: str = "episode_{index:06d}" + SUFFIX,
-                 save_unfinished: bool = True):
+                 save_unfinished: bool = True, policy: str | None = None):
         super().__init__(env)
         uw = env.unwrapped
         if not isinstance(getattr(uw, "config", None), PickupConfig) or not hasattr(uw, "scene"):
@@ -49,7 +51,7 @@ class HDF5Recorder(gym.Wrapper):
         if record_frames and not pixels_in_obs and env.render_mode != "rgb_array":
             raise ValueError(f"record_frames=True needs render_mode='rgb_array', got {env.render_mode!r}")
         self.writer = EpisodeWriter(directory, uw.config, compression=compression, name_template=name_template,
-                                    env_id=env.spec.id if env.spec is not None else type(uw).__name__)
+                                    env_id=env.spec.id if env.spec is not None else type(uw).__name__, policy=policy)
         self.record_frames = record_frames and not pixels_in_obs
         self.save_unfinished = save_unfinished
         self._ended = False

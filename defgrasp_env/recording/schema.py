@@ -93,6 +93,12 @@ ROOT_ATTRS: dict[str, tuple[type, str]] = {
     "end_reason": (str, "'terminated', 'truncated', 'reset' or 'close' (what ended the recording)"),
     "created_utc": (str, "ISO 8601 time the file was written"),
 }
+#: Root attributes a file may lack (files written before they existed, or a recorder not told): name ->
+#: (python type, description); checked when present.
+OPTIONAL_ROOT_ATTRS: dict[str, tuple[type, str]] = {
+    "policy": (str, "what chose the actions: `defgrasp-generate --policy` (module:attribute or 'random'), "
+                    "'teleop' for the collection app, or what a recorder's `policy=` was given"),
+}
 
 def shape_text(shape: tuple[str | int, ...]) -> str:
     return "scalar" if shape == () else "[" + ", ".join(str(d) for d in shape) + "]"
@@ -111,4 +117,6 @@ def schema_markdown() -> str:
     lines += ["", "| Root attribute | Type | Description |", "|---|---|---|"]
     for name, (typ, desc) in ROOT_ATTRS.items():
         lines.append(f"| `{name}` | {typ.__name__} | {desc} |")
+    for name, (typ, desc) in OPTIONAL_ROOT_ATTRS.items():
+        lines.append(f"| `{name}` | {typ.__name__} | {desc} (optional) |")
     return "\n".join(lines) + "\n"

@@ -62,13 +62,16 @@ class VectorHDF5Recorder(VectorWrapper):
         name_template: file name with an ``{index}`` field; existing names are skipped.
         save_unfinished: what reset()/close() do with episodes cut short: save them (``end_reason``
             "reset"/"close") or discard them.
+        policy: what chooses the actions, stored in every file as the ``policy`` attribute; None:
+            not stored.
 
     Attributes:
         paths: files written so far, in order of completion. ``writer``: the ``EpisodeWriter``.
     """
 
     def __init__(self, env: VectorEnv, directory: str | os.PathLike, *, compression: str | None = None,
-                 name_template: str = "episode_{index:06d}" + SUFFIX, save_unfinished: bool = True):
+                 name_template: str = "episode_{index:06d}" + SUFFIX, save_unfinished: bool = True,
+                 policy: str | None = None):
         super().__init__(env)
         uw = env.unwrapped
         if not isinstance(uw, DeformablePickupVectorEnv):
@@ -78,7 +81,7 @@ class VectorHDF5Recorder(VectorWrapper):
                              "(the env resets an ended world inside the step, before its final state can be recorded)")
         self.writer = EpisodeWriter(directory, uw.config, compression=compression, name_template=name_template,
                                     env_id=uw.spec.id if getattr(uw, "spec", None) is not None
-                                    else "DeformablePickup-v0")
+                                    else "DeformablePickup-v0", policy=policy)
         self.save_unfinished = save_unfinished
 
     @property

@@ -57,14 +57,19 @@ class EpisodeWriter:
         env_id: stored as the ``env_id`` attribute.
         compression: h5py compression of the large datasets (None, "gzip", "lzf").
         name_template: file name with an ``{index}`` field; existing names are skipped.
+        policy: what chooses the actions, stored as the ``policy`` attribute (None: not stored).
 
     Attributes:
         paths: files written so far, in order. ``episode_index``: the next file's index.
     """
 
     def __init__(self, directory: str | os.PathLike, config: PickupConfig, *, env_id: str,
-                 compression: str | None = None, name_template: str = "episode_{index:06d}" + SUFFIX):
+                 compression: str | None = None, name_template: str = "episode_{index:06d}" + SUFFIX,
+                 policy: str | None = None):
         check_recorder_options(name_template, compression)
+        if policy is not None and (not isinstance(policy, str) or not policy):
+            raise ValueError(f"policy must be a non-empty string naming what chooses the actions, or None; got {policy!r}")
+        self.policy = policy
         self.directory = check_writable_directory(directory)
         self.config = config
         self.env_id = env_id
@@ -153,6 +158,8 @@ class EpisodeWriter:
             "truncated": bool(buf.truncated[-1]), "is_success": bool(arrays["steps/is_success"][-1]),
             "end_reason": reason, "world": w,
         }
+        if self.policy is not None:
+            attrs["policy"] = self.policy
         names = {"steps/action": list(ACTION_LAYOUTS[cfg.action_mode].names),
                  "observations/agent_pos": list(AGENT_POS.names),
                  "observations/environment_state": list(ENV_STATE.names)}

@@ -99,7 +99,7 @@ def make_env_stack(env_kwargs: dict, *, out_dir=None, render: bool = False, env_
     except ImportError as exc:
         say(f"WARNING: defgrasp_env.recording is not available ({exc}); running WITHOUT recording")
         return marks, None, marks
-    rec = HDF5Recorder(marks, out_dir)
+    rec = HDF5Recorder(marks, out_dir, policy="teleop")
     return rec, rec, marks
 
 
