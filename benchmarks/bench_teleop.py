@@ -305,6 +305,8 @@ def main(argv=None) -> int:
     p.add_argument("--objects", nargs="*", default=None, help="objects of table 2 (default: all five; none: skip it)")
     p.add_argument("--moduli", nargs="*", type=float, default=[1e4, 1e7], help="E values of table 2 (Pa)")
     p.add_argument("--no-components", action="store_true", help="skip table 1")
+    p.add_argument("--device", default="cpu", help="Warp device of the simulation (cpu, cuda:0), as defgrasp-teleop "
+                                                   "--env-device")
     args = p.parse_args(argv)
     iks = ("analytic", "iterative") if args.ik == "both" else (args.ik,)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
@@ -314,13 +316,14 @@ def main(argv=None) -> int:
     sweep = []
     for name in objects:
         for e in args.moduli:
-            kw = {"object": name, "youngs_modulus": e}
+            kw = {"object": name, "youngs_modulus": e, "device": args.device}
             sweep.append((name, e, bench_loop("analytic", kw), bench_latency("analytic", args.latency_seconds, kw)))
             print(sweep_table(sweep[-1:]).splitlines()[-1], flush=True)
-    loops = [] if args.no_components else [bench_loop(ik) for ik in iks]
-    lats = [] if args.no_components else [bench_latency(ik, args.latency_seconds) for ik in iks]
+    on_device = {"device": args.device}
+    loops = [] if args.no_components else [bench_loop(ik, on_device) for ik in iks]
+    lats = [] if args.no_components else [bench_latency(ik, args.latency_seconds, on_device) for ik in iks]
     machine = (f"{host()}, "
-               f"load average {load:.1f} at start; Python {platform.python_version()}; env on Warp CPU; commit {git_state()}"
+               f"load average {load:.1f} at start; Python {platform.python_version()}; env on Warp {args.device}; commit {git_state()}"
                + (f"; {args.note}" if args.note else ""))
     out = (f"\n## Teleop loop (bench_teleop.py), {datetime.datetime.now().isoformat(timespec='seconds')}\n\n"
            f"Machine: {machine}.\nStream: tests/data/{STREAM}_*.jsonl over loopback UDP.\n")
