@@ -122,6 +122,8 @@ class VectorLayout:
         """Indices (int [n]) of the entries of the fields ``field_names`` (a non-empty sequence of
         distinct field names of this layout), in the layout's order whatever the order given:
         ``vector[..., layout.columns(names)]`` keeps those fields."""
+        if isinstance(field_names, str):
+            raise ValueError(f"{self.name} fields must be a list of field names, got the string {field_names!r}")
         names = list(field_names)
         known = [f.name for f in self.fields]
         unknown = [n for n in names if n not in known]

@@ -58,6 +58,8 @@ class DefgraspEnvConfig(EnvConfig):
     the policy's ``observation.state`` holds (default all [10]), for a policy trained on a dataset
     exported with ``defgrasp-dataset to-lerobot --state-fields`` (e.g.
     ``--env.state_fields='[wrist_position,jaw_gap,tip_normal_force]'``: no wrist orientation [6]).
+    Only the state's size is visible to a check against the policy: give the fields its dataset
+    was exported with (``meta/info.json`` names them under ``observation.state``).
     """
 
     task: str | None = ENV_ID
@@ -88,6 +90,9 @@ class DefgraspEnvConfig(EnvConfig):
                                                shape=(ACTION_LAYOUTS[env_config.action_mode].size,))}
         if self.state_fields is not None:
             AGENT_POS.columns(self.state_fields)  # names checked at parse time
+            if self.obs_type == "pixels":
+                raise ValueError("state_fields selects agent_pos fields; obs_type='pixels' has no agent_pos "
+                                 f"(got state_fields={self.state_fields})")
         if self.obs_type in ("state", "pixels_agent_pos"):
             self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(len(self.state_columns),))
         if self.obs_type == "state":
@@ -138,6 +143,11 @@ class SelectStateColumnsStep(ObservationProcessorStep):
     last axis, as ``defgrasp-dataset to-lerobot --state-fields`` keeps them in a dataset."""
 
     columns: list[int] = field(default_factory=list)
+
+    def __post_init__(self):
+        cols = list(self.columns)
+        if not cols or len(set(cols)) != len(cols) or not all(0 <= c < AGENT_POS.size for c in cols):
+            raise ValueError(f"columns must be distinct indices in [0, {AGENT_POS.size}) of agent_pos, got {cols}")
 
     def observation(self, observation):
         if OBS_STATE in observation:

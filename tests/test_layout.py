@@ -188,3 +188,5 @@ def test_columns_select_fields_in_layout_order_and_reject_bad_names():
     for bad in (["wrist_yaw"], [], ["jaw_gap", "jaw_gap"]):
         with pytest.raises(ValueError, match="agent_pos fields must be a non-empty list of distinct names"):
             AGENT_POS.columns(bad)
+    with pytest.raises(ValueError, match="got the string 'jaw_gap'"):
+        AGENT_POS.columns("jaw_gap")

@@ -105,6 +105,12 @@ def test_state_fields_select_the_columns_the_policy_sees():
     vec.close()
     with pytest.raises(ValueError, match="unknown: \\['quat'\\]"):
         DefgraspEnvConfig(state_fields=["quat"])
+    with pytest.raises(ValueError, match="obs_type='pixels' has no agent_pos"):
+        DefgraspEnvConfig(obs_type="pixels", state_fields=["jaw_gap"])
+    from defgrasp_env.lerobot_env import SelectStateColumnsStep
+    for bad in ([], [0, 0], [10]):
+        with pytest.raises(ValueError, match="distinct indices in \\[0, 10\\)"):
+            SelectStateColumnsStep(columns=bad)
 
 
 def test_reset_accepts_framework_options_and_rejects_typos():

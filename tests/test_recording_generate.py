@@ -92,6 +92,13 @@ def test_files_name_their_policy_and_resuming_with_another_is_refused(tmp_path, 
     assert validate_path(first).ok
     assert generate_main(more + ["--policy", "random"]) == 0
     assert load_episode(tmp_path / "cuboid_E1e4_001.h5").attrs["policy"] == "random"
+    # the attribute-less first file does not hide the second one's policy from a third run
+    capsys.readouterr()
+    assert generate_main(args[:6] + ["3"] + args[7:]) == 2
+    assert "cuboid_E1e4_001.h5 was recorded by the policy 'random'" in capsys.readouterr().err
+    with h5py.File(first, "r+") as f:  # a present policy must name one
+        f.attrs["policy"] = ""
+    assert "'policy': expected a non-empty str, got ''" in validate_path(first).text()
 
 
 def test_bad_policy_is_reported(tmp_path, capsys):
@@ -145,6 +152,7 @@ def test_worlds_record_the_serial_runs_data(tmp_path):
             assert a.keys() == b.keys(), name
             for k in a:
                 assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k]), f"{policy} {name}: {k} differs"
+            assert load_episode(together / name).attrs["policy"] == policy
         assert validate_path(together).ok
     (together / names[1]).unlink()
     assert generate_main([str(together), *args, "--worlds", "2"]) == 0

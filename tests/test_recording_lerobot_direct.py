@@ -38,3 +38,23 @@ def test_direct_lerobot_recording_round_trip(tmp_path):
         np.testing.assert_array_equal(row["action"][0].numpy(), action)
         assert row["next.reward"][0].item() == np.float32(reward)
         assert bool(row["next.done"][0]) == done
+
+
+def test_direct_recording_keeps_the_state_fields_asked_for(tmp_path):
+    """``state_fields`` as in ``to-lerobot --state-fields``: ``observation.state`` holds the env's
+    wrist position, gap and tip forces (no quaternion), named by the layout."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    env = LeRobotRecorder(gym.make("DeformablePickup-v0", max_episode_steps=3), tmp_path / "lr",
+                          state_fields=["tip_normal_force", "wrist_position", "jaw_gap"])
+    obs, _ = env.reset(seed=1)
+    seen = []
+    for _ in range(3):
+        seen.append(obs["agent_pos"])
+        obs, *_ = env.step(np.zeros(7, np.float32))
+    env.close()
+    ds = LeRobotDataset("defgrasp/lr", root=tmp_path / "lr")
+    assert ds.features["observation.state"]["names"] == ["wrist_x", "wrist_y", "wrist_z", "jaw_gap",
+                                                         "left_tip_normal_force", "right_tip_normal_force"]
+    got = np.stack([row["observation.state"][0].numpy() for row in torch.utils.data.DataLoader(ds, batch_size=1)])
+    np.testing.assert_array_equal(got, np.stack(seen)[:, [0, 1, 2, 7, 8, 9]])

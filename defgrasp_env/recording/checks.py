@@ -57,8 +57,11 @@ def _check_attrs(attrs: dict, out: Inspection) -> None:
         ok = isinstance(v, typ) and not (typ is int and isinstance(v, bool))
         if typ is float:
             ok = isinstance(v, (int, float)) and not isinstance(v, bool) and bool(np.isfinite(v))
+        named = typ is str and name in OPTIONAL_ROOT_ATTRS  # an optional text, when present, names something
+        ok = ok and (bool(v) or not named)
         if not ok:
-            out.errors.append(f"root attribute {name!r}: expected a {typ.__name__}, got {v!r}")
+            what = f"non-empty {typ.__name__}" if named else typ.__name__
+            out.errors.append(f"root attribute {name!r}: expected a {what}, got {v!r}")
     for name in ("config_json", "replay_json", "versions_json"):
         if not isinstance(attrs.get(name), str):
             continue

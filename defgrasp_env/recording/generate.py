@@ -242,8 +242,8 @@ def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta", p
     import h5py
 
     from ..envs.config import PickupConfig
+    from .checks import attr_value
     from .config_io import config_from_json
-
     from .reader import list_episodes
 
     files = list_episodes(out) if pathlib.Path(out).is_dir() else []
@@ -252,7 +252,6 @@ def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta", p
     path = files[0]
     with h5py.File(path, "r") as f:
         recorded = config_from_json(str(f.attrs["config_json"]))
-        recorded_policy = f.attrs.get("policy")
     default = PickupConfig().edge_contact
     if recorded.edge_contact != default:
         raise ValueError(f"{path} was recorded with edge_contact={recorded.edge_contact}, today's default is "
@@ -262,10 +261,15 @@ def check_same_recording_config(out: pathlib.Path, action_mode: str = "delta", p
         raise ValueError(f"{path} was recorded with action_mode={recorded.action_mode!r}, this run's is "
                          f"{action_mode!r}: the folder would mix action layouts in one dataset; pass "
                          f"--action-mode {recorded.action_mode} or record into a new folder")
-    if policy is not None and recorded_policy is not None and str(recorded_policy) != policy:
-        raise ValueError(f"{path} was recorded by the policy {str(recorded_policy)!r}, this run's is {policy!r}: "
-                         f"the folder would mix policies in one dataset; pass --policy {recorded_policy} or record "
-                         "into a new folder")
+    if policy is None:
+        return
+    for other in files:
+        with h5py.File(other, "r") as f:
+            recorded_policy = attr_value(f.attrs.get("policy", policy))
+        if recorded_policy != policy:
+            raise ValueError(f"{other} was recorded by the policy {recorded_policy!r}, this run's is {policy!r}: "
+                             "the folder would mix policies in one dataset; record into a new folder"
+                             + ("" if recorded_policy == "teleop" else f" or pass --policy {recorded_policy}"))
 
 
 def run_jobs(out: pathlib.Path, jobs: list[Job], policy_spec: str, max_steps: int | None = None,

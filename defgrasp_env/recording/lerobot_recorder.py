@@ -12,6 +12,7 @@ import os
 import pathlib
 
 import gymnasium as gym
+import numpy as np
 
 from ..layout import AGENT_POS, ENV_STATE
 from .lerobot_export import ROBOT_TYPE, FrameShape, lerobot_features, lerobot_frame
@@ -19,10 +20,13 @@ from .lerobot_export import ROBOT_TYPE, FrameShape, lerobot_features, lerobot_fr
 
 class LeRobotRecorder(gym.Wrapper):
     """Wrap a single ``DeformablePickup-v0`` env (``obs_type`` "state", optionally with camera
-    frames from ``render()`` when ``record_frames``) and write a LeRobot dataset at ``root``."""
+    frames from ``render()`` when ``record_frames``) and write a LeRobot dataset at ``root``.
+    ``state_fields``: the ``AGENT_POS`` fields ``observation.state`` keeps, as ``to_lerobot``'s
+    (default all)."""
 
     def __init__(self, env: gym.Env, root: str | os.PathLike, repo_id: str | None = None,
-                 task: str | None = None, record_frames: bool = False, use_videos: bool = False):
+                 task: str | None = None, record_frames: bool = False, use_videos: bool = False,
+                 state_fields=None):
         super().__init__(env)
         from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
@@ -37,9 +41,10 @@ class LeRobotRecorder(gym.Wrapper):
         if record_frames and env.render_mode != "rgb_array":
             raise ValueError("record_frames needs the env made with render_mode='rgb_array'")
         image = (cfg.camera.height, cfg.camera.width, 3) if record_frames else None
-        layout = FrameShape(int(round(cfg.control_hz)), AGENT_POS.size, ENV_STATE.size, env.action_space.shape[0],
+        self._columns = np.arange(AGENT_POS.size) if state_fields is None else AGENT_POS.columns(state_fields)
+        layout = FrameShape(int(round(cfg.control_hz)), len(self._columns), ENV_STATE.size, env.action_space.shape[0],
                             image)
-        names = {"observations/agent_pos": list(AGENT_POS.names),
+        names = {"observations/agent_pos": [AGENT_POS.names[i] for i in self._columns],
                  "observations/environment_state": list(ENV_STATE.names)}
         self.dataset = LeRobotDataset.create(repo_id or f"defgrasp/{root.name}", layout.fps,
                                              lerobot_features(layout, names, use_videos), root=root,
@@ -63,7 +68,8 @@ class LeRobotRecorder(gym.Wrapper):
         if self._obs is None:
             raise RuntimeError("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self.dataset.add_frame(lerobot_frame(self._obs["agent_pos"], self._obs["environment_state"], action, reward,
+        self.dataset.add_frame(lerobot_frame(self._obs["agent_pos"][self._columns], self._obs["environment_state"],
+                                             action, reward,
                                              terminated or truncated, bool(info.get("is_success", False)),
                                              self.task, self._frame))
         self._pending += 1
