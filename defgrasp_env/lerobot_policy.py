@@ -17,9 +17,37 @@ import pathlib
 import numpy as np
 import torch
 
-from .layout import ACTION_LAYOUTS
+from .layout import ACTION_LAYOUTS, AGENT_POS
 
-__all__ = ["LeRobotPolicy"]
+__all__ = ["LeRobotPolicy", "training_state_fields"]
+
+
+def training_state_fields(path: str | pathlib.Path) -> list[str] | None:
+    """The ``AGENT_POS`` fields of ``observation.state`` in the dataset a ``pretrained_model``
+    folder was trained on (``train_config.json``'s dataset root, else the LeRobot cache of its
+    repo id; relative roots from the working directory, as ``lerobot-train`` read them), from the
+    dataset's ``meta/info.json`` column names; None when the folder or the dataset does not say.
+    ValueError if the columns are not whole ``AGENT_POS`` fields in the layout's order."""
+    import json
+
+    from lerobot.utils.constants import HF_LEROBOT_HOME
+
+    config = pathlib.Path(path) / "train_config.json"
+    if not config.is_file():
+        return None
+    dataset = json.loads(config.read_text()).get("dataset") or {}
+    root = dataset.get("root") or (HF_LEROBOT_HOME / dataset["repo_id"] if dataset.get("repo_id") else None)
+    info = pathlib.Path(root) / "meta" / "info.json" if root else None
+    if info is None or not info.is_file():
+        return None
+    names = (json.loads(info.read_text()).get("features", {}).get("observation.state") or {}).get("names")
+    if not names:
+        return None
+    fields = [f.name for f in AGENT_POS.fields if set(f.components) <= set(names)]
+    if [c for name in fields for c in AGENT_POS.field(name).components] != list(names):
+        raise ValueError(f"{info}: observation.state columns {names} are not whole agent_pos fields "
+                         f"{[f.name for f in AGENT_POS.fields]} in order")
+    return fields
 
 
 class LeRobotPolicy:
@@ -56,7 +84,9 @@ class LeRobotPolicy:
         """Load a ``pretrained_model`` folder written by ``lerobot-train`` (config, weights and the
         saved pre/post-processors) onto ``device``. ``state_fields``: the ``AGENT_POS`` fields the
         policy's ``observation.state`` was trained on (``defgrasp-dataset to-lerobot
-        --state-fields``; default all); checked against the policy's state size."""
+        --state-fields``); default: those its training dataset names (:func:`training_state_fields`)
+        when it can be found, else all. Checked against the policy's state size, and against the
+        training dataset's fields when both are known."""
         from lerobot.configs.policies import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
         from lerobot.utils.constants import OBS_STATE
@@ -71,6 +101,12 @@ class LeRobotPolicy:
         policy = get_policy_class(config.type).from_pretrained(path, config=config)
         pre, post = make_pre_post_processors(config, pretrained_path=str(path),
                                              preprocessor_overrides={"device_processor": {"device": device}})
+        trained_on = training_state_fields(path)
+        if state_fields is not None and trained_on is not None and AGENT_POS.columns(state_fields).tolist() != \
+                AGENT_POS.columns(trained_on).tolist():
+            raise ValueError(f"{path}: state_fields {list(state_fields)} differ from the fields its training dataset's "
+                             f"observation.state holds, {trained_on}")
+        state_fields = trained_on if state_fields is None else state_fields
         env_config = DefgraspEnvConfig(state_fields=None if state_fields is None else list(state_fields))
         state = config.input_features.get(OBS_STATE)
         if state is not None and tuple(state.shape) != (len(env_config.state_columns),):

@@ -106,3 +106,34 @@ def test_a_policy_without_the_wrist_orientation_ignores_it_and_reads_the_rest(tm
     base = policy(obs)
     np.testing.assert_array_equal(policy(turned), base)
     assert np.abs(policy(narrower) - base).max() > 0
+
+
+def test_the_state_fields_come_from_the_training_dataset(tmp_path):
+    """A checkpoint whose ``train_config.json`` names a dataset exported with ``--state-fields``
+    loads with those fields without being told, and refuses other fields given by hand; without a
+    findable dataset it falls back to the size check."""
+    import json
+
+    from test_recording_helpers import record_episodes
+
+    from defgrasp_env.lerobot_policy import training_state_fields
+    from defgrasp_env.recording import to_lerobot
+
+    fields = ["wrist_position", "jaw_gap", "tip_normal_force"]
+    record_episodes(tmp_path / "h5", seeds=(0,), steps=2)
+    to_lerobot(tmp_path / "h5", tmp_path / "lr", state_fields=list(reversed(fields)))
+    ckpt = save_untrained_act(tmp_path / "nq", seed=4, state_fields=fields)
+    assert training_state_fields(ckpt) is None  # no train_config.json
+    (ckpt / "train_config.json").write_text(json.dumps({"dataset": {"repo_id": "defgrasp/lr",
+                                                                     "root": str(tmp_path / "lr")}}))
+    assert training_state_fields(ckpt) == fields
+    policy = LeRobotPolicy.from_pretrained(ckpt)
+    obs, _ = gym.make("DeformablePickup-v0").reset(seed=0)
+    np.testing.assert_array_equal(policy(obs), LeRobotPolicy.from_pretrained(ckpt, state_fields=fields)(obs))
+    with pytest.raises(ValueError, match="differ from the fields its training dataset"):
+        LeRobotPolicy.from_pretrained(ckpt, state_fields=["wrist_quat", "tip_normal_force"])
+    (ckpt / "train_config.json").write_text(json.dumps({"dataset": {"repo_id": "defgrasp/lr",
+                                                                     "root": str(tmp_path / "gone")}}))
+    assert training_state_fields(ckpt) is None
+    with pytest.raises(ValueError, match=r"shape \(6,\)"):
+        LeRobotPolicy.from_pretrained(ckpt)
