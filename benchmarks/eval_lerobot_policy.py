@@ -20,6 +20,8 @@ there are this call's, which ran the cells in ``cells_run``, None and [] for a t
     python benchmarks/eval_lerobot_policy.py CKPT --objects torus --moduli 1e4 --policy.n_action_steps=1
 
 Arguments this script does not know (``--env.*``, ``--policy.*``, ``--eval.*``) go to ``lerobot-eval``.
+A policy trained on a dataset exported with ``--state-fields`` gets ``--env.state_fields`` of that
+dataset added when its ``train_config.json`` leads to the dataset (``training_state_fields``).
 """
 
 from __future__ import annotations
@@ -120,6 +122,20 @@ def format_report(cells: dict, wall: float, ckpt: str, train_note: str) -> str:
     return "\n".join(lines)
 
 
+def with_state_fields(ckpt: str, extra: list[str]) -> list[str]:
+    """``extra`` plus ``--env.state_fields=[...]`` of the checkpoint's training dataset when it holds
+    a subset of ``agent_pos`` and ``extra`` does not set it (lerobot-eval would feed the policy the
+    whole ``agent_pos`` and fail on the size)."""
+    from defgrasp_env.layout import AGENT_POS
+    from defgrasp_env.lerobot_policy import training_state_fields
+
+    fields = training_state_fields(ckpt)
+    if fields is None or len(fields) == len(AGENT_POS.fields) or any(a.startswith("--env.state_fields") for a in extra):
+        return extra
+    print(f"the policy was trained on observation.state = {fields}: adding --env.state_fields", flush=True)
+    return [*extra, f"--env.state_fields=[{','.join(fields)}]"]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("checkpoint", help="pretrained_model folder written by lerobot-train")
@@ -141,6 +157,7 @@ def main(argv=None) -> int:
     import defgrasp_env.lerobot_env  # noqa: F401  (registers --env.type=defgrasp without the plugin install)
 
     register_third_party_plugins()
+    extra = with_state_fields(args.checkpoint, extra)
     objects = args.objects.split(",")
     moduli = [float(x) for x in args.moduli.split(",")]
     out = pathlib.Path(args.out)

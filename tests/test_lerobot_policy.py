@@ -1,5 +1,8 @@
 """``LeRobotPolicy``: a saved LeRobot policy as a plain-Python policy object (the expert's interface)."""
 
+import pathlib
+import sys
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -127,6 +130,13 @@ def test_the_state_fields_come_from_the_training_dataset(tmp_path):
     (ckpt / "train_config.json").write_text(json.dumps({"dataset": {"repo_id": "defgrasp/lr",
                                                                      "root": str(tmp_path / "lr")}}))
     assert training_state_fields(ckpt) == fields
+    # the success-table script hands lerobot-eval the same fields unless told otherwise
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from eval_lerobot_policy import with_state_fields
+
+    assert with_state_fields(str(ckpt), ["--env.episode_seconds=1"]) == [
+        "--env.episode_seconds=1", "--env.state_fields=[wrist_position,jaw_gap,tip_normal_force]"]
+    assert with_state_fields(str(ckpt), ["--env.state_fields=[jaw_gap]"]) == ["--env.state_fields=[jaw_gap]"]
     policy = LeRobotPolicy.from_pretrained(ckpt)
     obs, _ = gym.make("DeformablePickup-v0").reset(seed=0)
     np.testing.assert_array_equal(policy(obs), LeRobotPolicy.from_pretrained(ckpt, state_fields=fields)(obs))
@@ -135,5 +145,6 @@ def test_the_state_fields_come_from_the_training_dataset(tmp_path):
     (ckpt / "train_config.json").write_text(json.dumps({"dataset": {"repo_id": "defgrasp/lr",
                                                                      "root": str(tmp_path / "gone")}}))
     assert training_state_fields(ckpt) is None
+    assert with_state_fields(str(ckpt), []) == []
     with pytest.raises(ValueError, match=r"shape \(6,\)"):
         LeRobotPolicy.from_pretrained(ckpt)
