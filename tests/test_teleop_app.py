@@ -343,5 +343,5 @@ def test_app_cli_replays_a_recorded_operator_to_success(tmp_path, recording):
     assert len(report.saved) == 1, msgs
     with h5py.File(report.saved[0]) as f:
         assert f.attrs["is_success"], "the replayed operator should lift the cuboid to the goal"
-        assert f.attrs["end_reason"] == "terminated"
+        assert f.attrs["end_reason"] == "terminated" and f.attrs["policy"] == "teleop"
     assert (tmp_path / "view.png").stat().st_size > 1000
