@@ -131,7 +131,7 @@ class DefgraspEnvConfig(EnvConfig):
         dataset's camera key. ``observation.state`` keeps the ``state_fields`` columns (all by
         default); the environment state passes through unchanged."""
         steps = [RenameObservationsProcessorStep(rename_map={OBS_IMAGE: CAMERA_KEY})]
-        if self.state_fields is not None:
+        if len(self.state_columns) < AGENT_POS.size:
             steps.append(SelectStateColumnsStep(columns=self.state_columns.tolist()))
         return PolicyProcessorPipeline(steps=steps), PolicyProcessorPipeline(steps=[])
 
