@@ -34,7 +34,7 @@ from . import ENV_ID
 from .envs.config import OBS_TYPES, RANDOM_OBJECT, PickupConfig
 from .sim.meshing import OBJECT_SHAPES
 from .layout import ACTION_LAYOUTS, AGENT_POS, ENV_STATE
-from .recording.lerobot_export import CAMERA_KEY
+from .recording.lerobot_export import CAMERA_KEY, state_columns
 
 __all__ = ["DefgraspEnvConfig", "SelectStateColumnsStep"]
 
@@ -88,13 +88,12 @@ class DefgraspEnvConfig(EnvConfig):
         camera = env_config.camera
         self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION,
                                                shape=(ACTION_LAYOUTS[env_config.action_mode].size,))}
-        if self.state_fields is not None:
-            AGENT_POS.columns(self.state_fields)  # names checked at parse time
-            if self.obs_type == "pixels":
-                raise ValueError("state_fields selects agent_pos fields; obs_type='pixels' has no agent_pos "
-                                 f"(got state_fields={self.state_fields})")
+        columns = self.state_columns  # the names checked at parse time
+        if self.state_fields is not None and self.obs_type == "pixels":
+            raise ValueError("state_fields selects agent_pos fields; obs_type='pixels' has no agent_pos "
+                             f"(got state_fields={self.state_fields})")
         if self.obs_type in ("state", "pixels_agent_pos"):
-            self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(len(self.state_columns),))
+            self.features["agent_pos"] = PolicyFeature(type=FeatureType.STATE, shape=(len(columns),))
         if self.obs_type == "state":
             self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV,
                                                                shape=(ENV_STATE.size,))
@@ -105,7 +104,7 @@ class DefgraspEnvConfig(EnvConfig):
     @property
     def state_columns(self) -> np.ndarray:
         """Indices (int [n]) of the ``agent_pos`` entries ``observation.state`` keeps (``state_fields``)."""
-        return np.arange(AGENT_POS.size) if self.state_fields is None else AGENT_POS.columns(self.state_fields)
+        return state_columns(self.state_fields)
 
     def _pickup_kwargs(self) -> dict:
         return dict(object=self.object, youngs_modulus=float(self.youngs_modulus), obs_type=self.obs_type,

@@ -72,6 +72,12 @@ def _frame_shape(episodes: list[Episode]) -> FrameShape:
     return layout
 
 
+def state_columns(state_fields=None) -> np.ndarray:
+    """Indices (int [n]) of the ``agent_pos`` entries ``observation.state`` keeps: those of the
+    ``AGENT_POS`` fields ``state_fields`` (in the layout's order), all of them when None."""
+    return np.arange(AGENT_POS.size) if state_fields is None else AGENT_POS.columns(state_fields)
+
+
 def _layout_names(key: str, n: int) -> list[str] | None:
     """Column names of dataset ``key`` with ``n`` columns from ``defgrasp_env.layout`` (None: no fit)."""
     layouts = {"observations/agent_pos": (AGENT_POS,), "observations/environment_state": (ENV_STATE,),
@@ -135,7 +141,7 @@ def to_lerobot(src: str | os.PathLike, dst: str | os.PathLike, repo_id: str | No
     names = dict(episodes[0].names)
     columns = None
     if state_fields is not None:
-        columns = AGENT_POS.columns(state_fields)
+        columns = state_columns(state_fields)
         if layout.state_dim != AGENT_POS.size:
             raise ValueError(f"{episodes[0].path}: agent_pos has {layout.state_dim} columns, not AGENT_POS's "
                              f"{AGENT_POS.size}; state_fields selects AGENT_POS fields")

@@ -12,10 +12,9 @@ import os
 import pathlib
 
 import gymnasium as gym
-import numpy as np
 
 from ..layout import AGENT_POS, ENV_STATE
-from .lerobot_export import ROBOT_TYPE, FrameShape, lerobot_features, lerobot_frame
+from .lerobot_export import ROBOT_TYPE, FrameShape, lerobot_features, lerobot_frame, state_columns
 
 
 class LeRobotRecorder(gym.Wrapper):
@@ -41,7 +40,7 @@ class LeRobotRecorder(gym.Wrapper):
         if record_frames and env.render_mode != "rgb_array":
             raise ValueError("record_frames needs the env made with render_mode='rgb_array'")
         image = (cfg.camera.height, cfg.camera.width, 3) if record_frames else None
-        self._columns = np.arange(AGENT_POS.size) if state_fields is None else AGENT_POS.columns(state_fields)
+        self._columns = state_columns(state_fields)
         layout = FrameShape(int(round(cfg.control_hz)), len(self._columns), ENV_STATE.size, env.action_space.shape[0],
                             image)
         names = {"observations/agent_pos": [AGENT_POS.names[i] for i in self._columns],
