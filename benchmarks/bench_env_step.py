@@ -18,6 +18,8 @@ and zeroes their wrist rotation: the contact-heavy steps of an RL policy learnin
 cost the actuator force limit's retries and the slowest world's iterations set; ``press`` = the
 closed gripper pushed down onto the object at full speed and kept pushing (``press_actions``: a
 learner pressing the object into the ground, the wrist at its force limit from the first touch).
+``--listed-cg-worlds N [N ...]``: ``SolverConfig.listed_cg_worlds`` (CG's launches over the rows of
+the worlds still iterating once at most N are left; 0 = over all rows), a row each side by side.
 ``--edge-contact on|off|both``: pad edge contact (``PickupConfig.edge_contact``, on by default;
 both: a row each, side by side). ``--split``: also time the solver's share of each step: every
 ``ImplicitSolver.advance`` is bracketed by ``wp.synchronize_device`` (one more synchronisation per
@@ -60,9 +62,11 @@ from defgrasp_env.sim import ImplicitSolver, SolverConfig  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
 
 
-def solver_with_graphs(graphs: str) -> SolverConfig:
-    """The env's default solver settings with ``graphs`` ("auto", "on", "off")."""
-    return dataclasses.replace(PickupConfig().solver, graphs={"auto": None, "on": True, "off": False}[graphs])
+def solver_config(graphs: str, listed_cg_worlds: int) -> SolverConfig:
+    """The env's default solver settings with ``graphs`` ("auto", "on", "off") and
+    ``listed_cg_worlds``."""
+    return dataclasses.replace(PickupConfig().solver, graphs={"auto": None, "on": True, "off": False}[graphs],
+                               listed_cg_worlds=listed_cg_worlds)
 
 
 def press_actions(obs: dict, scene) -> np.ndarray:
@@ -107,16 +111,20 @@ class SolverClock:
 
 
 def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
-             graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True, split: bool = False) -> dict:
+             graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True, split: bool = False,
+             listed_cg_worlds: int = SolverConfig.listed_cg_worlds) -> dict:
     """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table (with
     ``split``, the solver's share of each step too: ``SolverClock``)."""
     with SolverClock(device) if split else contextlib.nullcontext() as clock:
-        return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock)
+        return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock,
+                         listed_cg_worlds)
 
 
-def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock) -> dict:
+def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock,
+              listed_cg_worlds) -> dict:
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
-                       device=device, object=obj, youngs_modulus=modulus, solver=solver_with_graphs(graphs),
+                       device=device, object=obj, youngs_modulus=modulus,
+                       solver=solver_config(graphs, listed_cg_worlds),
                        edge_contact=edge_contact)
     obs, _ = env.reset(seed=0)
     rng = np.random.default_rng(0)
@@ -157,7 +165,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
     env.close()
     t, solver_t, newton, cg = np.array(times), np.array(solver_times), np.array(newton), np.array(cg)
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
-            "edges": "on" if edge_contact else "off",
+            "edges": "on" if edge_contact else "off", "listed": listed_cg_worlds,
             "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "solver_ms": 1e3 * float(np.median(solver_t)), "outside_ms": 1e3 * float(np.median(t - solver_t)),
@@ -171,13 +179,13 @@ def _ms(value: float) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| W | actions | step graphs | edge contact | object | E (Pa) | substeps | median ms | p95 ms | "
+    lines = ["| W | actions | step graphs | edge contact | CG listed at <= worlds | object | E (Pa) | substeps | median ms | p95 ms | "
              "world-steps/s | deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / "
              "mean | CG / step, slowest / mean | episodes won | solver ms (median) | outside the solver ms (median) |",
-             "|---" * 18 + "|"]
+             "|---" * 19 + "|"]
     for r in rows:
         won = r["successes"] if r["policy"].startswith("expert") else "-"
-        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
+        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['listed']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
                      f"{r['median_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
                      f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['solves']:.3f} | {r['newton'][0]:.0f} / "
                      f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} | {_ms(r['solver_ms'])} | "
@@ -201,6 +209,8 @@ def main(argv=None) -> int:
                     help="std of Gaussian noise on the expert's actions (wrist rotation zeroed); needs --policy expert")
     ap.add_argument("--edge-contact", choices=["on", "off", "both"], default="on",
                     help="pad edge contact (PickupConfig.edge_contact, on by default); both: a row each, side by side")
+    ap.add_argument("--listed-cg-worlds", type=int, nargs="+", default=[SolverConfig.listed_cg_worlds],
+                    help="SolverConfig.listed_cg_worlds (0: CG always over all rows); several: a row each, side by side")
     ap.add_argument("--split", action="store_true",
                     help="also time the solver's share of each step (a synchronisation around every solve)")
     ap.add_argument("--no-append", action="store_true")
@@ -213,9 +223,10 @@ def main(argv=None) -> int:
     for w in args.worlds:
         for graphs in (["off", "on"] if args.graphs == "both" else [args.graphs]):
             for edges in (["off", "on"] if args.edge_contact == "both" else [args.edge_contact]):
-                rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus, args.warmup,
-                                     args.steps, graphs, args.noise, edges == "on", args.split))
-                print(table(rows[-1:]).splitlines()[-1], flush=True)
+                for listed in args.listed_cg_worlds:
+                    rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus, args.warmup,
+                                         args.steps, graphs, args.noise, edges == "on", args.split, listed))
+                    print(table(rows[-1:]).splitlines()[-1], flush=True)
     report = table(rows)
     print(report)
     if not args.no_append:

@@ -18,6 +18,7 @@ from defgrasp_env.sim.meshing import make_object_mesh
 from defgrasp_env.sim.model import build_model
 from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig
 from defgrasp_env.sim.state import Control, State
+from defgrasp_env.sim.world_compaction import every_row
 
 DT = 0.05
 
@@ -131,11 +132,12 @@ def test_coarse_matrix_is_the_galerkin_product(fixed):
         product = wp.zeros(n, dtype=wp.vec3, device=d)
         wp.launch(ke.hessian_product_tets, model.num_tets,
                   inputs=[direction, model.tets, model.tet_rest_inv, model.tet_rest_volume, model.tet_mu,
-                          model.tet_lambda, s.cofactor, model.tet_world, s.solve_worlds, product, s.tet_r, s.tet_twist],
+                          model.tet_lambda, s.cofactor, model.tet_world, s.solve_worlds, product, s.tet_r, s.tet_twist,
+                          every_row(d)],
                   device=d)
         wp.launch(klin.cg_node_product, n, inputs=[direction, model.node_mass, s.contact_hessian, model.free_axes,
                                                    model.node_world, s.solve_worlds, 1.0 / DT**2, product,
-                                                   wp.zeros(1, dtype=float, device=d)], device=d)
+                                                   wp.zeros(1, dtype=float, device=d), every_row(d)], device=d)
         at[c] = product.numpy()
     galerkin = np.einsum("inj,knj->ik", columns, at)
     used = np.diag(galerkin) > 0

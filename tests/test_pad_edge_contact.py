@@ -17,6 +17,7 @@ from defgrasp_env.sim.meshing import make_object_mesh
 from defgrasp_env.sim.model import ContactParams, build_model
 from defgrasp_env.sim.pad_edge_points import EDGE_POINT_SPACING, pad_edge_points, surface_triangles
 from defgrasp_env.sim.solver_scratch import EdgeContactScratch
+from defgrasp_env.sim.world_compaction import every_row
 from defgrasp_env.transforms import axis_angle_to_quat, quat_rotate
 from geometry_reference import point_triangle_distances
 
@@ -326,7 +327,8 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
         out = wp.zeros(n, dtype=wp.vec3, device="cpu")
         wp.launch(kpe.edge_point_product, slots,
                   [wp.array(direction.astype(np.float32), dtype=wp.vec3, device="cpu"), edges.triangles, active,
-                   edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_block, out], device="cpu")
+                   edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_block, out,
+                   every_row("cpu")], device="cpu")
         return out.numpy().astype(np.float64)
 
     f0 = force(x)  # sets point_hessian at x

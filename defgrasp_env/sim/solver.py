@@ -28,6 +28,7 @@ from .solver_launches import SubstepLaunches, record_substep_launches
 from .solver_loops import DeviceLoops
 from .solver_scratch import SolverScratch
 from .state import Control, State
+from .world_compaction import WorldCompaction
 
 __all__ = ["ImplicitSolver", "SolveStats", "SolverConfig"]
 
@@ -78,6 +79,11 @@ class SolverConfig:
             line-search trial, whether all worlds are done (0 = never: run the full iteration
             counts). The tests run on the device (``solver_loops``): inside the captured graph of
             a step they cost no host round trip.
+        listed_cg_worlds: once at most this many worlds of a batch still iterate CG (checked every
+            ``check_every`` iterations), its launches run over the rows of those worlds only
+            (``world_compaction``; 0 = never; only where the model has more worlds). The same rows
+            by the same code: bit-identical on the CPU; on a GPU a launch then costs what a few
+            worlds' rows cost instead of a thread per row of every world.
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
@@ -96,12 +102,13 @@ class SolverConfig:
     penetration_bound: float = 1e-3
     penetration_iterations: int = 8
     patient_iterations: int = 60
+    listed_cg_worlds: int = 32
     graphs: bool | None = None
 
     def __post_init__(self) -> None:
         for name, low in (("substeps", 1), ("newton_iterations", 1), ("cg_iterations", 1),
                           ("line_search_steps", 0), ("check_every", 0), ("penetration_iterations", 0),
-                          ("patient_iterations", 0)):
+                          ("patient_iterations", 0), ("listed_cg_worlds", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -169,6 +176,8 @@ class ImplicitSolver:
         self.graphs = supported if config.graphs is None else config.graphs
         self.scratch = SolverScratch.from_model(model)
         self.loops = DeviceLoops(model, config, self.scratch)
+        self.compaction = WorldCompaction.from_model(model, config.listed_cg_worlds, self.scratch.edges.points_per_world)
+        self._listed_cg = 0 < config.listed_cg_worlds < model.num_worlds
         self._report = SolveReport(model.num_worlds, model.device)
         self._solving_all = True  # scratch.solve_worlds holds all ones
         self._launches: dict[tuple, tuple] = {}
@@ -299,12 +308,23 @@ class ImplicitSolver:
 
     def _run_cg(self, run: SubstepLaunches) -> None:
         """CG in blocks of ``run.cg_block`` iterations (a world stops at its own test or at
-        ``cg_iterations``; later iterations of a block skip it) while a world iterates."""
-        def block():
+        ``cg_iterations``; later iterations of a block skip it) while a world iterates; a block
+        runs over the listed worlds' rows once few still iterate (``listed_cg_worlds``)."""
+        def over_all():
             for cmd in run.cg:
                 cmd.launch()
 
-        self.loops.do_while("cg", block, block)
+        def over_listed():
+            for cmd in run.cg_listed:
+                cmd.launch()
+
+        def block():
+            for cmd in run.list_cg_worlds:
+                cmd.launch()
+            wp.capture_if(self.compaction.cond, on_true=over_listed, on_false=over_all)
+
+        body = block if self._listed_cg else over_all
+        self.loops.do_while("cg", body, body)
 
     def _line_search(self, run: SubstepLaunches, first: bool) -> None:
         """Per world, halve the Newton step until the incremental potential does not increase.
@@ -343,7 +363,8 @@ class ImplicitSolver:
             entry = (state_in, state_out, control,
                      record_substep_launches(self.model, self.config, self.scratch, state_out, control, h,
                                              start_pads=(state_in.pad_positions, state_in.pad_orientations),
-                                             step_start=step_start, phase_graphs=not self.graphs), {})
+                                             step_start=step_start, compaction=self.compaction,
+                                             listed_cg=self._listed_cg, phase_graphs=not self.graphs), {})
         self._launches[key] = entry  # most recently used last
         while len(self._launches) > _LAUNCH_SETS:
             self._launches.pop(next(iter(self._launches)))

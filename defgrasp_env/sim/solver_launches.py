@@ -35,6 +35,7 @@ from .kernels import substep as ksub
 from .model import Model
 from .solver_scratch import SolverScratch
 from .state import Control, State
+from .world_compaction import WorldCompaction
 
 
 class LaunchSequence:
@@ -71,6 +72,8 @@ class SubstepLaunches:
     lag: list
     evaluate: list
     cg: list
+    cg_listed: list     # the same CG iterations over the listed worlds' rows (WorldCompaction; [] if unused)
+    list_cg_worlds: list  # launches: list the worlds still iterating CG (WorldCompaction.record_list)
     coarse_post: list
     energy0: list
     begin_search: object
@@ -93,6 +96,7 @@ class _Context:
     substeps: int
     start_pads: tuple   # (positions, orientations) [W*P] of the pads at the step's start
     step_start: object  # [N] vec3: node positions at the step's start (prescribed-axis lerp)
+    compaction: WorldCompaction
 
     def rec(self, kernel, dim, *inputs):
         return wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device, record_cmd=True)
@@ -123,13 +127,16 @@ def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
               if slots else [])]
 
 
-def _edge_product(c: _Context, p, active) -> list:
-    """ap += the edge points' Hessian blocks times ``p`` (none without edge contact)."""
-    m, s, e = c.model, c.scratch, c.scratch.edges
+def _edge_product(c: _Context, p, active, listed: bool = False) -> list:
+    """ap += the edge points' Hessian blocks times ``p`` (none without edge contact); ``listed``:
+    only the listed worlds' slots (``WorldCompaction``)."""
+    m, s, e, wc = c.model, c.scratch, c.scratch.edges, c.compaction
     if not e.active:
         return []
-    return [c.rec(kpe.edge_point_product, m.num_worlds * e.points_per_world, p, e.triangles, active,
-                  e.points_per_world, e.point_tri, e.point_bary, e.point_block, s.ap)]
+    rows = wc.edge_slots if listed else wc.all_rows
+    dim = wc.dim(rows) if listed else m.num_worlds * e.points_per_world
+    return [c.rec(kpe.edge_point_product, dim, p, e.triangles, active, e.points_per_world, e.point_tri, e.point_bary,
+                  e.point_block, s.ap, rows)]
 
 
 def _edge_search(c: _Context, x) -> list:
@@ -198,10 +205,11 @@ def _coarse_before(c: _Context, active) -> list:
         c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx,
               s.coarse_guess),
         c.rec(ke.hessian_product_tets, m.num_tets, s.coarse_guess, m.tets, m.tet_rest_inv, m.tet_rest_volume,
-              m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
+              m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist,
+              c.compaction.all_rows),
         *_edge_product(c, s.coarse_guess, active),
         c.rec(klin.cg_node_product, n, s.coarse_guess, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
-              active, 1.0 / (c.h * c.h), s.ap, s.coarse_scratch),
+              active, 1.0 / (c.h * c.h), s.ap, s.coarse_scratch, c.compaction.all_rows),
         c.rec(kcs.coarse_start_cg, n, s.precond, m.free_axes, m.node_world, active, s.residual, s.ap, s.z, s.p,
               s.rz)]
 
@@ -253,23 +261,27 @@ def _evaluate(c: _Context, config) -> list:
                   s.cg_active)]
 
 
-def _cg(c: _Context, config) -> list:
-    m, s = c.model, c.scratch
-    n, active = m.num_nodes, s.cg_active
+def _cg(c: _Context, config, listed: bool = False) -> list:
+    """One CG iteration over every row, or (``listed``) over the rows of the listed worlds."""
+    m, s, wc = c.model, c.scratch, c.compaction
+    active = s.cg_active
+    tets, nodes = (wc.tets, wc.nodes) if listed else (wc.all_rows, wc.all_rows)
+    n = wc.dim(nodes) if listed else m.num_nodes
     return [
-        c.rec(ke.hessian_product_tets, m.num_tets, s.p, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
-              m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist),
-        *_edge_product(c, s.p, active),
+        c.rec(ke.hessian_product_tets, wc.dim(tets) if listed else m.num_tets, s.p, m.tets, m.tet_rest_inv,
+              m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist,
+              tets),
+        *_edge_product(c, s.p, active, listed),
         c.rec(klin.cg_node_product, n, s.p, m.node_mass, s.contact_hessian, m.free_axes, m.node_world, active,
-              1.0 / (c.h * c.h), s.ap, s.p_ap),
+              1.0 / (c.h * c.h), s.ap, s.p_ap, nodes),
         c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate, active,
-              s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs),
+              s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs, nodes),
         c.rec(klin.cg_end_iteration, m.num_worlds, s.rz_stop,
               config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.coarse_size,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it, s.cg_total,
               active, s.cg_update),
         c.rec(klin.cg_update_direction, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef,
-              s.cg_beta, s.z, s.p, s.ap)]
+              s.cg_beta, s.z, s.p, s.ap, nodes)]
 
 
 def _trial(c: _Context, config) -> list:
@@ -306,14 +318,15 @@ def _outputs(c: _Context) -> list:
 
 
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
-                            h: float, start_pads: tuple, step_start: wp.array,
-                            phase_graphs: bool = True) -> SubstepLaunches:
+                            h: float, start_pads: tuple, step_start: wp.array, compaction: WorldCompaction,
+                            listed_cg: bool = False, phase_graphs: bool = True) -> SubstepLaunches:
     """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step,
     iterating in ``work`` (the output state: positions and velocities hold the step's start when
     it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
     ``step_start`` at the step's start, toward ``control``. ``phase_graphs``: capture each phase
-    as a CPU graph (False where the caller captures the whole substep)."""
-    c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start)
+    as a CPU graph (False where the caller captures the whole substep). ``compaction``: the row maps;
+    ``listed_cg``: also record the CG iterations over the listed worlds and the listing."""
+    c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction)
     s, x = scratch, work.positions
     block = config.check_every or config.cg_iterations
 
@@ -322,7 +335,8 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
 
     return SubstepLaunches(
         pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c, config)),
-        cg=seq(_cg(c, config) * block), coarse_post=seq(_coarse_after(c, s.newton_active)),
+        cg=seq(_cg(c, config) * block), cg_listed=seq(_cg(c, config, listed=True) * block) if listed_cg else [],
+        list_cg_worlds=compaction.record_list(scratch.cg_active) if listed_cg else [], coarse_post=seq(_coarse_after(c, s.newton_active)),
         energy0=seq([*_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)]),
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),

@@ -24,6 +24,8 @@ F = sum_a x_a (outer) b_a, and the gradient of the element energy w.r.t. x_a is 
 
 import warp as wp
 
+from .world_rows import RowMap, mapped_row
+
 
 @wp.func
 def column(m: wp.mat33, j: int):
@@ -217,9 +219,13 @@ def hessian_product_tets(
     product: wp.array(dtype=wp.vec3),
     tet_r: wp.array(dtype=wp.mat33),
     tet_twist: wp.array(dtype=float),
+    rows: RowMap,
 ):
-    """product += K * direction (the elastic Hessian above), accumulated per node."""
-    t = wp.tid()
+    """product += K * direction (the elastic Hessian above), accumulated per node, for the tets of
+    ``rows`` (``world_rows.py``)."""
+    t = mapped_row(rows, wp.tid())
+    if t < 0:
+        return
     if world_active[tet_world[t]] == 0:
         return
     idx = tets[t]

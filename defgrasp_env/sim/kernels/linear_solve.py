@@ -12,6 +12,7 @@ One CG iteration is five launches: ``hessian_product_tets`` (elastic.py), ``cg_n
 import warp as wp
 
 from .coarse_space import add_rhs, aggregate_part, coarse_coefficients
+from .world_rows import RowMap, mapped_row
 
 
 @wp.func
@@ -104,9 +105,13 @@ def cg_node_product(
     inv_dt2: float,
     ap: wp.array(dtype=wp.vec3),
     p_ap: wp.array(dtype=float),
+    rows: RowMap,
 ):
-    """ap += (m/dt^2 I + contact Hessian) p (the tets added their part); accumulate p . ap per world."""
-    i = wp.tid()
+    """ap += (m/dt^2 I + contact Hessian) p (the tets added their part); accumulate p . ap per world
+    (the nodes of ``rows``)."""
+    i = mapped_row(rows, wp.tid())
+    if i < 0:
+        return
     w = node_world[i]
     if cg_active[w] == 0:
         return
@@ -133,10 +138,13 @@ def cg_update_solution(
     rz_new: wp.array(dtype=float),
     cg_update: wp.array(dtype=float),
     coarse_rhs: wp.array2d(dtype=float),
+    rows: RowMap,
 ):
     """dx += alpha p, r -= alpha A p, z = P r (block-Jacobi part); per world: r.z, the largest
-    |alpha p| (m) and the coarse right-hand side T^T r."""
-    i = wp.tid()
+    |alpha p| (m) and the coarse right-hand side T^T r (the nodes of ``rows``)."""
+    i = mapped_row(rows, wp.tid())
+    if i < 0:
+        return
     w = node_world[i]
     if cg_active[w] == 0:
         return
@@ -208,9 +216,13 @@ def cg_update_direction(
     z: wp.array(dtype=wp.vec3),
     p: wp.array(dtype=wp.vec3),
     ap: wp.array(dtype=wp.vec3),
+    rows: RowMap,
 ):
-    """z += T coef (the coarse part), p = z + beta p, ap = 0, in the worlds still iterating."""
-    i = wp.tid()
+    """z += T coef (the coarse part), p = z + beta p, ap = 0, in the worlds still iterating (the
+    nodes of ``rows``)."""
+    i = mapped_row(rows, wp.tid())
+    if i < 0:
+        return
     w = node_world[i]
     if cg_active[w] == 0:
         return

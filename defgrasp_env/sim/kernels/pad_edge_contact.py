@@ -70,6 +70,7 @@ from .contact import friction_force, pad_slip, penalty_energy, penalty_force, pe
 from .energy import friction_potential
 from .pad_edge_search import NO_TRIANGLE, closest_point_barycentric
 from .surface_query import depth_inside_surface, winding_number
+from .world_rows import RowMap, mapped_row
 
 #: Free depth of a pad edge point behind the surface, in penalty knees (2 x 0.25 mm = 0.5 mm).
 SKIN_KNEES = 2.0
@@ -459,12 +460,15 @@ def edge_point_product(
     point_bary: wp.array(dtype=wp.vec3),
     point_block: wp.array(dtype=wp.mat33),
     ap: wp.array(dtype=wp.vec3),
+    rows: RowMap,
 ):
     """ap += H p for the edge points' Hessians H = (w w^T) x B (node j, k: w_j w_k B; B from
     ``evaluate_edge_points``: the surface point is affine in the triangle's nodes, so this is the
     whole Hessian of its terms), before ``linear_solve.cg_node_product`` masks ap and adds the
-    node terms."""
-    slot = wp.tid()
+    node terms; for the slots of ``rows`` (``world_rows.py``)."""
+    slot = mapped_row(rows, wp.tid())
+    if slot < 0:
+        return
     t = point_tri[slot]
     if t < 0 or cg_active[slot // points_per_world] == 0:
         return
