@@ -26,7 +26,8 @@ both: a row each, side by side). ``--split``: also time the solver's share of ea
 solve, so the step itself is then slightly slower) and the row gives the median ms per step inside
 the solver and outside it (the policy's actions where ``expert`` or ``press`` computes them, the
 gripper, force limits, readouts, observations, reward: the host side and its transfers).
-Printed per row: median and p95 ms per step, world-steps/s (W / median), the physics substeps per
+Printed per row: median, mean (what a learner waits for on average, slow steps included) and p95 ms
+per step, world-steps/s (W / median), the physics substeps per
 control step, the deepest solver-reported penetration (mm) and largest wrist force (N) over the timed
 steps, world-solves per world-substep (1 = no force-limit retry or patient re-solve; the scene's
 ``world_solves``), Newton and CG iterations per step of the slowest world (median over steps) and of
@@ -166,7 +167,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
     t, solver_t, newton, cg = np.array(times), np.array(solver_times), np.array(newton), np.array(cg)
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
             "edges": "on" if edge_contact else "off", "listed": listed_cg_worlds,
-            "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)),
+            "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)), "mean_ms": 1e3 * float(np.mean(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "solver_ms": 1e3 * float(np.median(solver_t)), "outside_ms": 1e3 * float(np.median(t - solver_t)),
             "substeps": substeps, "depth_mm": 1e3 * depth, "wrist_N": wrist, "successes": successes,
@@ -179,14 +180,14 @@ def _ms(value: float) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| W | actions | step graphs | edge contact | CG listed at <= worlds | object | E (Pa) | substeps | median ms | p95 ms | "
+    lines = ["| W | actions | step graphs | edge contact | CG listed at <= worlds | object | E (Pa) | substeps | median ms | mean ms | p95 ms | "
              "world-steps/s | deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / "
              "mean | CG / step, slowest / mean | episodes won | solver ms (median) | outside the solver ms (median) |",
-             "|---" * 19 + "|"]
+             "|---" * 20 + "|"]
     for r in rows:
         won = r["successes"] if r["policy"].startswith("expert") else "-"
         lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['listed']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
-                     f"{r['median_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
+                     f"{r['median_ms']:.1f} | {r['mean_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
                      f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['solves']:.3f} | {r['newton'][0]:.0f} / "
                      f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} | {_ms(r['solver_ms'])} | "
                      f"{_ms(r['outside_ms'])} |")

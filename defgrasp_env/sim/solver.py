@@ -102,7 +102,7 @@ class SolverConfig:
     penetration_bound: float = 1e-3
     penetration_iterations: int = 8
     patient_iterations: int = 60
-    listed_cg_worlds: int = 32
+    listed_cg_worlds: int = 8
     graphs: bool | None = None
 
     def __post_init__(self) -> None:
