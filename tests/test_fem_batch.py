@@ -270,13 +270,30 @@ def test_cuda_graph_steps_agree_with_launched_steps():
 
 
 
+def _run_listing(capacity, steps, graphs):
+    """The three worlds stepped ``steps`` times with ``listed_cg_worlds=capacity``: every
+    ``STATE_ROWS`` array and the report after each step, and per step the listing's (cond, count)
+    at the end of the step's last CG block."""
+    model, state, control = build((0, 1, 2))
+    solver = ImplicitSolver(model, SolverConfig(listed_cg_worlds=capacity, graphs=graphs))
+    history = []
+    for k in range(1, steps + 1):
+        control.pad_target_positions.assign(np.concatenate([pad_targets(w, k) for w in (0, 1, 2)]))
+        report = solver.step(state, state, control, DT)
+        listing = (int(solver.compaction.cond.numpy()[0]), int(solver.compaction.count.numpy()[0]))
+        history.append(({name: getattr(state, name).numpy().copy() for name in STATE_ROWS}, report, listing))
+    return history
+
+
 @pytest.mark.parametrize("graphs", [None, False], ids=["graphs", "launches"])
 def test_cg_over_the_listed_worlds_gives_the_bits_of_cg_over_all_rows(graphs, monkeypatch):
     """``listed_cg_worlds``: once at most that many worlds still iterate CG, its launches run over
     those worlds' rows only. Three worlds whose CG stops at different iterations, stepped 14 times
-    with the listing off (0), at capacity 1 and 2: every state array and every report field are
-    bit-identical, and the listed path did run (its condition held in some CG blocks and not in
-    others, counted by a spy on ``wp.capture_if``)."""
+    with the listing off (0), at capacity 1 and 2, the step captured as one graph and launched
+    kernel by kernel: every state array (``STATE_ROWS``) and every report field are bit-identical.
+    The listed path ran: at the end of some steps' last CG block the listing held (cond 1) with a
+    world listed (count >= 1); launched one by one, a spy on ``wp.capture_if`` also sees its
+    condition hold in some CG blocks and fail in others."""
     import warp as wp
 
     conditions = []
@@ -289,17 +306,18 @@ def test_cg_over_the_listed_worlds_gives_the_bits_of_cg_over_all_rows(graphs, mo
 
     monkeypatch.setattr(wp, "capture_if", spy)
     steps = 14
-    _, reference, stats_reference = run((0, 1, 2), steps, SolverConfig(listed_cg_worlds=0), graphs=graphs)
+    reference = _run_listing(0, steps, graphs)
     assert conditions == []
     for capacity in (1, 2):
         conditions.clear()
-        _, listed, stats_listed = run((0, 1, 2), steps, SolverConfig(listed_cg_worlds=capacity), graphs=graphs)
-        for k in range(steps):
-            for got, want in zip(listed[k], reference[k]):
-                np.testing.assert_array_equal(got, want)
+        listed = _run_listing(capacity, steps, graphs)
+        for (got, got_report, _), (want, want_report, _) in zip(listed, reference):
+            for name in STATE_ROWS:
+                np.testing.assert_array_equal(got[name], want[name], err_msg=name)
             for field in REPORT_FIELDS:
-                np.testing.assert_array_equal(getattr(stats_listed[k], field), getattr(stats_reference[k], field))
-        if graphs is False:  # launched one by one, the condition is read on the host: both branches ran
+                np.testing.assert_array_equal(getattr(got_report, field), getattr(want_report, field), err_msg=field)
+        assert any(cond == 1 and count >= 1 for _, _, (cond, count) in listed), capacity
+        if graphs is False:
             assert 0 < sum(conditions) < len(conditions), (capacity, sum(conditions), len(conditions))
 
 

@@ -81,7 +81,8 @@ class SolverConfig:
             a step they cost no host round trip.
         listed_cg_worlds: once at most this many worlds of a batch still iterate CG (checked every
             ``check_every`` iterations), its launches run over the rows of those worlds only
-            (``world_compaction``; 0 = never; only where the model has more worlds). The same rows
+            (``world_compaction``; 0 = never; only where the model has more worlds, and on CUDA only
+            where the step is captured as a graph: outside one the test is a host round trip). The same rows
             by the same code: bit-identical on the CPU; on a GPU a launch then costs what a few
             worlds' rows cost instead of a thread per row of every world.
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
@@ -125,7 +126,7 @@ class SolverConfig:
 def graphs_supported(device) -> bool:
     """Whether a whole ``advance`` (loops with device-side exit tests) can be one graph on ``device``:
     CUDA graphs with conditional nodes (driver and toolkit >= 12.4), or Warp's CPU graphs with
-    ``capture_while`` (tried once per process)."""
+    ``capture_while`` and ``capture_if`` (tried once per process)."""
     device = wp.get_device(device)
     if device.is_cuda:
         return wp.is_conditional_graph_supported()
@@ -135,6 +136,7 @@ def graphs_supported(device) -> bool:
         try:
             with wp.ScopedCapture(device=device, force_module_load=False) as capture:
                 wp.capture_while(flag, lambda: flag.zero_())
+                wp.capture_if(flag, on_true=lambda: flag.zero_(), on_false=lambda: flag.zero_())
             wp.capture_launch(capture.graph)
             _CPU_GRAPHS = True
         except (RuntimeError, NotImplementedError, TypeError, AttributeError):
@@ -177,7 +179,9 @@ class ImplicitSolver:
         self.scratch = SolverScratch.from_model(model)
         self.loops = DeviceLoops(model, config, self.scratch)
         self.compaction = WorldCompaction.from_model(model, config.listed_cg_worlds, self.scratch.edges.points_per_world)
-        self._listed_cg = 0 < config.listed_cg_worlds < model.num_worlds
+        # outside a captured step, capture_if reads its condition on the host: free on the CPU, a
+        # synchronisation per CG block on CUDA (where listing is then not used)
+        self._listed_cg = self.compaction.pays(model) and (self.graphs or wp.get_device(model.device).is_cpu)
         self._report = SolveReport(model.num_worlds, model.device)
         self._solving_all = True  # scratch.solve_worlds holds all ones
         self._launches: dict[tuple, tuple] = {}

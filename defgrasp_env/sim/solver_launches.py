@@ -73,7 +73,7 @@ class SubstepLaunches:
     evaluate: list
     cg: list
     cg_listed: list     # the same CG iterations over the listed worlds' rows (WorldCompaction; [] if unused)
-    list_cg_worlds: list  # launches: list the worlds still iterating CG (WorldCompaction.record_list)
+    list_cg_worlds: list  # list the worlds still iterating CG (WorldCompaction.record_list; [] if unused)
     coarse_post: list
     energy0: list
     begin_search: object
@@ -133,7 +133,7 @@ def _edge_product(c: _Context, p, active, listed: bool = False) -> list:
     m, s, e, wc = c.model, c.scratch, c.scratch.edges, c.compaction
     if not e.active:
         return []
-    rows = wc.edge_slots if listed else wc.all_rows
+    rows = wc.edge_slots if listed else wc.every_row
     dim = wc.dim(rows) if listed else m.num_worlds * e.points_per_world
     return [c.rec(kpe.edge_point_product, dim, p, e.triangles, active, e.points_per_world, e.point_tri, e.point_bary,
                   e.point_block, s.ap, rows)]
@@ -206,10 +206,10 @@ def _coarse_before(c: _Context, active) -> list:
               s.coarse_guess),
         c.rec(ke.hessian_product_tets, m.num_tets, s.coarse_guess, m.tets, m.tet_rest_inv, m.tet_rest_volume,
               m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist,
-              c.compaction.all_rows),
+              c.compaction.every_row),
         *_edge_product(c, s.coarse_guess, active),
         c.rec(klin.cg_node_product, n, s.coarse_guess, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
-              active, 1.0 / (c.h * c.h), s.ap, s.coarse_scratch, c.compaction.all_rows),
+              active, 1.0 / (c.h * c.h), s.ap, s.coarse_scratch, c.compaction.every_row),
         c.rec(kcs.coarse_start_cg, n, s.precond, m.free_axes, m.node_world, active, s.residual, s.ap, s.z, s.p,
               s.rz)]
 
@@ -265,7 +265,7 @@ def _cg(c: _Context, config, listed: bool = False) -> list:
     """One CG iteration over every row, or (``listed``) over the rows of the listed worlds."""
     m, s, wc = c.model, c.scratch, c.compaction
     active = s.cg_active
-    tets, nodes = (wc.tets, wc.nodes) if listed else (wc.all_rows, wc.all_rows)
+    tets, nodes = (wc.tets, wc.nodes) if listed else (wc.every_row, wc.every_row)
     n = wc.dim(nodes) if listed else m.num_nodes
     return [
         c.rec(ke.hessian_product_tets, wc.dim(tets) if listed else m.num_tets, s.p, m.tets, m.tet_rest_inv,
@@ -335,8 +335,10 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
 
     return SubstepLaunches(
         pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c, config)),
-        cg=seq(_cg(c, config) * block), cg_listed=seq(_cg(c, config, listed=True) * block) if listed_cg else [],
-        list_cg_worlds=compaction.record_list(scratch.cg_active) if listed_cg else [], coarse_post=seq(_coarse_after(c, s.newton_active)),
+        cg=seq(_cg(c, config) * block),
+        cg_listed=seq(_cg(c, config, listed=True) * block) if listed_cg else [],
+        list_cg_worlds=seq(compaction.record_list(scratch.cg_active)) if listed_cg else [],
+        coarse_post=seq(_coarse_after(c, s.newton_active)),
         energy0=seq([*_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)]),
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),

@@ -24,14 +24,14 @@ def _row_map(per_world: int, count: wp.array, worlds: wp.array, start: np.ndarra
     rows.per_world = int(per_world)
     rows.count = count
     rows.worlds = worlds
-    rows.start = wp.array(np.asarray(start, dtype=np.int64).astype(np.int32), dtype=int, device=device)
+    rows.start = wp.array(np.asarray(start, dtype=np.int32), dtype=int, device=device)
     return rows
 
 
 def every_row(device) -> kwr.RowMap:
-    """The map of a launch over every row (thread = row), for a kernel launched on its own."""
-    return _row_map(0, wp.zeros(1, dtype=wp.int32, device=device), wp.zeros(1, dtype=wp.int32, device=device),
-                    np.zeros(1), device)
+    """The map of a launch over every row (thread = row)."""
+    return _row_map(kwr.EVERY_ROW, wp.zeros(1, dtype=wp.int32, device=device),
+                    wp.zeros(1, dtype=wp.int32, device=device), np.zeros(1), device)
 
 
 @dataclass
@@ -39,15 +39,15 @@ class WorldCompaction:
     """Device arrays of the list and the row maps (all rows, and the listed worlds' nodes, tets and
     pad edge slots) with their launch sizes.
 
-    ``count`` [1] int32: worlds flagged at the last ``list`` (all counted, at most ``capacity``
-    listed in ``worlds`` [capacity] int32); ``cond`` [1] int32: 1 where all of them are listed.
-    ``all_rows``: the map of a launch over every row (thread = row)."""
+    ``count`` [1] int32: worlds flagged at the last listing (``record_list``; all counted, at most
+    ``capacity`` listed in ``worlds`` [capacity] int32); ``cond`` [1] int32: 1 where all of them are
+    listed. ``every_row``: the map of a launch over every row (thread = row)."""
 
     capacity: int
     count: wp.array
     worlds: wp.array
     cond: wp.array
-    all_rows: kwr.RowMap
+    every_row: kwr.RowMap
     nodes: kwr.RowMap
     tets: kwr.RowMap
     edge_slots: kwr.RowMap
@@ -61,7 +61,7 @@ class WorldCompaction:
         edge_start = np.arange(w + 1) * edge_points_per_world
         return cls(
             capacity=int(capacity), count=count, worlds=worlds, cond=wp.zeros(1, dtype=wp.int32, device=d),
-            all_rows=every_row(d),
+            every_row=every_row(d),
             nodes=_row_map(np.diff(node_start).max(), count, worlds, node_start, d),
             tets=_row_map(np.diff(tet_start).max(), count, worlds, tet_start, d),
             edge_slots=_row_map(edge_points_per_world, count, worlds, edge_start, d))
@@ -69,6 +69,12 @@ class WorldCompaction:
     def dim(self, rows: kwr.RowMap) -> int:
         """Threads of a launch over the listed worlds' rows of ``rows``."""
         return self.capacity * rows.per_world
+
+    def pays(self, model: Model) -> bool:
+        """Whether listed launches are smaller than launches over every row: more worlds than
+        ``capacity``, and ``capacity`` times the largest world's tets fewer than all tets (one large
+        world among small ones could make a listed launch the larger)."""
+        return 0 < self.capacity < model.num_worlds and self.dim(self.tets) < model.num_tets
 
     def record_list(self, flags: wp.array) -> list:
         """The recorded launches that list the worlds whose ``flags`` [W] are set and set ``cond``."""

@@ -3,19 +3,21 @@ short list of worlds (the worlds still iterating once few are left).
 
 A batched CG iterates as long as its slowest world. Its kernels test a per-world flag on every row,
 so once most worlds have stopped, a launch over all rows still costs a thread per row of every
-world: on a GPU at W = 4096 ~10-15 us a launch (3 M tets) for the work of one world. The same
+world: on an H200 at W = 4096 (3 M tets) 26-69 us a ``hessian_product_tets`` launch for the work of
+a few worlds, 7-12 us listed (benchmarks/RESULTS.md). The same
 kernels launched over ``capacity x rows_per_world`` threads through a ``RowMap`` of the listed worlds
 do that world's work for the cost of a small launch.
 
-A ``RowMap`` with ``per_world == 0`` maps thread ``tid`` to row ``tid`` (a launch over all rows);
-otherwise thread ``tid`` is row ``tid % per_world`` of listed world ``tid // per_world`` (the k-th
-of ``worlds``, while ``k < count[0]``), if the world has that many rows. Each row is computed by the
+A ``RowMap`` with ``per_world == EVERY_ROW`` (-1) maps thread ``tid`` to row ``tid`` (a launch over
+all rows); otherwise thread ``tid`` is row ``tid % per_world`` of listed world ``tid // per_world``
+(the k-th of ``worlds``, while ``k < count[0]``), if the world has that many rows (a listed map with
+``per_world == 0`` maps nothing: its launch has no threads). Each row is computed by the
 same code either way, and a world's rows run in the same order, so on the CPU (one thread,
 sequential launches) the results are bit-identical to a launch over all rows.
 
-``list_worlds`` builds the list from a loop's per-world flags (``compact_begin``, then
-``compact_worlds`` over the W worlds, then ``compact_gate``: ``cond`` = 1 where at most ``capacity``
-worlds are flagged, the test of ``wp.capture_if``).
+``WorldCompaction.record_list`` (``sim/world_compaction.py``) builds the list from a loop's
+per-world flags: ``compact_begin``, then ``compact_worlds`` over the W worlds, then ``compact_gate``
+(``cond`` = 1 where at most ``capacity`` worlds are flagged: the test of ``wp.capture_if``).
 """
 
 from __future__ import annotations
@@ -23,18 +25,22 @@ from __future__ import annotations
 import warp as wp
 
 
+#: ``RowMap.per_world`` of a map over every row (thread = row).
+EVERY_ROW = -1
+
+
 @wp.struct
 class RowMap:
-    per_world: int                    # 0: all rows; else the thread stride per listed world
-    count: wp.array(dtype=wp.int32)   # [1] listed worlds
+    per_world: int                    # EVERY_ROW: all rows; else the thread stride per listed world
+    count: wp.array(dtype=wp.int32)   # [1] worlds flagged at the last listing
     worlds: wp.array(dtype=wp.int32)  # [capacity] the listed worlds
-    start: wp.array(dtype=int)        # [W+1] first row of each world (and the row count last)
+    start: wp.array(dtype=int)        # [W+1] first row of each world (and the row count last); unused by EVERY_ROW
 
 
 @wp.func
 def mapped_row(rows: RowMap, tid: int) -> int:
     """The row thread ``tid`` runs, or -1 for none."""
-    if rows.per_world == 0:
+    if rows.per_world == EVERY_ROW:
         return tid
     k = tid // rows.per_world
     if k >= int(rows.count[0]):
@@ -48,6 +54,7 @@ def mapped_row(rows: RowMap, tid: int) -> int:
 
 @wp.kernel
 def compact_begin(count: wp.array(dtype=wp.int32)):
+    """Empty the list."""
     count[0] = wp.int32(0)
 
 
