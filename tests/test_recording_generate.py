@@ -108,6 +108,25 @@ def test_bad_policy_is_reported(tmp_path, capsys):
     assert list(tmp_path.glob("*.h5")) == []
 
 
+def test_bad_objects_and_moduli_are_refused_before_anything_runs(tmp_path, capsys):
+    """An unknown object, a missing mesh file or a non-positive modulus stops defgrasp-generate at
+    its arguments (exit 2, the bad value and the valid names in the message), before any episode
+    runs or the output folder is made."""
+    import pytest
+
+    out = tmp_path / "out"
+    for bad, words in ((["--objects", "cuboid,banana"], ["'banana'", "cuboid", "torus"]),
+                       (["--objects", str(tmp_path / "missing.stl")], ["missing.stl", "existing"]),
+                       (["--objects", "cuboid", "--moduli", "1e5,-3"], ["youngs_modulus", "-3"]),
+                       (["--objects", ","], ["--objects"])):
+        with pytest.raises(SystemExit) as exc:
+            generate_main([str(out), "--max-steps", "2", "--no-progress", *bad])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert all(w in err for w in words), (bad, err)
+    assert not out.exists()
+
+
 def test_console_scripts_are_registered():
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     for name in ("defgrasp-dataset", "defgrasp-generate"):

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..envs.config import PickupConfig
 from ..layout import ACTION_LAYOUTS
 
 DEFAULT_POLICY = "defgrasp_env.policies:ScriptedPickupExpert"
@@ -358,7 +359,14 @@ def main(argv: list[str] | None = None) -> int:
         p.error("--frames records one episode at a time: use --worlds 1")
     if args.workers is not None and (args.workers < 1 or args.ray is None):
         p.error(f"--workers needs --ray and must be >= 1, got {args.workers}")
-    jobs = plan_jobs([o for o in args.objects.split(",") if o], args.moduli, args.episodes, args.seed)
+    objects = [o for o in args.objects.split(",") if o]
+    if not objects or not args.moduli:
+        p.error(f"--objects and --moduli must name at least one value each, got {args.objects!r} and {args.moduli}")
+    try:  # before anything runs or is written: the names, mesh files and moduli, as the env checks them
+        PickupConfig(object=tuple(objects), youngs_modulus=tuple(args.moduli))
+    except (ValueError, TypeError) as exc:
+        p.error(str(exc))
+    jobs = plan_jobs(objects, args.moduli, args.episodes, args.seed)
     record = run_jobs
     if args.ray is not None:
         from functools import partial
