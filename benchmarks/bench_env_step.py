@@ -19,7 +19,8 @@ cost the actuator force limit's retries and the slowest world's iterations set; 
 closed gripper pushed down onto the object at full speed and kept pushing (``press_actions``: a
 learner pressing the object into the ground, the wrist at its force limit from the first touch).
 ``--listed-cg-worlds N [N ...]``: ``SolverConfig.listed_cg_worlds`` (CG's launches over the rows of
-the worlds still iterating once at most N are left; 0 = over all rows), a row each side by side.
+the worlds still iterating once at most N are left; 0 = over all rows; default: the solver's choice
+for the device, "auto" in the table), a row each side by side.
 ``--edge-contact on|off|both``: pad edge contact (``PickupConfig.edge_contact``, on by default;
 both: a row each, side by side). ``--split``: also time the solver's share of each step: every
 ``ImplicitSolver.advance`` is bracketed by ``wp.synchronize_device`` (one more synchronisation per
@@ -63,7 +64,7 @@ from defgrasp_env.sim import ImplicitSolver, SolverConfig  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
 
 
-def solver_config(graphs: str, listed_cg_worlds: int) -> SolverConfig:
+def solver_config(graphs: str, listed_cg_worlds: int | None) -> SolverConfig:
     """The env's default solver settings with ``graphs`` ("auto", "on", "off") and
     ``listed_cg_worlds``."""
     return dataclasses.replace(PickupConfig().solver, graphs={"auto": None, "on": True, "off": False}[graphs],
@@ -113,7 +114,7 @@ class SolverClock:
 
 def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
              graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True, split: bool = False,
-             listed_cg_worlds: int = SolverConfig.listed_cg_worlds) -> dict:
+             listed_cg_worlds: int | None = None) -> dict:
     """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table (with
     ``split``, the solver's share of each step too: ``SolverClock``)."""
     with SolverClock(device) if split else contextlib.nullcontext() as clock:
@@ -166,7 +167,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
     env.close()
     t, solver_t, newton, cg = np.array(times), np.array(solver_times), np.array(newton), np.array(cg)
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
-            "edges": "on" if edge_contact else "off", "listed": listed_cg_worlds,
+            "edges": "on" if edge_contact else "off", "listed": "auto" if listed_cg_worlds is None else listed_cg_worlds,
             "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)), "mean_ms": 1e3 * float(np.mean(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "solver_ms": 1e3 * float(np.median(solver_t)), "outside_ms": 1e3 * float(np.median(t - solver_t)),
@@ -210,8 +211,9 @@ def main(argv=None) -> int:
                     help="std of Gaussian noise on the expert's actions (wrist rotation zeroed); needs --policy expert")
     ap.add_argument("--edge-contact", choices=["on", "off", "both"], default="on",
                     help="pad edge contact (PickupConfig.edge_contact, on by default); both: a row each, side by side")
-    ap.add_argument("--listed-cg-worlds", type=int, nargs="+", default=[SolverConfig.listed_cg_worlds],
-                    help="SolverConfig.listed_cg_worlds (0: CG always over all rows); several: a row each, side by side")
+    ap.add_argument("--listed-cg-worlds", type=int, nargs="+", default=[None],
+                    help="SolverConfig.listed_cg_worlds (0: CG always over all rows; default: the solver's choice "
+                         "for the device); several: a row each, side by side")
     ap.add_argument("--split", action="store_true",
                     help="also time the solver's share of each step (a synchronisation around every solve)")
     ap.add_argument("--no-append", action="store_true")

@@ -336,6 +336,12 @@ def test_cg_over_the_listed_worlds_on_cuda_agrees_with_cg_over_all_rows():
     assert abs(it1 - it0) <= 0.1 * it0, (it0, it1)
 
 
-def test_listed_cg_worlds_is_checked():
-    with pytest.raises(ValueError, match="listed_cg_worlds"):
-        SolverConfig(listed_cg_worlds=-1)
+def test_listed_cg_worlds_is_checked_and_its_default_depends_on_the_device():
+    """A negative or non-integer capacity is refused; None (the default) lists on CUDA only (on the
+    CPU it measured slower), an explicit capacity applies on the CPU too."""
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="listed_cg_worlds"):
+            SolverConfig(listed_cg_worlds=bad)
+    model, _, _ = build((0, 1, 2))
+    assert ImplicitSolver(model, SolverConfig()).compaction.capacity == 0
+    assert ImplicitSolver(model, SolverConfig(listed_cg_worlds=2)).compaction.capacity == 2

@@ -34,6 +34,8 @@ __all__ = ["ImplicitSolver", "SolveStats", "SolverConfig"]
 
 #: Launch sets (one per substep length and (state_in, state_out, control) triple) kept at most.
 _LAUNCH_SETS = 8
+#: ``SolverConfig.listed_cg_worlds`` on CUDA when it is None.
+LISTED_CG_WORLDS_CUDA = 8
 
 
 @dataclass(frozen=True)
@@ -82,9 +84,11 @@ class SolverConfig:
         listed_cg_worlds: once at most this many worlds of a batch still iterate CG (checked every
             ``check_every`` iterations), its launches run over the rows of those worlds only
             (``world_compaction``; 0 = never; only where the model has more worlds, and on CUDA only
-            where the step is captured as a graph: outside one the test is a host round trip). The same rows
-            by the same code: bit-identical on the CPU; on a GPU a launch then costs what a few
-            worlds' rows cost instead of a thread per row of every world.
+            where the step is captured as a graph: outside one the test is a host round trip). The
+            same rows by the same code: bit-identical on the CPU; on a GPU a launch then costs what a
+            few worlds' rows cost instead of a thread per row of every world. None (default):
+            ``LISTED_CG_WORLDS_CUDA`` on CUDA, 0 on the CPU (where it measured slower: W = 48 on a
+            2-core CPU, 4-20 % longer solves; benchmarks/RESULTS.md).
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
@@ -103,7 +107,7 @@ class SolverConfig:
     penetration_bound: float = 1e-3
     penetration_iterations: int = 8
     patient_iterations: int = 60
-    listed_cg_worlds: int = 8
+    listed_cg_worlds: int | None = None
     graphs: bool | None = None
 
     def __post_init__(self) -> None:
@@ -111,6 +115,8 @@ class SolverConfig:
                           ("line_search_steps", 0), ("check_every", 0), ("penetration_iterations", 0),
                           ("patient_iterations", 0), ("listed_cg_worlds", 0)):
             value = getattr(self, name)
+            if name == "listed_cg_worlds" and value is None:
+                continue
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
         check_range("newton_tolerance", self.newton_tolerance, 0.0, math.inf, "m")
@@ -178,10 +184,14 @@ class ImplicitSolver:
         self.graphs = supported if config.graphs is None else config.graphs
         self.scratch = SolverScratch.from_model(model)
         self.loops = DeviceLoops(model, config, self.scratch)
-        self.compaction = WorldCompaction.from_model(model, config.listed_cg_worlds, self.scratch.edges.points_per_world)
+        is_cpu = wp.get_device(model.device).is_cpu
+        capacity = config.listed_cg_worlds
+        if capacity is None:
+            capacity = 0 if is_cpu else LISTED_CG_WORLDS_CUDA
+        self.compaction = WorldCompaction.from_model(model, capacity, self.scratch.edges.points_per_world)
         # outside a captured step, capture_if reads its condition on the host: free on the CPU, a
         # synchronisation per CG block on CUDA (where listing is then not used)
-        self._listed_cg = self.compaction.pays(model) and (self.graphs or wp.get_device(model.device).is_cpu)
+        self._listed_cg = self.compaction.pays(model) and (self.graphs or is_cpu)
         self._report = SolveReport(model.num_worlds, model.device)
         self._solving_all = True  # scratch.solve_worlds holds all ones
         self._launches: dict[tuple, tuple] = {}
