@@ -88,7 +88,7 @@ class SolverConfig:
             same rows by the same code: bit-identical on the CPU; on a GPU a launch then costs what a
             few worlds' rows cost instead of a thread per row of every world. None (default):
             ``LISTED_CG_WORLDS_CUDA`` on CUDA, 0 on the CPU (where it measured slower: W = 48 on a
-            2-core CPU, 4-20 % longer solves; benchmarks/RESULTS.md).
+            2-core CPU, 4-19 % longer solves; benchmarks/RESULTS.md).
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
@@ -111,12 +111,12 @@ class SolverConfig:
     graphs: bool | None = None
 
     def __post_init__(self) -> None:
-        for name, low in (("substeps", 1), ("newton_iterations", 1), ("cg_iterations", 1),
-                          ("line_search_steps", 0), ("check_every", 0), ("penetration_iterations", 0),
-                          ("patient_iterations", 0), ("listed_cg_worlds", 0)):
+        counts = [("substeps", 1), ("newton_iterations", 1), ("cg_iterations", 1), ("line_search_steps", 0),
+                  ("check_every", 0), ("penetration_iterations", 0), ("patient_iterations", 0)]
+        if self.listed_cg_worlds is not None:  # None: the device's default
+            counts.append(("listed_cg_worlds", 0))
+        for name, low in counts:
             value = getattr(self, name)
-            if name == "listed_cg_worlds" and value is None:
-                continue
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
         check_range("newton_tolerance", self.newton_tolerance, 0.0, math.inf, "m")
