@@ -89,14 +89,14 @@ def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical
         for k in range(30):
             a = np.tile(action("sweep", k, rng).astype(np.float32), (2, 1))
             scene = venv.unwrapped.scene
-            gripper = copy.deepcopy(scene.gripper)   # the probe plans a substep: restored after it
+            probe = copy.deepcopy(scene.gripper)   # plans the step's first substep; the scene's stays as it is
             pos, quat, gap = targets(scene.gripper, venv.unwrapped.config, a)
-            scene.gripper.begin_step(pos, quat)
+            probe.begin_step(pos, quat, gap)
             h = venv.unwrapped.config.dt / scene.substeps
-            scene.gripper.plan_substep(0, scene.substeps, h, gap, np.ones(2, bool))
+            probe.plan_substep(0, scene.substeps, h)
             control = Control.from_model(scene.model)
-            pad_pos, pad_quat = scene.gripper.move()
-            scene.gripper = gripper
+            probe.move()
+            pad_pos, pad_quat = probe.pad_target_poses()
             control.pad_target_positions.assign(pad_pos.reshape(-1, 3).astype(np.float32))
             control.pad_target_orientations.assign(pad_quat.reshape(-1, 4).astype(np.float32))
             plain_state, patient_state = State.from_model(scene.model), State.from_model(scene.model)

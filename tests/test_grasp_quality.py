@@ -39,8 +39,8 @@ def test_pad_force_angles_in_a_turned_wrists_frame():
     g.reset(np.ones(4, bool), np.zeros((4, 2)))
     pos, quat = g.flange_pose()
     turn = quat_multiply(axis_angle_to_quat(np.array([0.0, 0.7, 0.0])), axis_angle_to_quat(np.array([0.3, 0.0, 0.0])))
-    g.begin_step(pos, quat_multiply(np.tile(turn, (4, 1)), quat))
-    g.substep(0, 4, 0.0125, np.full(4, 0.05), np.ones(4, bool))
+    g.begin_step(pos, quat_multiply(np.tile(turn, (4, 1)), quat), np.full(4, 0.05))
+    g.substep(0, 4, 0.0125)
     R = quat_to_matrix(g.flange_pose()[1])                                        # [4, 3, 3]
     assert np.all(np.abs(R[:, 1, 0]) > 0.01) and np.all(np.abs(R[:, 0, 2]) > 0.01)  # turned and tilted
     x, y, z = R[:, :, 0], R[:, :, 1], R[:, :, 2]

@@ -26,10 +26,10 @@ def _gripper(n=3, **cfg):
 def _period(g, target_pos, target_quat, target_gap, forces, substeps=4, dt=0.05, active=None):
     """One control period driven by hand: ``forces`` [W, 2] N are 'measured' after every substep."""
     active = np.ones(g.num_worlds, bool) if active is None else active
-    g.begin_step(target_pos, target_quat)
+    g.begin_step(target_pos, target_quat, target_gap, active)
     poses = []
     for k in range(substeps):
-        poses.append(g.substep(k, substeps, dt / substeps, target_gap, active))
+        poses.append(g.substep(k, substeps, dt / substeps))
         g.sense(forces)
     return poses
 
@@ -91,13 +91,13 @@ def test_move_fraction_scales_the_wrist_and_the_closing_jaw_only():
     ``fraction`` of a planned closing (world 0) but all of a planned opening (world 1), and a retry
     from the same plan with fraction 1 gives the unscaled substep bit for bit."""
     g = _gripper(2)
-    g.begin_step(*g.flange_pose())
-    g.substep(0, 1, 0.05, np.full(2, GAP_MIN), np.ones(2, bool))  # both close 7.5 mm
+    g.begin_step(*g.flange_pose(), np.full(2, GAP_MIN))
+    g.substep(0, 1, 0.05)  # both close 7.5 mm
     g.sense(np.zeros((2, 2)))
     pos, quat = g.flange_pose()
     q0, gap0 = g.q.copy(), g.gap.copy()
-    g.begin_step(pos + np.array([0.0, -0.02, 0.0]), quat)
-    g.plan_substep(0, 1, 0.05, np.array([GAP_MIN, GAP_MAX]), np.ones(2, bool))
+    g.begin_step(pos + np.array([0.0, -0.02, 0.0]), quat, np.array([GAP_MIN, GAP_MAX]))
+    g.plan_substep(0, 1, 0.05)
     g.move(np.ones(2))
     q_full, gap_full = g.q.copy(), g.gap.copy()
     assert gap_full[0] < gap0[0] and gap_full[1] > gap0[1]
@@ -146,7 +146,7 @@ def test_lift_puts_the_lowest_pad_corner_at_the_clearance():
     for random wrist poses (gimbal-lock and axis-aligned angles included) and gaps: no corner ends
     below GROUND_CLEARANCE, a lifted world's lowest corner is exactly at it (float64 rounding), an
     unlifted one is left as it was, and the returned pad poses are those of the returned joints."""
-    from defgrasp_env.gripper.gripper import _CORNER_SIGNS
+    from defgrasp_env.gripper.gripper import _CORNER_SIGNS, lift_above_ground
     from defgrasp_env.transforms import quat_rotate
 
     rng = np.random.default_rng(7)
@@ -158,7 +158,7 @@ def test_lift_puts_the_lowest_pad_corner_at_the_clearance():
     q[:400, 3:] = rng.choice([0.0, np.pi / 2, -np.pi / 2, 1e-12], (400, 3))
     gap = rng.uniform(GAP_MIN, GAP_MAX, n)
     g = _gripper(n)
-    lifted, centers, quats = g.lift_above_ground(q, gap)
+    lifted, centers, quats = lift_above_ground(q, gap)
     corners = centers[:, :, None, :] + quat_rotate(quats[:, :, None, :], _CORNER_SIGNS * PAD_BOX_HALF_EXTENTS)
     lowest = corners[..., 1].reshape(n, -1).min(axis=1)
     raised = lifted[:, 1] > q[:, 1]
@@ -235,15 +235,28 @@ def test_held_at_limit_only_for_the_same_push():
     def plan(g, velocity, gap=0.0, turn=0.0):
         c, s = np.cos(turn / 2), np.sin(turn / 2)
         g.begin_step(np.tile(start + 0.05 * np.asarray(velocity), (g.num_worlds, 1)),
-                     np.tile([0.0, s, 0.0, c] if turn else quat, (g.num_worlds, 1)))
-        g.plan_substep(0, 4, h, np.full(g.num_worlds, gap), np.ones(g.num_worlds, bool))
+                     np.tile([0.0, s, 0.0, c] if turn else quat, (g.num_worlds, 1)), np.full(g.num_worlds, gap))
+        g.plan_substep(0, 4, h)
 
-    g = Gripper(GripperConfig(), 1)
+    def held():
+        return g.held_at_limit()[1]
+
+    def sense(pads, moved=None):
+        """Pad forces [1, 2, 3] sensed; ``moved``: the force limit's accepted fraction of the planned
+        substep (recorded: ``sense(record_limit=True)``), None: no limit outcome recorded."""
+        if moved is not None:
+            g.move(np.full(1, moved))
+        g.sense(np.zeros((1, 2)), pads, record_limit=moved is not None)
+
+    g = Gripper(GripperConfig(), 1, wrist_force_limit=150.0)
     g.reset(np.ones(1, bool), np.zeros((1, 2)))
-    at_limit, below = np.ones(1), np.full(1, 0.99)
+    at_limit = np.array([[[0.0, 150.0, 0.0], [0.0, 0.0, 0.0]]])  # the wrist force at its 150 N limit: load 1
+    below = 0.99 * at_limit
+    sense(at_limit)
     plan(g, 0.3 * down)
-    assert not g.held_at_limit(at_limit)            # nothing stopped yet: it tries
-    g.record_limit(np.zeros(1), np.zeros(1, bool))  # the try was stopped
+    assert g.held_at_limit()[0][0] == 1.0
+    assert not held()[0]                            # nothing stopped yet: it tries
+    sense(at_limit, moved=0.0)                      # the try was stopped
     cases = {"same push": (0.3 * down, 0.0, True), "slower": (0.05 * down, 0.0, True),
              "20 degrees off": (0.3 * np.array([np.sin(0.35), -np.cos(0.35), 0.0]), 0.0, True),
              "35 degrees off": (0.3 * np.array([np.sin(0.61), -np.cos(0.61), 0.0]), 0.0, False),
@@ -251,15 +264,28 @@ def test_held_at_limit_only_for_the_same_push():
              "same push, turning wrist": (0.3 * down, 0.3, True), "turning wrist only": (np.zeros(3), 0.3, False)}
     for name, (velocity, turn, expected) in cases.items():
         plan(g, velocity, turn=turn)
-        assert g.held_at_limit(at_limit)[0] == expected, name
+        assert held()[0] == expected, name
+    sense(below)
     plan(g, 0.3 * down)
-    assert not g.held_at_limit(below)[0]            # the object gave way: try again
+    assert not held()[0]                            # the object gave way: try again
+    sense(at_limit)
     # a held substep keeps the stopped push; a command turning 15 degrees at a time is released at 30
     for angle, expected in ((0.26, True), (0.52, False)):
         plan(g, 0.3 * np.array([np.sin(angle), -np.cos(angle), 0.0]))
-        held = g.held_at_limit(at_limit)
-        assert held[0] == expected, angle
-        g.record_limit(np.zeros(1), held)
-    g.record_limit(np.ones(1), np.zeros(1, bool))   # a try that moved: nothing is held any more
+        assert held()[0] == expected, angle
+        sense(at_limit, moved=0.0)
     plan(g, 0.3 * down)
-    assert not g.held_at_limit(at_limit)[0]
+    sense(at_limit, moved=1.0)                      # a try that moved: nothing is held any more
+    plan(g, 0.3 * down)
+    assert not held()[0]
+
+
+def test_begin_step_refuses_a_bad_jaw_target():
+    """A non-finite or wrongly shaped jaw target is refused at the step's start, naming it (the
+    kernels would clip NaN silently)."""
+    g = _gripper(2)
+    pos, quat = g.flange_pose()
+    with pytest.raises(ValueError, match="target_gap must be finite"):
+        g.begin_step(pos, quat, np.array([0.05, np.nan]))
+    with pytest.raises(ValueError, match=r"target_gap must have shape \[2\]"):
+        g.begin_step(pos, quat, np.full(3, 0.05))

@@ -120,15 +120,15 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
     policy does). The wrist stops at its limit; each later substep of the same push is held
     (``Gripper.held_at_limit``, turn or not) in one solve instead of a full-motion try, its patient
     re-solve and a stopped re-solve. Independent truth: the same episode with holding switched off
-    (every substep tries its motion) gives bit-identical observations and wrist forces with >= 1.6x
-    the solves (measured 1.8-1.9x), turning or not: a world at its limit whose try reads over is
+    (``HOLD_COSINE`` above 1: every substep tries its motion) gives bit-identical observations and
+    wrist forces with >= 1.6x the solves (measured 1.8-1.9x), turning or not: a world at its limit whose try reads over is
     stopped whole (slide, turn and jaw), as the held one is. While pressing, the turning wrist keeps
     its orientation. The lift then moves the wrist up at the full 0.3 m/s from its first step.
     (Where a turn eases the load enough for the full try to read within the limit, holding does
     change an episode: a cylinder, E = 3e6, pushed with the yaw at 0.4 turned and read 168 N on a
     pad tried, 136 N held; the hold is a protective stop, released when the slide turns away or the
     load drops.)"""
-    from defgrasp_env.gripper.gripper import Gripper
+    from defgrasp_env.gripper import gripper as gripper_module
     from defgrasp_env.layout import AGENT_POS, DELTA_ACTION, ENV_STATE
 
     def episode():
@@ -148,7 +148,7 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
         return rows, scene.world_solves
 
     held_rows, held_solves = episode()
-    monkeypatch.setattr(Gripper, "held_at_limit", lambda self, load_before: np.zeros(self.num_worlds, bool))
+    monkeypatch.setattr(gripper_module, "HOLD_COSINE", 2.0)  # above any cosine: no world is held
     tried_rows, tried_solves = episode()
     for (pos_a, state_a, wrist_a), (pos_b, state_b, wrist_b) in zip(held_rows, tried_rows):
         np.testing.assert_array_equal(pos_a, pos_b)

@@ -25,6 +25,7 @@ from ..gripper import Gripper, pad_reach
 from ..layout import NUM_KEYPOINTS
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
+from ..sim.launch_cache import LaunchCache
 from ..sim.model import ContactParams, set_world_material
 from ..sim.pad_motion import max_pad_travel, substeps_for_travel
 from ..sim.solve_report import SolveReport
@@ -36,8 +37,8 @@ from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model
-from .scene_kernels import (gather_rows, pack_pad_loads, scatter_rows, unpack_pad_targets,
-                            zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
+from .scene_kernels import (gather_rows, pack_pad_loads, scatter_rows, zero_float_rows_of_worlds,
+                            zero_vec3_rows_of_worlds)
 
 
 @functools.lru_cache(maxsize=16)
@@ -114,7 +115,7 @@ class PickupScene:
         linear, angle = max_flange_step(config)
         travel = max_pad_travel(linear, angle, pad_reach(), config.gripper.closing_speed * config.dt)
         self.substeps = substeps_for_travel(travel, config.solver.substeps)
-        self.gripper = Gripper(config.gripper, self.num_worlds)
+        self._gripper = Gripper(config.gripper, self.num_worlds, config.device, config.wrist_force_limit)
         self._build(setups)
         self._setups = list(setups)  # the setup each world was last reset to (initial pose, material)
         self.reset_worlds(np.ones(self.num_worlds, bool), setups)
@@ -136,12 +137,14 @@ class PickupScene:
         # substep's untouched start, and write this one; the two swap when a solve is accepted
         self._next_state = State.from_model(self.model)
         self._control = Control.from_model(self.model)
+        # the pads' targets are written by the gripper's kernels into its own arrays: the control reads those
+        self._control.pad_target_positions, self._control.pad_target_orientations = self.gripper.pad_targets
         self._readouts = SceneReadouts(self.model, [self.state, self._next_state],
                                        [object_keypoints(s.object_name, config.object_resolution) for s in setups])
         self._report = SolveReport(self.num_worlds, self.model.device)  # the control step's solver report
         self._pad_loads = wp.zeros(self.num_worlds * self.model.pads_per_world, dtype=wp.vec4,
                                    device=self.model.device)  # a solve's pad forces, packed for one download
-        self._pad_targets = wp.zeros(len(self._pad_loads), dtype=wp.transform, device=self.model.device)
+        self._launches = LaunchCache(self.model.device)  # per-solve launches, recorded once and replayed
         self._solves = 0  # solves run by ``_solve_substep`` (the wrist limit's accepted solve is its last)
         #: world-solves run since the scene was built: per solver call, the worlds it computed (all of
         #: them in a substep's first solve, those the force limit retries or re-solves patiently after)
@@ -153,6 +156,12 @@ class PickupScene:
                                    device=self.model.device)  # [W*P]: the world of each pad row
 
     # -- accessors ---------------------------------------------------------------------------
+    @property
+    def gripper(self) -> Gripper:
+        """The W grippers (state, kinematics); the scene's control reads their pad targets, so the
+        scene keeps this one gripper for its life (read-only attribute)."""
+        return self._gripper
+
     @property
     def object_names(self) -> tuple[str, ...]:
         """The object each world holds now (a name of ``OBJECT_SHAPES`` or a mesh path)."""
@@ -247,14 +256,13 @@ class PickupScene:
         force limit plus it, ``wrist.force_limit``), and the gripper reads the new pad forces
         (``Gripper.sense``). Worlds with ``active == False`` keep their wrist and jaw
         still."""
-        active = np.ones(self.num_worlds, bool) if active is None else active
         self._readout = None
-        self.gripper.begin_step(target_pos, target_quat)
+        self.gripper.begin_step(target_pos, target_quat, target_gap, active)
         count = self.substeps
         h = self.config.dt / count
         limits = self.config.wrist_force_limit, self.config.gripper.grip_force_limit
         for k in range(count):
-            self.gripper.plan_substep(k, count, h, target_gap, active)
+            self.gripper.plan_substep(k, count, h)
             solved = None  # the fraction [W] each world's last solve of this substep moved by
 
             def solve(fraction):
@@ -275,16 +283,15 @@ class PickupScene:
                         load = actuator_load(wrist_force(pads), tip, *limits)
                 return (number, tip, pads), load
 
-            load_before = actuator_load(self.gripper.wrist_force, self.gripper.tip_force, *limits)
-            held = self.gripper.held_at_limit(load_before)
-            (number, tip, pads), _, scale = limited_substep(solve, load_before, held=held)
-            self.gripper.record_limit(scale, held)
+            load_before, held = self.gripper.held_at_limit()
+            (number, _, _), _, _ = limited_substep(solve, load_before, held=held)
             if number != self._solves:
                 raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
-                                   "the last solve's state and report are kept")
+                                   "the last solve's state, report and the gripper's move are kept")
             self.state, self._next_state = self._next_state, self.state
             self._report.fold(self.solver.scratch, self.solver.config.penetration_bound, first=k == 0)
-            self.gripper.sense(tip, pads)
+            # the accepted solve is the last: its forces, and its move's fraction as the limit's scale
+            self.gripper.sense(self.state.pad_normal_force, self.state.pad_force, record_limit=True)
         if self.state is not self._home_state:  # an odd number of substeps
             self._home_state.copy_from(self.state)
             self.state, self._next_state = self._home_state, self.state
@@ -299,16 +306,12 @@ class PickupScene:
         (the solve's number, pad normal forces [W, P] N, the object's total force on each pad
         [W, P, 3] N (world) of each world's last solve), from one download of the pad loads; the
         report stays on the device."""
-        pos, quat = self.gripper.move(fraction)
-        self._pad_targets.assign(np.concatenate([pos, quat], axis=-1).reshape(-1, 7).astype(np.float32))
-        wp.launch(unpack_pad_targets, dim=len(self._pad_targets), inputs=[self._pad_targets],
-                  outputs=[self._control.pad_target_positions, self._control.pad_target_orientations],
-                  device=self.model.device)
+        self.gripper.move(fraction)  # writes the control's pad targets
         out = self._next_state
         self.solver.advance(self.state, out, self._control, h, patient, worlds)
         self.world_solves += self.num_worlds if worlds is None else int(np.count_nonzero(worlds))
-        wp.launch(pack_pad_loads, dim=len(self._pad_loads), inputs=[out.pad_normal_force, out.pad_force],
-                  outputs=[self._pad_loads], device=self.model.device)
+        self._launches.launch(("pack", id(out)), pack_pad_loads, len(self._pad_loads),
+                              [out.pad_normal_force, out.pad_force], [self._pad_loads], keep=(out,))
         loads = self._pad_loads.numpy().reshape(self.num_worlds, -1, 4).copy()  # CPU: numpy() views
         self._solves += 1
         return self._solves, loads[..., 0], loads[..., 1:]

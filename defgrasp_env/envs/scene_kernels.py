@@ -2,7 +2,7 @@
 state remap of a rebuild (worlds whose object changed at a reset), the per-world readouts of a
 step (feature point, keypoints, finiteness, object material inside a pad), which reduce the full
 state to small [W, ...] arrays,
-the pad loads of a solve and the readouts packed for one download, the pad targets for one upload.
+the pad loads of a solve and the readouts packed for one download.
 Kernels take arrays and scalars only; the launchers are in ``scene.py`` / ``readouts.py``."""
 
 from __future__ import annotations
@@ -94,17 +94,6 @@ def pack_pad_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.a
     p = wp.tid()
     f = pad_force[p]
     loads[p] = wp.vec4(pad_normal_force[p], f[0], f[1], f[2])
-
-
-@wp.kernel
-def unpack_pad_targets(targets: wp.array(dtype=wp.transform), positions: wp.array(dtype=wp.vec3),
-                       orientations: wp.array(dtype=wp.quat)):
-    """Pad target poses uploaded packed as transforms (position, quaternion xyzw) -> the control's
-    position and orientation arrays (one upload per solve instead of two)."""
-    p = wp.tid()
-    t = targets[p]
-    positions[p] = wp.transform_get_translation(t)
-    orientations[p] = wp.transform_get_rotation(t)
 
 
 @wp.kernel

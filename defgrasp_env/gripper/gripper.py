@@ -1,11 +1,14 @@
-"""``Gripper``: W 2F-85 grippers, each on an invisible 6-DOF wrist (batched numpy state).
+"""``Gripper``: W 2F-85 grippers, each on an invisible 6-DOF wrist (batched state in Warp arrays
+on the simulation's device, stepped by the kernels of ``gripper.kernels``).
 
 The gripper owns the robot side of the pickup scene: the wrist joints, the jaw gap and its driver,
 the grip-stiffness estimate, the pads' collision boxes and their poses, the lift that keeps the
 pads above the ground, and the tip-force readout. It knows nothing about the FEM solver: per
 physics substep the scene (which owns the substep loop) asks it for the pad box poses to move to
-(:meth:`Gripper.plan_substep`, :meth:`Gripper.move`) and hands it the pad forces the solver measured
-there (:meth:`Gripper.sense`).
+(:meth:`Gripper.plan_substep`, :meth:`Gripper.move`: written on the device into the arrays the FEM's
+control reads) and hands it the pad forces the solver measured there (:meth:`Gripper.sense`: read
+from the solver's state arrays on the device). A substep's gripper work is three kernel launches
+and no transfer of the worlds' state; numpy copies of the state are made only when read.
 
 Force limits: the jaw driver's grip-force limit runs in :meth:`Gripper.plan_substep` on the forces
 of the previous :meth:`Gripper.sense`. The wrist's force limit (``wrist.force_limit``) needs the
@@ -20,15 +23,20 @@ Frames and units: world frame (y up), m, rad, N; quaternions xyzw; joints
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
+import numpy as np
+import warp as wp
+
+from ..sim.launch_cache import LaunchCache
 from ..transforms import quat_rotate, quat_to_matrix
 from ..wrist import clamp_joints, fk_analytic, ik_joints
 from ..wrist.force_limit import wrist_force
-from .driver import GripperConfig, GripperDriver, update_grip_stiffness
-from .linkage import GAP_MAX, GAP_MIN, pad_boxes, pad_centers, theta_from_gap
+from . import kernels as gk
+from .driver import GripperConfig, GripperDriver
+from .linkage import GAP_MAX, GAP_MIN, _finite, pad_boxes, pad_centers, theta_from_gap
 
-__all__ = ["GROUND_CLEARANCE", "Gripper", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
+__all__ = ["GROUND_CLEARANCE", "Gripper", "lift_above_ground", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
 
 #: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
 #: can never push a node through itself; the inner face stays where the linkage puts it.
@@ -74,6 +82,32 @@ def pad_reach() -> float:
     return float(np.linalg.norm(corners, axis=-1).max())
 
 
+def _move_pads_inputs(q_before, q_plan, gap_before, gap_plan, fraction) -> list:
+    """The inputs of ``gripper.kernels.move_pads``: the substep's start and plan, the fraction of it
+    to apply, and the pad boxes' size, backing and ground clearance."""
+    return [q_before, q_plan, gap_before, gap_plan, fraction, wp.vec3d(*PAD_BOX_HALF_EXTENTS), PAD_BACKING,
+            GROUND_CLEARANCE]
+
+
+def lift_above_ground(q: np.ndarray, gap: np.ndarray, device="cpu"):
+    """Joints ``q`` [W, 6] with the flange raised so that no pad box corner is below
+    ``GROUND_CLEARANCE`` (joint limits kept), and the pad box poses for them at jaw gaps ``gap`` [W]
+    (m): (lifted joints [W, 6], centres [W, 2, 3] m, orientations [W, 2, 4] xyzw). The lowest
+    corner of a box with centre c, rotation R and half extents h is at ``c_y - sum_j |R[1, j]| h_j``;
+    both pads share R. The kernel of :meth:`Gripper.move`, run on ``device``."""
+    d, n = wp.get_device(device), len(q)
+    q_in = wp.array(np.asarray(q, dtype=np.float64), dtype=gk.vec6d, device=d)
+    gap_in = wp.array(np.asarray(gap, dtype=np.float64), dtype=wp.float64, device=d)
+    outputs = [wp.zeros_like(q_in), wp.zeros_like(gap_in), wp.zeros((n, 2), dtype=wp.vec3d, device=d),
+               wp.zeros(n, dtype=wp.vec4d, device=d), wp.zeros(2 * n, dtype=wp.vec3, device=d),
+               wp.zeros(2 * n, dtype=wp.quat, device=d)]
+    whole = wp.ones(n, dtype=wp.float64, device=d)
+    wp.launch(gk.move_pads, dim=n, inputs=_move_pads_inputs(q_in, q_in, gap_in, gap_in, whole), outputs=outputs,
+              device=d)
+    quat = outputs[3].numpy()
+    return outputs[0].numpy(), outputs[2].numpy(), np.repeat(quat[:, None, :], 2, axis=1)
+
+
 def _read_only(a: np.ndarray) -> np.ndarray:
     view = a.view()
     view.flags.writeable = False
@@ -81,7 +115,9 @@ def _read_only(a: np.ndarray) -> np.ndarray:
 
 
 class Gripper:
-    """W grippers on 6-DOF wrists. State (read-only views, float64, world frame):
+    """W grippers on 6-DOF wrists, their state in Warp arrays on ``device`` (the simulation's) and
+    stepped there by ``gripper.kernels`` (one thread per world, float64). State, read as numpy
+    (read-only; float64, world frame; on a GPU downloaded once after each change):
 
     * ``q`` [W, 6]: wrist joints (m, m, m, rad, rad, rad);
     * ``gap`` [W]: jaw gap between the pad inner faces, m, in [GAP_MIN, GAP_MAX];
@@ -92,53 +128,106 @@ class Gripper:
     * ``wrist_force`` [W]: magnitude of the net force of both pads on the object, N (last substep):
       the force the wrist carries, limited by ``wrist.force_limit``.
 
-    One control period: :meth:`begin_step` (wrist targets), then per physics substep
+    One control period: :meth:`begin_step` (wrist, jaw targets), then per physics substep
     :meth:`plan_substep` (the jaw driver's move and the wrist's planned joints), :meth:`move` (apply
-    them, possibly again with a fraction of the motion; returns the pad poses) and
+    them, possibly again with a fraction of the motion; writes the pad poses ``pad_targets``) and
     :meth:`sense` (pad forces). :meth:`substep` is plan + move of the whole motion.
+    ``pad_targets`` = (positions [W*2] vec3, orientations [W*2] quat, float32, pad 0 then 1 of
+    each world) are the arrays the FEM's ``Control`` reads: the scene hands them to it.
     """
 
     pad_half_extents = PAD_BOX_HALF_EXTENTS
 
-    def __init__(self, config: GripperConfig, num_worlds: int):
+    def __init__(self, config: GripperConfig, num_worlds: int, device="cpu", wrist_force_limit: float = math.inf):
         self.driver = GripperDriver(config)
-        self.num_worlds = num_worlds
-        self._q = np.zeros((num_worlds, 6))
-        self._gap = np.full(num_worlds, GAP_MAX)
-        self._tip_force = np.zeros((num_worlds, 2))
-        self._grip_stiffness = np.zeros(num_worlds)
-        self._pad_force = np.zeros((num_worlds, 2, 3))
-        self._q_start = self._q_move = None
-        self._plan = None   # (joints before, gap after, joints after) of the planned substep
-        #: [W, 3] per world, the planned substep push (flange slide, m, world) that the actuator
-        #: force limit stopped when the world last tried to move; zeros where it moved (``record_limit``)
-        self._stopped_push = np.zeros((num_worlds, 3))
-        self._before = None  # (gap, grip force, target gap) at the start of the running substep
+        #: N: the wrist's force limit (``wrist.force_limit``; inf = none), for :meth:`held_at_limit`'s load
+        self.wrist_force_limit = float(wrist_force_limit)
+        self.num_worlds = n = num_worlds
+        self.device = d = wp.get_device(device)
+        f64 = wp.float64
+        self._q = wp.zeros(n, dtype=gk.vec6d, device=d)
+        self._gap = wp.full(n, GAP_MAX, dtype=f64, device=d)
+        self._tip_force = wp.zeros(n, dtype=wp.vec2d, device=d)
+        self._grip_stiffness = wp.zeros(n, dtype=f64, device=d)
+        self._pad_force = wp.zeros((n, 2), dtype=wp.vec3d, device=d)
+        #: per world, the planned substep push (flange slide, m, world) that the actuator force limit
+        #: stopped when the world last tried to move; zeros where it moved (``sense(record_limit=True)``)
+        self._stopped_push = wp.zeros(n, dtype=wp.vec3d, device=d)
+        # the control period: start joints, joint motion, jaw target, active worlds
+        self._q_start = wp.zeros(n, dtype=gk.vec6d, device=d)
+        self._q_move = wp.zeros(n, dtype=gk.vec6d, device=d)
+        self._target_gap = wp.zeros(n, dtype=f64, device=d)
+        self._active = wp.zeros(n, dtype=wp.int32, device=d)
+        # the running substep: its start and plan, the fraction of it applied, (load, held) at its start
+        self._q_before = wp.zeros(n, dtype=gk.vec6d, device=d)
+        self._q_plan = wp.zeros(n, dtype=gk.vec6d, device=d)
+        self._gap_before = wp.zeros(n, dtype=f64, device=d)
+        self._gap_plan = wp.zeros(n, dtype=f64, device=d)
+        self._force_before = wp.zeros(n, dtype=f64, device=d)
+        self._fraction = wp.ones(n, dtype=f64, device=d)
+        self._limits = wp.zeros(n, dtype=wp.vec2d, device=d)
+        self._pad_center = wp.zeros((n, 2), dtype=wp.vec3d, device=d)
+        self._pad_quat = wp.zeros(n, dtype=wp.vec4d, device=d)
+        quats = np.tile(np.array([0, 0, 0, 1], np.float32), (2 * n, 1))
+        self.pad_targets = (wp.zeros(2 * n, dtype=wp.vec3, device=d), wp.array(quats, dtype=wp.quat, device=d))
+        self._no_total = wp.zeros(0, dtype=wp.vec3d, device=d)
+        self._host: dict[str, np.ndarray] = {}   # numpy copies of device arrays read since their last change
+        self._launches = LaunchCache(d)  # the substep's launches, recorded once and replayed
+
+    def __deepcopy__(self, memo) -> "Gripper":
+        """An independent gripper with the same state (every Warp array cloned)."""
+        other = object.__new__(Gripper)
+        for name, value in self.__dict__.items():
+            if isinstance(value, wp.array):
+                value = wp.clone(value)
+            elif isinstance(value, tuple) and value and isinstance(value[0], wp.array):
+                value = tuple(wp.clone(a) for a in value)
+            elif name == "_host":
+                value = {}
+            elif name == "_launches":  # its records name this gripper's arrays
+                value = LaunchCache(self.device)
+            other.__dict__[name] = value
+        return other
 
     # -- state -----------------------------------------------------------------------------
+    def _numpy(self, name: str) -> np.ndarray:
+        """Read-only numpy view of the Warp array ``name`` (a zero-copy view on the CPU; on a GPU
+        a copy downloaded once after each change)."""
+        cached = self._host.get(name)
+        if cached is None:
+            cached = self._host[name] = _read_only(getattr(self, name).numpy())
+        return cached
+
+    def _changed(self) -> None:
+        self._host.clear()
+
+    def _launch(self, key, kernel, inputs: list, outputs: list, keep: tuple = ()) -> None:
+        """Launch ``kernel`` over the worlds, recorded under ``key`` and replayed (``LaunchCache``)."""
+        self._launches.launch(key, kernel, self.num_worlds, inputs, outputs, keep)
+
     @property
     def q(self) -> np.ndarray:
-        return _read_only(self._q)
+        return self._numpy("_q")
 
     @property
     def gap(self) -> np.ndarray:
-        return _read_only(self._gap)
+        return self._numpy("_gap")
 
     @property
     def tip_force(self) -> np.ndarray:
-        return _read_only(self._tip_force)
+        return self._numpy("_tip_force")
 
     @property
     def grip_stiffness(self) -> np.ndarray:
-        return _read_only(self._grip_stiffness)
+        return self._numpy("_grip_stiffness")
 
     @property
     def pad_force(self) -> np.ndarray:
-        return _read_only(self._pad_force)
+        return self._numpy("_pad_force")
 
     @property
     def wrist_force(self) -> np.ndarray:
-        return _read_only(wrist_force(self._pad_force))
+        return _read_only(wrist_force(self.pad_force))
 
     def pad_force_angles(self) -> np.ndarray:
         """[W, 2] rad, in [0, pi]: angle of the object's total force on each pad (``pad_force``)
@@ -147,31 +236,33 @@ class Gripper:
         Coulomb cone, over pi/2 where it pulls the pad inward; 0 where the force is zero."""
         _, quat = self.flange_pose()
         opening = quat_to_matrix(quat)[:, None, :, 0] * np.array([1.0, -1.0])[None, :, None]  # [W, 2, 3]
-        along = np.sum(self._pad_force * opening, axis=-1)
-        across = np.linalg.norm(self._pad_force - along[..., None] * opening, axis=-1)
+        pad_force = self.pad_force
+        along = np.sum(pad_force * opening, axis=-1)
+        across = np.linalg.norm(pad_force - along[..., None] * opening, axis=-1)
         return np.arctan2(across, along)
 
     def reset(self, mask: np.ndarray, flange_xz: np.ndarray) -> None:
         """Worlds in ``mask`` [W]: flange at ``flange_xz`` [W, 2] (m, world x and z; rows outside the
         mask are ignored) and ``START_FLANGE_HEIGHT``, pointing down, jaw open, no force."""
-        for w in np.flatnonzero(mask):
-            self._q[w] = [flange_xz[w][0], START_FLANGE_HEIGHT, flange_xz[w][1], 0.0, 0.0, 0.0]
-            self._gap[w] = GAP_MAX
-            self._tip_force[w] = 0.0
-            self._grip_stiffness[w] = 0.0
-            self._pad_force[w] = 0.0
-            self._stopped_push[w] = 0.0
+        d = self.device
+        wp.launch(gk.reset_worlds, dim=self.num_worlds,
+                  inputs=[wp.array(np.asarray(mask, dtype=np.int32), dtype=wp.int32, device=d),
+                          wp.array(np.asarray(flange_xz, dtype=np.float64), dtype=wp.vec2d, device=d),
+                          START_FLANGE_HEIGHT],
+                  outputs=[self._q, self._gap, self._tip_force, self._pad_force, self._grip_stiffness,
+                           self._stopped_push], device=d)
+        self._changed()
 
     # -- kinematics ------------------------------------------------------------------------
     def flange_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Flange positions [W, 3] (m) and orientations [W, 4] (xyzw) in the world."""
-        return fk_analytic(self._q)
+        return fk_analytic(self.q)
 
     def pad_poses(self, q: np.ndarray | None = None, gap: np.ndarray | None = None):
         """Collision-box centres [W, 2, 3] (m) and orientations [W, 2, 4] (xyzw) of the pads for
         joints ``q`` [W, 6] and gap [W] (m; default: the current ones)."""
-        q = self._q if q is None else q
-        gap = self._gap if gap is None else gap
+        q = self.q if q is None else q
+        gap = self.gap if gap is None else gap
         return pad_box_poses(*fk_analytic(q), gap)
 
     def tcp_positions(self) -> np.ndarray:
@@ -179,76 +270,53 @@ class Gripper:
         centers, _ = self.pad_poses()
         return centers.mean(axis=1)
 
-    def lift_above_ground(self, q: np.ndarray, gap: np.ndarray):
-        """Raise the flange so that no pad box corner is below ``GROUND_CLEARANCE``. Returns the
-        joints [W, 6] and the pad poses (as :meth:`pad_poses`) for them.
-
-        The lowest corner of a box with centre c, rotation R and half extents h is at height
-        ``c_y - sum_j |R[1, j]| h_j``; both pads share R. (The terms are summed x, z, y: the order
-        in which numpy's einsum summed them over the eight corners before, so the lift is the
-        same to the bit.)"""
-        pos, quat = fk_analytic(q)
-        centers, R = _pad_box_centers(pos, quat, gap)
-        quats = np.repeat(quat[:, None, :], 2, axis=1)
-        r, h = np.abs(R[:, 1, :]), PAD_BOX_HALF_EXTENTS
-        reach = (-(r[:, 0] * h[0]) - r[:, 2] * h[2]) - r[:, 1] * h[1]   # lowest corner below the centre
-        lowest = np.minimum(centers[:, 0, 1], centers[:, 1, 1]) + reach
-        lifted = q.copy()
-        lifted[:, 1] += np.maximum(GROUND_CLEARANCE - lowest, 0.0)
-        lifted = clamp_joints(lifted)
-        centers[..., 1] += (lifted[:, 1] - q[:, 1])[:, None]  # joint 1 is the world-y slide
-        return lifted, centers, quats
+    def pad_target_poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """The pad box poses the last :meth:`move` wrote (float64): centres [W, 2, 3] (m) and
+        orientations [W, 2, 4] (xyzw), with the flange lifted so that no pad box corner is below
+        ``GROUND_CLEARANCE`` (the lowest corner of a box with centre c, rotation R and half extents
+        h is at ``c_y - sum_j |R[1, j]| h_j``; both pads share R)."""
+        quat = self._numpy("_pad_quat")
+        return self._numpy("_pad_center").copy(), np.repeat(quat[:, None, :], 2, axis=1)
 
     # -- actuation (one control period) ---------------------------------------------------
-    def begin_step(self, target_pos: np.ndarray, target_quat: np.ndarray) -> None:
+    def begin_step(self, target_pos: np.ndarray, target_quat: np.ndarray, target_gap: np.ndarray,
+                   active: np.ndarray | None = None) -> None:
         """Start a control period toward flange targets [W, 3] m, [W, 4] xyzw (joint limits
-        enforced; the wrist turns the shortest way round)."""
-        self._q_start = self._q.copy()
-        q_move = clamp_joints(ik_joints(target_pos, target_quat)) - self._q_start
+        enforced; the wrist turns the shortest way round) and the jaw gap ``target_gap`` [W] (m,
+        finite; clipped to the stroke by the driver). Worlds with ``active == False`` [W] (default:
+        all active) keep wrist and jaw this period."""
+        target_gap = _finite(target_gap, "target_gap")
+        if target_gap.shape != (self.num_worlds,):
+            raise ValueError(f"target_gap must have shape [{self.num_worlds}], got {target_gap.shape}")
+        q_start = self.q
+        q_move = clamp_joints(ik_joints(target_pos, target_quat)) - q_start
         q_move[:, 3:] = (q_move[:, 3:] + np.pi) % (2 * np.pi) - np.pi
-        self._q_move = q_move
+        wp.copy(self._q_start, self._q)
+        self._q_move.assign(q_move)
+        self._target_gap.assign(target_gap)
+        active = np.ones(self.num_worlds, bool) if active is None else np.asarray(active, dtype=bool)
+        self._active.assign(active.astype(np.int32))
 
-    def _wrist_joints(self, fraction: float) -> np.ndarray:
-        """Joints [W, 6] a ``fraction`` of the way through the control period's wrist motion."""
-        return clamp_joints(self._q_start + self._q_move * fraction)
-
-    def plan_substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray) -> None:
+    def plan_substep(self, k: int, count: int, h: float) -> None:
         """Plan substep ``k`` of ``count`` (length ``h`` s): the jaw driver moves the gap toward
-        ``target_gap`` [W] (m) on the forces of the last :meth:`sense` (speed and force limits,
-        ``gripper.driver``) and the wrist is to move ``(k + 1) / count`` of the way. Worlds with
-        ``active == False`` keep wrist and jaw. Nothing moves until :meth:`move`."""
-        self._before = (self._gap, self._tip_force.mean(axis=1), target_gap)
-        gap = self.driver.step(target_gap, self._gap, h, self._tip_force[:, 0], self._tip_force[:, 1],
-                               self._grip_stiffness)
-        q = np.where(active[:, None], self._wrist_joints((k + 1) / count), self._q)
-        self._plan = (self._q, np.where(active, gap, self._gap), q)
+        the period's target (speed and force limits, ``gripper.driver``) on the forces of the last
+        :meth:`sense` and the wrist is to move ``(k + 1) / count`` of the way. Inactive worlds keep
+        wrist and jaw. Nothing moves until :meth:`move`. Also finds, per world, the actuator load
+        at the substep start and whether the world stays held at its limit (:meth:`held_at_limit`)."""
+        config = self.driver.config
+        self._launch(("plan", k, count, h), gk.plan_substep,
+                     [self._q, self._gap, self._tip_force, self._pad_force, self._grip_stiffness, self._stopped_push,
+                      self._q_start, self._q_move, self._target_gap, self._active, (k + 1) / count,
+                      config.closing_speed * h, config.grip_force_limit, self.wrist_force_limit, HOLD_COSINE],
+                     [self._q_before, self._q_plan, self._gap_before, self._gap_plan, self._force_before, self._limits])
+        self._host.pop("_limits", None)
 
-    def move(self, fraction: np.ndarray | None = None):
-        """Apply the planned substep: ``fraction`` [W] (in [0, 1]; default 1) of the wrist's planned
-        substep motion and of the jaw's planned closing (a planned opening is applied whole: it only
-        lowers the forces), with the wrist lifted so that the pads stay above the ground. May be
-        called again (a retry from the same start, ``wrist.force_limit``) with another fraction.
-        Returns the pad box centres [W, 2, 3] (m) and orientations [W, 2, 4] (xyzw) to move to."""
-        q_before, gap, q = self._plan
-        if fraction is not None:
-            f = np.asarray(fraction, dtype=np.float64)
-            q = np.where(f[:, None] < 1.0, q_before + (q - q_before) * f[:, None], q)
-            gap_before = self._before[0]
-            gap = np.where((f < 1.0) & (gap < gap_before), gap_before + (gap - gap_before) * f, gap)
-        # an inactive world keeps q, already above the ground: the lift leaves it as it is
-        self._q, pos, quat = self.lift_above_ground(q, gap)
-        self._gap = gap
-        return pos, quat
-
-    def planned_push(self) -> np.ndarray:
-        """[W, 3] (m, world): the planned substep's flange slide (joints 0-2), before any force limit."""
-        q_before, _, q = self._plan
-        return q[:, :3] - q_before[:, :3]
-
-    def held_at_limit(self, load_before: np.ndarray) -> np.ndarray:
-        """[W] bool: worlds whose actuators stay stopped this substep without trying their planned
-        motion (``wrist.force_limit.limited_substep``'s ``held``), like a protective stop: at a
-        limit at the substep start (``load_before`` [W] >= 1), their last try stopped by the limit,
+    def held_at_limit(self) -> tuple[np.ndarray, np.ndarray]:
+        """(load [W], held [W] bool) at the start of the planned substep: the actuator load
+        (``wrist.force_limit.actuator_load``: 1 = at a limit) of the last sensed forces, and the
+        worlds whose actuators stay stopped this substep without trying their planned motion
+        (``wrist.force_limit.limited_substep``'s ``held``), like a protective stop: at a
+        limit at the substep start (load >= 1), their last try stopped by the limit,
         and the planned flange slide within ~26 degrees of that stopped one (cosine >=
         ``HOLD_COSINE``, any speed), whatever turn of the wrist is planned with it: the force limit
         scales the whole motion (slide, turn and the jaw's closing) by one fraction, and a world at
@@ -258,30 +326,51 @@ class Gripper:
         pressing a cube into the ground). A world whose load fell below its limit (the object gave
         way), whose slide turned away, or that only moves its jaw or only turns its wrist (no
         slide), tries to move."""
-        stopped, push = self._stopped_push, self.planned_push()
-        norms = np.linalg.norm(stopped, axis=1) * np.linalg.norm(push, axis=1)
-        same_push = (norms > 0.0) & (np.einsum("wi,wi->w", stopped, push) >= HOLD_COSINE * norms)
-        return same_push & (np.asarray(load_before) >= 1.0)
+        limits = self._numpy("_limits")
+        return limits[:, 0], limits[:, 1] > 0.0
 
-    def record_limit(self, scale: np.ndarray, held: np.ndarray) -> None:
-        """After a substep's force limit: a world that tried to move (not ``held`` [W]) and was
-        stopped (``scale`` [W] = 0) remembers the push it tried; one that moved forgets; a held one
-        keeps the push that stopped it (so a command turning step by step releases it)."""
-        tried_push = np.where((np.asarray(scale) == 0.0)[:, None], self.planned_push(), 0.0)
-        self._stopped_push = np.where(np.asarray(held)[:, None], self._stopped_push, tried_push)
+    def move(self, fraction: np.ndarray | None = None) -> None:
+        """Apply the planned substep: ``fraction`` [W] (in [0, 1]; default 1) of the wrist's planned
+        substep motion and of the jaw's planned closing (a planned opening is applied whole: it only
+        lowers the forces), with the wrist lifted so that the pads stay above the ground; writes the
+        pad box poses to move to (``pad_targets``, :meth:`pad_target_poses`). May be called again (a
+        retry from the same start, ``wrist.force_limit``) with another fraction."""
+        if fraction is None or np.all(np.asarray(fraction) == 1.0):
+            self._fraction.fill_(1.0)
+        else:
+            self._fraction.assign(np.asarray(fraction, dtype=np.float64).reshape(self.num_worlds))
+        self._launch("move", gk.move_pads, _move_pads_inputs(self._q_before, self._q_plan, self._gap_before,
+                                                              self._gap_plan, self._fraction),
+                     [self._q, self._gap, self._pad_center, self._pad_quat, *self.pad_targets])
+        self._changed()
 
-    def substep(self, k: int, count: int, h: float, target_gap: np.ndarray, active: np.ndarray):
-        """:meth:`plan_substep` then :meth:`move` with the whole wrist motion; returns the pad poses."""
-        self.plan_substep(k, count, h, target_gap, active)
-        return self.move()
+    def substep(self, k: int, count: int, h: float):
+        """:meth:`plan_substep` then :meth:`move` with the whole wrist motion; returns
+        :meth:`pad_target_poses`."""
+        self.plan_substep(k, count, h)
+        self.move()
+        return self.pad_target_poses()
 
-    def sense(self, pad_normal_force: np.ndarray, pad_force: np.ndarray | None = None) -> None:
-        """The pad normal forces [W, 2] (N, left and right) and the object's total force on each pad
-        [W, 2, 3] (N, world; default: unchanged) measured at the end of the substep: the readouts
-        and the grip-stiffness estimate follow them."""
-        gap_before, force_before, target_gap = self._before
-        self._tip_force = np.array(pad_normal_force, dtype=np.float64).reshape(self.num_worlds, 2)
-        if pad_force is not None:
-            self._pad_force = np.array(pad_force, dtype=np.float64).reshape(self.num_worlds, 2, 3)
-        self._grip_stiffness = update_grip_stiffness(self._grip_stiffness, gap_before, self._gap, force_before,
-                                                     self._tip_force.mean(axis=1), target_gap)
+    def sense(self, pad_normal_force, pad_force=None, record_limit: bool = False) -> None:
+        """The pad normal forces (N, left and right) and the object's total force on each pad (N,
+        world; default: unchanged) measured at the end of the substep, as Warp arrays [W*2]
+        (float32 or float64; vec3 / vec3d) on the gripper's device or array-likes [W, 2] / [W, 2, 3]:
+        the readouts and the grip-stiffness estimate follow them. ``record_limit``: the last
+        :meth:`move` was the force limit's accepted one (its fraction the limit's scale): a world
+        that tried to move (not held, :meth:`held_at_limit`) and was stopped (fraction 0) remembers
+        the push it tried, one that moved forgets, a held one keeps the push that stopped it (so a
+        command turning step by step releases it)."""
+        n, d = self.num_worlds, self.device
+        if not isinstance(pad_normal_force, wp.array):
+            pad_normal_force = wp.array(np.asarray(pad_normal_force, dtype=np.float64).reshape(2 * n),
+                                        dtype=wp.float64, device=d)
+        if pad_force is not None and not isinstance(pad_force, wp.array):
+            pad_force = wp.array(np.asarray(pad_force, dtype=np.float64).reshape(2 * n, 3), dtype=wp.vec3d, device=d)
+        total = self._no_total if pad_force is None else pad_force
+        self._launch(("sense", id(pad_normal_force), id(total), record_limit), gk.sense_pads,
+                     [pad_normal_force, total, int(pad_force is not None), self._gap, self._gap_before,
+                      self._force_before, self._target_gap, self._q_before, self._q_plan, self._fraction,
+                      self._limits, int(record_limit)],
+                     [self._tip_force, self._pad_force, self._grip_stiffness, self._stopped_push],
+                     keep=(pad_normal_force, total))
+        self._changed()

@@ -15,6 +15,7 @@ import numpy as np
 import warp as wp
 
 from .kernels.report import SolveRecord, fold_solve_record
+from .launch_cache import LaunchCache
 from .solver_scratch import SolverScratch
 
 
@@ -62,14 +63,14 @@ class SolveReport:
         self.num_worlds = num_worlds
         self.device = device
         self.records = wp.zeros(num_worlds, dtype=SolveRecord, device=device)
+        self._launches = LaunchCache(device)
 
     def fold(self, scratch: SolverScratch, penetration_bound: float, first: bool) -> None:
         """Fold the last solve's report (left in ``scratch``) in; ``first``: overwrite instead."""
         s = scratch
-        wp.launch(fold_solve_record, dim=self.num_worlds,
-                  inputs=[s.newton_it, s.cg_total, s.last_dx, s.res_norm, s.penetration, s.diverged,
-                          s.unconverged, s.clamped, penetration_bound, int(first)],
-                  outputs=[self.records], device=self.device)
+        self._launches.launch((id(s), penetration_bound, first), fold_solve_record, self.num_worlds,
+                              [s.newton_it, s.cg_total, s.last_dx, s.res_norm, s.penetration, s.diverged,
+                               s.unconverged, s.clamped, penetration_bound, int(first)], [self.records], keep=(s,))
 
     def download(self) -> SolveStats:
         """The folded report on the host (one device-to-host copy): iteration counts int64, update,
