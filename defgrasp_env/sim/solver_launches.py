@@ -170,15 +170,16 @@ def _keep_edge_depth(c: _Context, x) -> list:
                   m.free_axes, s.lag_normal_force, m.pads_per_world, e.push, e.push_normal, x)]
 
 
-def _tets(c: _Context, x, active, energy=None):
-    """Elastic terms of every tet at ``x`` (or their energy)."""
+def _tets(c: _Context, x, active, energy=None, outputs: int = 0):
+    """Elastic terms of every tet at ``x`` for a Newton iteration, or (``outputs`` = 1) for the
+    outputs pass (``kernels/elastic.py``), or their energy."""
     m, s, work = c.model, c.scratch, c.work
     if energy is not None:
         return c.rec(kenergy.tet_energy, m.num_tets, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
                      m.tet_lambda, m.tet_world, active, s.tet_rotation, energy)
     return c.rec(ke.evaluate_tets, m.num_tets, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda,
                  m.tet_world, active, s.tet_rotation, s.residual, s.diag_block, work.elastic_force, s.cofactor,
-                 work.von_mises, s.tet_r, s.tet_twist)
+                 work.von_mises, s.tet_r, s.tet_twist, outputs)
 
 
 def _begin_solve(c: _Context, active):
@@ -311,9 +312,9 @@ def _depth(c: _Context):
 def _outputs(c: _Context) -> list:
     m, s, work, x = c.model, c.scratch, c.work, c.work.positions
     return [c.rec(ksub.clear_outputs, m.num_worlds, s.solve_worlds, m.pads_per_world, work.pad_normal_force,
-                  work.pad_force, work.mean_von_mises, s.res_norm),
-            *_nodes(c, x, s.solve_worlds, 1), _tets(c, x, s.solve_worlds), _begin_solve(c, s.solve_worlds),
-            c.rec(ksub.mean_stress, m.num_tets, work.von_mises, m.tet_rest_volume, m.tet_world, s.solve_worlds,
+                  work.pad_force, s.res_norm),
+            *_nodes(c, x, s.solve_worlds, 1), _tets(c, x, s.solve_worlds, outputs=1), _begin_solve(c, s.solve_worlds),
+            c.rec(ksub.mean_stress, m.num_worlds, work.von_mises, m.tet_rest_volume, s.tet_start, s.solve_worlds,
                   m.world_volume, work.mean_von_mises)]
 
 

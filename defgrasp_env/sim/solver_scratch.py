@@ -100,6 +100,7 @@ class SolverScratch:
     tet_rotation: wp.array      # [T] quat: polar rotation of each tet (warm start of the next solve)
     tet_r: wp.array             # [T] mat33: that rotation as a matrix
     tet_twist: wp.array         # [T] float: twist factor of the fixed-corotated Hessian
+    tet_start: wp.array         # [W+1] int: first tet of each world (a world's tets are contiguous)
     # contact, lagged at the substep start
     lag_normal_force: wp.array  # [N*(P+1)] float, N: normal force per node and contact (0: ground, 1+k: pad k)
     lag_normal: wp.array        # [N*(P+1)] vec3: normal of that contact (pad frame for pads: the contact face)
@@ -186,7 +187,7 @@ class SolverScratch:
             coarse_size=size, node_aggregate=wp.array(aggregate, dtype=int, device=d),
             coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
             coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
-            coarse_guess=vec(),
+            coarse_guess=vec(), tet_start=wp.array(np.asarray(model.tet_start, dtype=np.int32), dtype=int, device=d),
             edges=EdgeContactScratch.from_model(model),
         )
         scratch.solve_worlds.fill_(1)

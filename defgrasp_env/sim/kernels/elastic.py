@@ -158,10 +158,14 @@ def evaluate_tets(
     von_mises: wp.array(dtype=float),
     tet_r: wp.array(dtype=wp.mat33),
     tet_twist: wp.array(dtype=float),
+    outputs: int,
 ):
-    """Add each tet's elastic force to ``residual`` and ``elastic_force`` and its Hessian diagonal
-    blocks to ``diag_block``; store cof(F), the polar rotation R of F (as quaternion and matrix)
-    and the twist factor for Hessian products, and the von Mises stress."""
+    """Add each tet's elastic force to ``residual`` and store the polar rotation of F (the next warm
+    start); then, in a Newton iteration (``outputs`` = 0), add its Hessian diagonal blocks to
+    ``diag_block`` and store cof(F), R as a matrix and the twist factor for the Hessian products,
+    or, in the outputs pass after a solve (``outputs`` = 1), add the force to ``elastic_force`` and
+    store the von Mises stress: each pass writes only what is read after it (the same values as
+    both passes writing everything)."""
     t = wp.tid()
     if world_active[tet_world[t]] == 0:
         return
@@ -175,11 +179,13 @@ def evaluate_tets(
     r = wp.quat_to_matrix(q)
     p = first_piola(f, cof, r, mu, lam)
     v0 = rest_volume[t]
-    tet_cof[t] = cof
     tet_rotation[t] = q
-    tet_r[t] = r
-    tet_twist[t] = twist_factor(wp.trace(wp.transpose(r) * f))
-    von_mises[t] = von_mises_of(f, p)
+    if outputs == 0:
+        tet_cof[t] = cof
+        tet_r[t] = r
+        tet_twist[t] = twist_factor(wp.trace(wp.transpose(r) * f))
+    else:
+        von_mises[t] = von_mises_of(f, p)
     b1 = row(dm_inv, 0)
     b2 = row(dm_inv, 1)
     b3 = row(dm_inv, 2)
@@ -187,11 +193,13 @@ def evaluate_tets(
     for a in range(4):
         b = pick_vertex(b0, b1, b2, b3, a)
         force = -v0 * (p * b)
-        cb = cof * b
-        block = v0 * (2.0 * mu * wp.dot(b, b) * wp.identity(n=3, dtype=float) + lam * wp.outer(cb, cb))
         wp.atomic_add(residual, idx[a], force)
-        wp.atomic_add(elastic_force, idx[a], force)
-        wp.atomic_add(diag_block, idx[a], block)
+        if outputs == 0:
+            cb = cof * b
+            block = v0 * (2.0 * mu * wp.dot(b, b) * wp.identity(n=3, dtype=float) + lam * wp.outer(cb, cb))
+            wp.atomic_add(diag_block, idx[a], block)
+        else:
+            wp.atomic_add(elastic_force, idx[a], force)
 
 
 @wp.func
