@@ -129,7 +129,7 @@ def test_a_gripper_on_cuda_matches_one_on_the_cpu():
     """The same control periods (random wrist and jaw targets, forces sensed after each substep,
     force-limit fractions and records) on a CUDA gripper and a CPU one: joints, gaps, pad targets,
     stiffness estimates and hold decisions agree within float64 rounding (the GPU may contract
-    products and sums into one rounding), and the CUDA state reaches numpy only when read."""
+    products and sums into one rounding)."""
     from defgrasp_env.gripper import Gripper
 
     rng = np.random.default_rng(4)

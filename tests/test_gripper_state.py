@@ -274,10 +274,34 @@ def test_held_at_limit_only_for_the_same_push():
         plan(g, 0.3 * np.array([np.sin(angle), -np.cos(angle), 0.0]))
         assert held()[0] == expected, angle
         sense(at_limit, moved=0.0)
+    plan(g, 0.3 * down)                             # 30 degrees off the last stopped push: tried,
+    sense(at_limit, moved=0.0)                      # and stopped: "down" is the stopped push again
     plan(g, 0.3 * down)
-    sense(at_limit, moved=1.0)                      # a try that moved: nothing is held any more
+    assert held()[0]
+    sense(below)
+    plan(g, 0.3 * down)                             # below the limit: tried, and it moved:
+    sense(at_limit, moved=1.0)                      # the stopped push is forgotten
     plan(g, 0.3 * down)
     assert not held()[0]
+
+
+def test_non_finite_pad_forces_from_the_solver_are_refused():
+    """A solve whose pad forces are not finite stops the step with an error naming the world, before
+    the gripper's kernels would carry them into the jaw driver and the force limit."""
+    setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
+    scene = PickupScene(PickupConfig(), [setup, setup])
+    advance = scene.solver.advance
+
+    def poisoned(state_in, state_out, *args, **kwargs):
+        advance(state_in, state_out, *args, **kwargs)
+        forces = state_out.pad_normal_force.numpy()
+        forces[3] = np.nan  # world 1's right pad
+        state_out.pad_normal_force.assign(forces)
+
+    scene.solver.advance = poisoned
+    pos, quat = scene.gripper.flange_pose()
+    with pytest.raises(FloatingPointError, match=r"non-finite pad forces in worlds \[1\]"):
+        scene.step(pos, quat, scene.gripper.gap.copy())
 
 
 def test_begin_step_refuses_a_bad_jaw_target():

@@ -313,6 +313,9 @@ class PickupScene:
         self._launches.launch(("pack", id(out)), pack_pad_loads, len(self._pad_loads),
                               [out.pad_normal_force, out.pad_force], [self._pad_loads], keep=(out,))
         loads = self._pad_loads.numpy().reshape(self.num_worlds, -1, 4).copy()  # CPU: numpy() views
+        bad = ~np.isfinite(loads).all(axis=(1, 2))
+        if bad.any():  # the gripper's kernels would carry them into the jaw and the force limit
+            raise FloatingPointError(f"the solver returned non-finite pad forces in worlds {np.flatnonzero(bad).tolist()}")
         self._solves += 1
         return self._solves, loads[..., 0], loads[..., 1:]
 

@@ -23,6 +23,7 @@ Frames and units: world frame (y up), m, rad, N; quaternions xyzw; joints
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -167,7 +168,7 @@ class Gripper:
         self._fraction = wp.ones(n, dtype=f64, device=d)
         self._limits = wp.zeros(n, dtype=wp.vec2d, device=d)
         self._pad_center = wp.zeros((n, 2), dtype=wp.vec3d, device=d)
-        self._pad_quat = wp.zeros(n, dtype=wp.vec4d, device=d)
+        self._pad_quat = wp.array(np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)), dtype=wp.vec4d, device=d)
         quats = np.tile(np.array([0, 0, 0, 1], np.float32), (2 * n, 1))
         self.pad_targets = (wp.zeros(2 * n, dtype=wp.vec3, device=d), wp.array(quats, dtype=wp.quat, device=d))
         self._no_total = wp.zeros(0, dtype=wp.vec3d, device=d)
@@ -175,27 +176,41 @@ class Gripper:
         self._launches = LaunchCache(d)  # the substep's launches, recorded once and replayed
 
     def __deepcopy__(self, memo) -> "Gripper":
-        """An independent gripper with the same state (every Warp array cloned)."""
+        """An independent gripper with the same state (every Warp array cloned; a clone is shared
+        through ``memo`` with anything else the same deep copy copies). Its ``pad_targets`` are
+        its own: a scene's control keeps reading the original's."""
         other = object.__new__(Gripper)
+        memo[id(self)] = other
+
+        def clone(a: wp.array) -> wp.array:
+            if id(a) not in memo:
+                memo[id(a)] = wp.clone(a)
+            return memo[id(a)]
+
         for name, value in self.__dict__.items():
             if isinstance(value, wp.array):
-                value = wp.clone(value)
+                value = clone(value)
             elif isinstance(value, tuple) and value and isinstance(value[0], wp.array):
-                value = tuple(wp.clone(a) for a in value)
+                value = tuple(clone(a) for a in value)
             elif name == "_host":
                 value = {}
             elif name == "_launches":  # its records name this gripper's arrays
                 value = LaunchCache(self.device)
+            elif name not in ("device", "driver"):  # those two are shared (immutable)
+                value = copy.deepcopy(value, memo)
             other.__dict__[name] = value
         return other
 
     # -- state -----------------------------------------------------------------------------
     def _numpy(self, name: str) -> np.ndarray:
-        """Read-only numpy view of the Warp array ``name`` (a zero-copy view on the CPU; on a GPU
-        a copy downloaded once after each change)."""
+        """Read-only numpy copy of the Warp array ``name``, made once after each change (downloaded
+        from a GPU; copied on the CPU, where ``numpy()`` would be a view that the next kernel
+        overwrites under a caller who kept it)."""
         cached = self._host.get(name)
         if cached is None:
-            cached = self._host[name] = _read_only(getattr(self, name).numpy())
+            array = getattr(self, name)
+            values = array.numpy()
+            cached = self._host[name] = _read_only(values.copy() if array.device.is_cpu else values)
         return cached
 
     def _changed(self) -> None:
@@ -271,7 +286,8 @@ class Gripper:
         return centers.mean(axis=1)
 
     def pad_target_poses(self) -> tuple[np.ndarray, np.ndarray]:
-        """The pad box poses the last :meth:`move` wrote (float64): centres [W, 2, 3] (m) and
+        """The pad box poses the last :meth:`move` wrote (float64; before any move: centres at the
+        origin, identity orientations; a reset does not write them): centres [W, 2, 3] (m) and
         orientations [W, 2, 4] (xyzw), with the flange lifted so that no pad box corner is below
         ``GROUND_CLEARANCE`` (the lowest corner of a box with centre c, rotation R and half extents
         h is at ``c_y - sum_j |R[1, j]| h_j``; both pads share R)."""
@@ -304,7 +320,9 @@ class Gripper:
         wrist and jaw. Nothing moves until :meth:`move`. Also finds, per world, the actuator load
         at the substep start and whether the world stays held at its limit (:meth:`held_at_limit`)."""
         config = self.driver.config
-        self._launch(("plan", k, count, h), gk.plan_substep,
+        key = ("plan", k, count, h, config.closing_speed, config.grip_force_limit, self.wrist_force_limit,
+               HOLD_COSINE)  # every scalar argument: a record replays the values it was made with
+        self._launch(key, gk.plan_substep,
                      [self._q, self._gap, self._tip_force, self._pad_force, self._grip_stiffness, self._stopped_push,
                       self._q_start, self._q_move, self._target_gap, self._active, (k + 1) / count,
                       config.closing_speed * h, config.grip_force_limit, self.wrist_force_limit, HOLD_COSINE],

@@ -1,10 +1,11 @@
 """Warp kernels of the batched gripper (``Gripper``): one thread per world, float64, on the
 simulation's device. They carry out the rules of ``driver`` (the jaw driver and the grip-stiffness
 estimate), ``linkage`` (pad centres from the gap), ``wrist.analytic`` (the flange orientation) and
-``Gripper.lift_above_ground`` / ``held_at_limit`` / ``record_limit`` for every world of a substep in
-four launches (plan, move, sense, reset), so that a control step's gripper work needs no numpy over
-the worlds and no full-state transfer. The numpy functions stay the reference (tests compare the
-two on random inputs).
+the lift above the ground, the hold at the force limit and its record (``Gripper.move``,
+``held_at_limit``, ``sense``) for every world: a substep's gripper work is three launches (plan,
+move, sense; reset apart), so that a control step's gripper work needs no numpy over the worlds and
+no full-state transfer. The numpy functions stay the reference (tests compare the two on random
+inputs).
 
 Frames and units: world frame (y up), m, rad, N; quaternions xyzw; joints ``q = (x, y, z, roll,
 pitch, yaw)`` as ``vec6d``; pad 0 = left (+x_G), 1 = right.
@@ -254,9 +255,9 @@ def sense_pads(normal_force: wp.array(dtype=Any), total_force: wp.array(dtype=An
     """World w after its accepted solve: the pad normal forces ``normal_force[2w], [2w+1]`` (N) and,
     if ``read_total``, the object's total force on each pad ``total_force`` (N, world) become the
     gripper's readings; the grip-stiffness estimate follows them (``driver.update_grip_stiffness``);
-    if ``record_limit``, the force limit's outcome is remembered (``Gripper.record_limit``: the
-    substep's fraction 0 in a world that tried to move keeps the planned push it tried, a held world
-    keeps its push, a world that moved forgets)."""
+    if ``record_limit``, the force limit's outcome is remembered (``Gripper.sense(record_limit=True)``:
+    the substep's fraction 0 in a world that tried to move keeps the planned push it tried, a held
+    world keeps its push, a world that moved forgets)."""
     w = wp.tid()
     f0 = wp.float64(normal_force[2 * w])
     f1 = wp.float64(normal_force[2 * w + 1])

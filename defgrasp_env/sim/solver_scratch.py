@@ -96,10 +96,10 @@ class SolverScratch:
     diag_block: wp.array        # [N] mat33, N/m: diagonal blocks of A
     precond: wp.array           # [N] mat33, m/N: their inverses (masked by the free axes)
     contact_hessian: wp.array   # [N] mat33, N/m: contact part of the diagonal blocks
-    cofactor: wp.array          # [T] mat33: d(det F)/dF of each tet
-    tet_rotation: wp.array      # [T] quat: polar rotation of each tet (warm start of the next solve)
-    tet_r: wp.array             # [T] mat33: that rotation as a matrix
-    tet_twist: wp.array         # [T] float: twist factor of the fixed-corotated Hessian
+    cofactor: wp.array          # [T] mat33: d(det F)/dF of each tet at the last Newton iterate
+    tet_rotation: wp.array      # [T] quat: polar rotation of each tet at the last evaluated positions (warm start)
+    tet_r: wp.array             # [T] mat33: the rotation at the last Newton iterate as a matrix
+    tet_twist: wp.array         # [T] float: twist factor of the fixed-corotated Hessian there
     tet_start: wp.array         # [W+1] int: first tet of each world (a world's tets are contiguous)
     # contact, lagged at the substep start
     lag_normal_force: wp.array  # [N*(P+1)] float, N: normal force per node and contact (0: ground, 1+k: pad k)
