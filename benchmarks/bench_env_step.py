@@ -33,7 +33,9 @@ control step, the deepest solver-reported penetration (mm) and largest wrist for
 steps, world-solves per world-substep (1 = no force-limit retry or patient re-solve; the scene's
 ``world_solves``), Newton and CG iterations per step of the slowest world (median over steps) and of
 the mean world, and for ``expert`` the successes so far. The bare FEM core's rate for comparison comes from
-``bench_fem.py`` (run it in the same session on the same machine). Appends a table with the machine to
+``bench_fem.py`` (run it in the same session on the same machine, with ``--substeps`` set to the
+env's substeps per control period, 4 by default: its own default is ``SolverConfig``'s 2, which
+halves the work per step). Appends a table with the machine to
 benchmarks/RESULTS.md unless ``--no-append``.
 """
 
