@@ -146,13 +146,13 @@ def test_pad_embedding_reads_material_inside_a_pad_and_nothing_outside():
     assert got[0] == got[2] == 0.0
     half = scene.model.pad_half_extents.numpy()[2]
     assert PIERCE_DEPTH < got[1] <= half.min()  # the pad's 16 mm thickness full of material
-    from types import SimpleNamespace
-
-    no_node_deep = SimpleNamespace(penetration=np.zeros(3))  # the solver's node depths: none
-    pierced = venv.unwrapped.task.evaluate(scene, no_node_deep, np.ones(3, bool))["pierced"]
-    assert pierced.tolist() == [False, True, False]
+    assert np.all(scene.solve_report.records.numpy()["penetration"] == 0.0)  # no step yet: no node deep
+    task = venv.unwrapped.task
+    task.evaluate(scene)
+    assert task.result()["pierced"].tolist() == [False, True, False]
     scene.state.pad_positions.assign(original_pos)  # the pads back above the objects: zero again,
     scene.state.pad_orientations.assign(original_quat)  # not the maximum of the last readout
     scene._readout = None
     assert np.all(scene.readout().pad_embedding == 0.0)
-    assert not venv.unwrapped.task.evaluate(scene, no_node_deep, np.ones(3, bool))["pierced"].any()
+    task.evaluate(scene)
+    assert not task.result()["pierced"].any()

@@ -43,38 +43,28 @@ def draw_world(config: PickupConfig, rng: np.random.Generator, seed: int | None,
     return setup, spec
 
 
-def observations(config: PickupConfig, scene: PickupScene, task: PickupTask, pixels=None) -> dict[str, np.ndarray]:
-    """Batched observation dict [W, ...]."""
-    obs = {}
-    if config.obs_type in ("state", "pixels_agent_pos"):
-        obs["agent_pos"] = task.agent_pos(scene)
-    if config.obs_type == "state":
-        obs["environment_state"] = task.environment_state(scene)
+def observations(task: PickupTask, pixels=None) -> dict[str, np.ndarray]:
+    """Batched observation dict [W, ...] of the task's last ``observe`` / ``evaluate``."""
+    obs = task.observations()
     if pixels is not None:
         obs["pixels"] = pixels
     return obs
 
 
-def step_infos(scene: PickupScene, result: dict, stats, diverged: np.ndarray) -> dict[str, np.ndarray]:
-    """Batched info arrays [W]: reward terms (``reward_<term>``), success, contact and solver data."""
-    info = {f"reward_{name}": result["terms"][name].astype(np.float64) for name in REWARD_TERMS}
+def step_infos(result: dict[str, np.ndarray], stats) -> dict[str, np.ndarray]:
+    """Batched info arrays [W]: reward terms (``reward_<term>``), success, contact and solver data,
+    from the task's step result (``PickupTask.result``) and the solver's report ``stats``."""
+    info = {f"reward_{name}": result[f"reward_{name}"] for name in REWARD_TERMS}
+    info.update({name: result[name] for name in (
+        "is_success", "grasped", "grasp_quality", "pierced", "goal_distance", "left_tip_normal_force",
+        "right_tip_normal_force", "jaw_gap", "mean_von_mises", "sim_diverged")})
     info.update(
-        is_success=result["is_success"].copy(),
-        grasped=result["grasped"].copy(),
-        grasp_quality=result["grasp_quality"].copy(),
-        pierced=result["pierced"].copy(),
-        goal_distance=result["goal_distance"].copy(),
-        left_tip_normal_force=scene.gripper.tip_force[:, 0].copy(),
-        right_tip_normal_force=scene.gripper.tip_force[:, 1].copy(),
-        jaw_gap=scene.gripper.gap.copy(),
-        mean_von_mises=scene.state.mean_von_mises.numpy().astype(np.float64),
-        sim_diverged=diverged.copy(),
         newton_iterations=stats.newton_iterations.copy(),
         cg_iterations=stats.cg_iterations.copy(),
         residual_force=stats.residual_force.astype(np.float64),
         penetration=stats.penetration.astype(np.float64),
-        pad_embedding=result["pad_embedding"].copy(),
-        wrist_force=scene.gripper.wrist_force.copy(),
+        pad_embedding=result["pad_embedding"],
+        wrist_force=result["wrist_force"],
         sim_converged=stats.converged.copy(),
         sim_penetrated=stats.penetrated.copy(),
     )

@@ -186,6 +186,7 @@ class DeformablePickupEnv(gym.Env):
             self.scene.reset_worlds(np.ones(1, bool), [setup])
             spec = dataclasses.replace(spec, scene_origin=self._scene_origin)
         self.task.reset(np.ones(1, bool))
+        self.task.observe(self.scene)
         if self._viewer is not None:
             self._viewer.new_episode()
             self.render()
@@ -197,11 +198,11 @@ class DeformablePickupEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         a = check_actions(action, self.action_space.shape, self.action_space.low, self.action_space.high)[None]
         stats = self.scene.step(*targets(self.scene.gripper, self.config, a))
-        diverged = stats.diverged | ~self.scene.finite()
-        result = self.task.evaluate(self.scene, stats, ~diverged)
-        info = {k: v[0].item() for k, v in step_infos(self.scene, result, stats, diverged).items()}
-        terminated = bool(result["is_success"][0])
-        truncated = bool(diverged[0])
+        self.task.evaluate(self.scene)  # on the device; observations too
+        result = self.task.result()
+        info = {k: v[0].item() for k, v in step_infos(result, stats).items()}
+        terminated = bool(result["terminated"][0])
+        truncated = bool(result["truncated"][0])  # the simulation diverged (the time limit: ``TimeLimit``)
         if self._viewer is not None:
             self.render()
         return self._obs(), float(result["reward"][0]), terminated, truncated, info
@@ -222,7 +223,7 @@ class DeformablePickupEnv(gym.Env):
     # -- internals -------------------------------------------------------------------------
     def _obs(self):
         pixels = self._render_world(0)[None] if "pixels" in self.observation_space.spaces else None
-        return {k: v[0] for k, v in observations(self.config, self.scene, self.task, pixels).items()}
+        return {k: v[0] for k, v in observations(self.task, pixels).items()}
 
     def _render_world(self, w: int) -> np.ndarray:
         return self._camera.render(self.scene, w)

@@ -83,16 +83,22 @@ class SceneReadouts:
                       outputs=[self.keypoints], device=d, record_cmd=True), embed, pack))
             for state, embed in zip(states, embedding)]
 
-    def compute(self, state: State) -> StepReadout:
-        """Launch the readout kernels on ``state`` (one of the constructor's ``states``) and bring
-        the [W, ...] results to the host, packed in one download."""
-        w = self.num_worlds
+    def launch(self, state: State) -> None:
+        """Launch the readout kernels on ``state`` (one of the constructor's ``states``): the public
+        device arrays then hold its readouts (no transfer)."""
         launches = next((cmds for s, cmds in self._launches if s is state), None)
         if launches is None:
             raise ValueError("state must be one of the states the readouts were built for")
         self.pad_embedding.zero_()  # the embedding launch takes maxima into it
-        for cmd in launches:
+        for cmd in launches[:-1]:
             cmd.launch()
+
+    def compute(self, state: State) -> StepReadout:
+        """:meth:`launch` on ``state``, then bring the [W, ...] results to the host, packed in one
+        download."""
+        w = self.num_worlds
+        self.launch(state)
+        next(cmds for s, cmds in self._launches if s is state)[-1].launch()  # the pack
         packed = self._packed.numpy()
         return StepReadout(packed[:, 0:3].copy(), packed[:, 3:6].copy(),
                            packed[:, 6:6 + 3 * NUM_KEYPOINTS].reshape(w, NUM_KEYPOINTS, 3).copy(),

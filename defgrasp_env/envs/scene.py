@@ -338,6 +338,19 @@ class PickupScene:
             self._readout = self._readouts.compute(self.state)
         return self._readout
 
+    def device_readouts(self) -> SceneReadouts:
+        """The readouts of the current state on the device (``SceneReadouts``' public arrays: feature
+        point and velocity, keypoints, finiteness, pad embedding), launched now, not downloaded:
+        for kernels that read them (``PickupTask``). Valid until the next step or reset."""
+        self._readouts.launch(self.state)
+        return self._readouts
+
+    @property
+    def solve_report(self) -> SolveReport:
+        """The last control step's solver report on the device (``SolveReport.records`` [W]);
+        ``step`` returns it downloaded."""
+        return self._report
+
     def feature_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Object feature point (mean node position, paper eq. 5) [W,3] m and its velocity [W,3] m/s."""
         r = self.readout()

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
 from gymnasium import spaces
 
 from ..gripper import PAD_BOX_HALF_EXTENTS
 from ..layout import ACTION_LAYOUTS, AGENT_POS, ENV_STATE, VectorLayout
 from ..transforms import quat_to_matrix
+from ..sim.launch_cache import LaunchCache
 from .config import PickupConfig
 from .scene import PickupScene
+from .task_kernels import (OBSERVATION_SIZE, OUTPUT_COLUMNS, RESULT_COLUMNS, TaskParams, column, evaluate_worlds,
+                           observe_worlds, reset_counters)
 
 REWARD_TERMS = ("reach", "grasp", "lift", "place", "success")
 #: Both tip normal forces above this (N) count as a grasp.
@@ -116,60 +120,126 @@ def action_space(config: PickupConfig) -> spaces.Box:
 
 
 class PickupTask:
-    """Reward, success and termination logic over the worlds of a ``PickupScene``."""
+    """Observations, reward, success and termination of the worlds of a ``PickupScene``, computed
+    on the simulation's device (``task_kernels``: one thread per world) from the gripper's state, the
+    scene's readouts and the solver's report, into ``outputs``: one float64 row per world
+    (``task_kernels.OUTPUT_COLUMNS``: the observation vectors, then the step's result), brought to
+    the host in one download (:meth:`download`) or read on the device as torch tensors
+    (:meth:`torch_outputs`).
 
-    def __init__(self, config: PickupConfig, num_worlds: int):
+    Args:
+        config: the env's config (goal, success tolerance and hold, pad friction, device).
+        num_worlds: W.
+        max_episode_steps: steps after which a world's episode is truncated (``None``: never; the
+            single env leaves that to Gymnasium's ``TimeLimit``).
+    """
+
+    def __init__(self, config: PickupConfig, num_worlds: int, max_episode_steps: int | None = None):
         self.config = config
+        self.num_worlds = num_worlds
         self.goal = np.asarray(config.goal, dtype=np.float64)
         self.hold_steps = int(round(config.success_hold_seconds * config.control_hz))
-        self.held = np.zeros(num_worlds, int)
-        self.elapsed = np.zeros(num_worlds, int)
+        self.device = d = wp.get_device(config.device)
+        p = TaskParams()
+        p.goal = wp.vec3d(*self.goal)
+        p.success_tolerance = float(config.success_tolerance)
+        p.friction_cone = float(np.cos(np.arctan(config.pad_friction)))
+        p.hold_steps = self.hold_steps
+        p.max_episode_steps = np.iinfo(np.int32).max if max_episode_steps is None else int(max_episode_steps)
+        p.grasp_force = GRASP_FORCE
+        p.pierce_depth = PIERCE_DEPTH
+        p.reach_scale, p.lift_scale, p.place_scale, p.centre_scale = REACH_SCALE, LIFT_SCALE, PLACE_SCALE, CENTRE_SCALE
+        self.params = p
+        self._held = wp.zeros(num_worlds, dtype=wp.int32, device=d)
+        self._elapsed = wp.zeros(num_worlds, dtype=wp.int32, device=d)
+        #: [W, len(OUTPUT_COLUMNS)] float64 on the device: the last observation and step result
+        self.outputs = wp.zeros((num_worlds, len(OUTPUT_COLUMNS)), dtype=wp.float64, device=d)
+        self._live = wp.ones(num_worlds, dtype=wp.int32, device=d)  # evaluate's ``live`` on the device
+        self._live_host = np.ones(num_worlds, np.int32)
+        self._host: np.ndarray | None = None  # ``outputs`` downloaded since its last change
+        self._launches = LaunchCache(d)
+
+    @property
+    def elapsed(self) -> np.ndarray:
+        """[W] int: control steps taken in each world's episode (downloaded)."""
+        return self._elapsed.numpy().astype(np.int64)
 
     def reset(self, mask: np.ndarray) -> None:
-        self.held[mask] = 0
-        self.elapsed[mask] = 0
+        """Worlds in ``mask`` [W] bool start a new episode (no step taken, not at the goal)."""
+        mask = wp.array(np.asarray(mask, dtype=np.int32), dtype=wp.int32, device=self.device)
+        wp.launch(reset_counters, dim=self.num_worlds, inputs=[mask, self._held, self._elapsed], device=self.device)
 
-    def agent_pos(self, scene: PickupScene) -> np.ndarray:
-        gripper = scene.gripper
-        pos, quat = gripper.flange_pose()
-        return AGENT_POS.pack(wrist_position=pos, wrist_quat=quat, jaw_gap=gripper.gap[:, None],
-                              tip_normal_force=gripper.tip_force).astype(np.float32)
+    def observe(self, scene: PickupScene) -> None:
+        """Write the observation columns of ``outputs`` for the scene's current state."""
+        self._observe(scene, scene.device_readouts())
 
-    def environment_state(self, scene: PickupScene) -> np.ndarray:
-        feat, vel = scene.feature_points()
-        goal = np.broadcast_to(self.goal, feat.shape)
-        keys = scene.keypoint_positions().reshape(scene.num_worlds, -1)
-        return ENV_STATE.pack(feature_position=feat, feature_velocity=vel, goal=goal, keypoints=keys).astype(np.float32)
+    def _observe(self, scene: PickupScene, r) -> None:
+        g = scene.gripper.arrays
+        self._launches.launch(("observe", id(r), id(g.q)), observe_worlds, self.num_worlds,
+                              [g.q, g.gap, g.tip_force, r.feature_position, r.feature_velocity, r.keypoints,
+                               self.params], [self.outputs], keep=(r, g.q))
+        self._host = None
 
-    def evaluate(self, scene: PickupScene, stats, valid: np.ndarray) -> dict[str, np.ndarray]:
-        """Reward terms [W] each, total reward, success/termination flags, after a step."""
-        feat, _ = scene.feature_points()
-        pad_pos, pad_quat = scene.gripper.pad_poses()
-        tcp = pad_pos.mean(axis=1)  # ``Gripper.tcp_positions`` of the same poses
-        reach_dist = np.linalg.norm(tcp - feat, axis=1)
-        goal_dist = np.linalg.norm(feat - self.goal, axis=1)
-        grasped = np.all(scene.gripper.tip_force > GRASP_FORCE, axis=1)
-        quality = grasp_quality(scene.gripper.pad_force_angles(), self.config.pad_friction,
-                                feature_beyond_pad_faces(feat, pad_pos, pad_quat))
-        # the hold's quality, 0 where nothing is held (or a diverged world's forces are not finite)
-        held_well = np.where(grasped & np.isfinite(quality), quality, 0.0)
-        embedding = scene.pad_embedding()
-        pierced = (stats.penetration > PIERCE_DEPTH) | (embedding > PIERCE_DEPTH)
-        at_goal = (goal_dist < self.config.success_tolerance) & grasped & ~pierced & valid
-        self.held = np.where(at_goal, self.held + 1, 0)
-        self.elapsed += 1
-        success = self.held >= max(self.hold_steps, 1)
-        lift_progress = shaped_progress(goal_dist, LIFT_SCALE)
-        terms = {
-            "reach": shaped_progress(reach_dist, REACH_SCALE) * 0.5,
-            "grasp": 0.5 * held_well,
-            "lift": held_well * lift_progress * 2.0,
-            "place": held_well * shaped_progress(goal_dist, PLACE_SCALE),
-            "success": 10.0 * success,
-        }
-        reward = np.zeros(scene.num_worlds)
-        for name in REWARD_TERMS:
-            terms[name] = np.where(valid, terms[name], 0.0)
-            reward = reward + terms[name]
-        return {"reward": reward, "terms": terms, "is_success": success, "grasped": grasped, "grasp_quality": held_well,
-                "pierced": pierced, "goal_distance": goal_dist, "pad_embedding": embedding}
+    def evaluate(self, scene: PickupScene, live: np.ndarray | None = None) -> None:
+        """After a control step: write every column of ``outputs`` (observations and the step's
+        result: reward terms, success, divergence, termination, truncation, info readings) and
+        advance the worlds' step and goal-hold counters. ``live`` [W] bool (default all): worlds
+        whose step counts; the others (being reset) get no reward and no flags."""
+        r, g, st, report = scene.device_readouts(), scene.gripper.arrays, scene.state, scene.solve_report.records
+        live = np.ones(self.num_worlds, np.int32) if live is None else np.asarray(live, dtype=bool).astype(np.int32)
+        if not np.array_equal(live, self._live_host):  # uploaded only when it changes
+            self._live.assign(live)
+            self._live_host = live
+        self._launches.launch(("evaluate", id(r), id(g.q), id(st), id(report)), evaluate_worlds, self.num_worlds,
+                              [g.q, g.gap, g.tip_force, g.pad_force, r.feature_position, r.finite, r.pad_embedding,
+                               report, st.mean_von_mises, self._live, self.params, self._held, self._elapsed],
+                              [self.outputs], keep=(r, g.q, st, report))
+        self._observe(scene, r)
+
+    def download(self) -> np.ndarray:
+        """``outputs`` on the host [W, len(OUTPUT_COLUMNS)] (read-only; one transfer per change)."""
+        if self._host is None:
+            values = self.outputs.numpy()
+            self._host = values.copy() if self.device.is_cpu else values
+            self._host.flags.writeable = False
+        return self._host
+
+    def result(self) -> dict[str, np.ndarray]:
+        """The step result columns as [W] arrays: ``reward`` and the ``reward_<term>`` (float64),
+        the flags (``is_success``, ``grasped``, ``pierced``, ``sim_diverged``, ``terminated``,
+        ``truncated``: bool), ``elapsed`` (int64) and the readings (float64)."""
+        out = self.download()
+        flags = ("is_success", "grasped", "pierced", "sim_diverged", "terminated", "truncated")
+        values = {name: out[:, column(name)] for name in RESULT_COLUMNS}
+        for name in flags:
+            values[name] = values[name] != 0.0
+        values["elapsed"] = values["elapsed"].astype(np.int64)
+        return {name: np.array(v) for name, v in values.items()}
+
+    def observations(self) -> dict[str, np.ndarray]:
+        """The observation dict [W, ...] float32 of ``config.obs_type`` (without pixels)."""
+        out = self.download()
+        return {name: out[:, sl].astype(np.float32) for name, sl in self._observation_columns()}
+
+    def torch_outputs(self, names: tuple[str, ...] = ()) -> dict:
+        """Torch tensors on the simulation's device, made there from ``outputs`` (no host round
+        trip): the observation dict (float32 [W, ...]) and the result columns ``names`` ([W]:
+        ``reward`` float32 as the observations, flags bool)."""
+        import torch
+
+        wp.synchronize_device(self.device)  # ``outputs`` written (Warp's stream) before torch reads it
+        t = wp.to_torch(self.outputs)
+        values = {name: t[:, sl].to(torch.float32) for name, sl in self._observation_columns()}
+        for name in names:
+            col = t[:, column(name)]
+            values[name] = col.to(torch.float32) if name.startswith("reward") else col != 0.0
+        wp.synchronize_device(self.device)  # the copies made (torch's stream) before a step overwrites it
+        return values
+
+    def _observation_columns(self):
+        spaces_ = []
+        if self.config.obs_type in ("state", "pixels_agent_pos"):
+            spaces_.append(("agent_pos", slice(0, AGENT_POS.size)))
+        if self.config.obs_type == "state":
+            spaces_.append(("environment_state", slice(AGENT_POS.size, OBSERVATION_SIZE)))
+        return spaces_

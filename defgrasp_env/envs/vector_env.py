@@ -86,8 +86,11 @@ class DeformablePickupVectorEnv(VectorEnv):
     Every world (re)set by ``reset`` or by an autoreset in ``step`` gets a ``ReplaySpec`` in
     ``info["replay_spec"]`` (object array [N], mask ``info["_replay_spec"]``): the seed or RNG state,
     options, object, material and pose with which a single env repeats that world's episode start.
-    ``torch_outputs=True`` returns observations as torch tensors on the simulation device (they are
-    small and assembled on the host, so on CUDA they are one upload per observation key per step).
+    ``torch_outputs=True`` returns observations (float32), reward (float32 [N]), terminated and
+    truncated (bool [N]) as torch tensors on the simulation's device, made there from the task's
+    device outputs (``PickupTask``: observations, reward and flags are computed by Warp kernels on
+    that device; no host round trip); ``info`` stays numpy (one download of the step's outputs a
+    step, which the resets need anyway). ``step`` also takes the actions as a torch tensor.
     ``full_state_torch()`` gives the complete FEM state as zero-copy torch views of the simulation's
     own arrays (on the GPU when ``device="cuda:0"``): node positions/velocities/forces [N, 3] and
     von Mises stress [T] of all worlds, with ``model.node_start`` / ``model.tet_start`` offsets.
@@ -131,7 +134,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         self.torch_outputs = bool(torch_outputs)
         self._rngs = [seeding.np_random(None)[0] for _ in range(num_envs)]
         self.scene: PickupScene | None = None
-        self.task = PickupTask(self.config, num_envs)
+        self.task = PickupTask(self.config, num_envs, self.max_episode_steps)
         self._needs_reset = np.zeros(num_envs, bool)
         self._origins = [None] * num_envs  # each world's ReplaySpec of the reset that built its object
         self._camera = SceneCamera(self.config)
@@ -163,16 +166,18 @@ class DeformablePickupVectorEnv(VectorEnv):
         if self.scene is None:
             raise RuntimeError("call reset() before step()")
         n = self.num_envs
+        if hasattr(actions, "detach"):  # a torch tensor (on any device)
+            actions = actions.detach().cpu().numpy()
         a = check_actions(actions, (n,) + self.single_action_space.shape, self.single_action_space.low,
                           self.single_action_space.high)
         resetting = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
         stats = self.scene.step(*targets(self.scene.gripper, self.config, a), active=~resetting)
-        diverged = (stats.diverged | ~self.scene.finite()) & ~resetting
-        result = self.task.evaluate(self.scene, stats, ~diverged & ~resetting)
-        terminated = result["is_success"] & ~resetting
-        truncated = (diverged | (self.task.elapsed >= self.max_episode_steps)) & ~resetting
-        reward = np.where(resetting, 0.0, result["reward"])
-        info = step_infos(self.scene, result, stats, diverged)
+        self.task.evaluate(self.scene, live=~resetting)  # on the device; observations too
+        result = self.task.result()  # the one download of the step's outputs
+        terminated, truncated, reward = result["terminated"], result["truncated"], result["reward"]
+        if self.torch_outputs:
+            torch_result = self.task.torch_outputs(("reward", "terminated", "truncated"))
+        info = step_infos(result, stats)
         live = ~resetting
         info = {**info, **{f"_{k}": live.copy() for k in list(info)}}
         done = terminated | truncated
@@ -192,6 +197,8 @@ class DeformablePickupVectorEnv(VectorEnv):
             obs = self._obs()
         if self._viewer is not None:
             self.render()
+        if self.torch_outputs:
+            reward, terminated, truncated = (torch_result[k] for k in ("reward", "terminated", "truncated"))
         return obs, reward, terminated, truncated, info
 
     def render(self):
@@ -246,6 +253,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         else:
             self.scene.reset_worlds(mask, setups)
         self.task.reset(mask)
+        self.task.observe(self.scene)
         self._needs_reset[mask] = False
         objects = np.full(self.num_envs, None, dtype=object)
         moduli = np.zeros(self.num_envs)
@@ -258,12 +266,13 @@ class DeformablePickupVectorEnv(VectorEnv):
         pixels = None
         if "pixels" in self.single_observation_space.spaces:
             pixels = np.stack([self._render_world(w) for w in range(self.num_envs)])
-        obs = observations(self.config, self.scene, self.task, pixels)
-        if self.torch_outputs:
+        if not self.torch_outputs:
+            return observations(self.task, pixels)
+        obs = self.task.torch_outputs()
+        if pixels is not None:
             import torch
 
-            device = "cpu" if self.config.device == "cpu" else str(self.config.device)
-            obs = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device) for k, v in obs.items()}
+            obs["pixels"] = torch.from_numpy(pixels).to(obs["agent_pos"].device)
         return obs
 
     def _render_world(self, w: int) -> np.ndarray:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import NamedTuple
 
 import numpy as np
 import warp as wp
@@ -37,7 +38,7 @@ from . import kernels as gk
 from .driver import GripperConfig, GripperDriver
 from .linkage import GAP_MAX, GAP_MIN, _finite, pad_boxes, pad_centers, theta_from_gap
 
-__all__ = ["GROUND_CLEARANCE", "Gripper", "lift_above_ground", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
+__all__ = ["GROUND_CLEARANCE", "Gripper", "GripperArrays", "lift_above_ground", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
 
 #: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
 #: can never push a node through itself; the inner face stays where the linkage puts it.
@@ -107,6 +108,17 @@ def lift_above_ground(q: np.ndarray, gap: np.ndarray, device="cpu"):
               device=d)
     quat = outputs[3].numpy()
     return outputs[0].numpy(), outputs[2].numpy(), np.repeat(quat[:, None, :], 2, axis=1)
+
+
+class GripperArrays(NamedTuple):
+    """The W grippers' state as Warp arrays on the simulation's device (float64, world frame), for
+    kernels that read it (``Gripper.arrays``); valid for the gripper's life, overwritten by its
+    kernels."""
+
+    q: wp.array          # [W] vec6d: wrist joints (m, m, m, rad, rad, rad)
+    gap: wp.array        # [W] float64: jaw gap, m
+    tip_force: wp.array  # [W] vec2d: left and right pad normal force, N
+    pad_force: wp.array  # [W, 2] vec3d: the object's total force on each pad, N
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:
@@ -219,6 +231,11 @@ class Gripper:
     def _launch(self, key, kernel, inputs: list, outputs: list, keep: tuple = ()) -> None:
         """Launch ``kernel`` over the worlds, recorded under ``key`` and replayed (``LaunchCache``)."""
         self._launches.launch(key, kernel, self.num_worlds, inputs, outputs, keep)
+
+    @property
+    def arrays(self) -> GripperArrays:
+        """The state's Warp arrays (read them in kernels; the gripper's kernels write them)."""
+        return GripperArrays(self._q, self._gap, self._tip_force, self._pad_force)
 
     @property
     def q(self) -> np.ndarray:

@@ -99,6 +99,18 @@ def left_pad_center(gap: wp.float64):
 
 
 @wp.func
+def pad_box_centers(flange_pos: wp.vec3d, R: wp.mat33d, gap: wp.float64, backing: wp.float64):
+    """Collision-box centres (m, world) of the left and right pad for a flange at ``flange_pos`` (m)
+    with rotation ``R`` and a jaw gap (m, clipped to the stroke), the boxes reaching ``backing`` m
+    behind the pads' faces: ``gripper._pad_box_centers`` for one world."""
+    left = left_pad_center(gap)
+    lateral = wp.vec3d(R[0, 0], R[1, 0], R[2, 0]) * (left[0] + backing / _F(2.0))
+    down = wp.vec3d(R[0, 1], R[1, 1], R[2, 1]) * left[1]
+    across = wp.vec3d(R[0, 2], R[1, 2], R[2, 2]) * left[2]
+    return flange_pos + ((lateral + down) + across), flange_pos + ((-lateral + down) + across)
+
+
+@wp.func
 def driver_gap(cmd: wp.float64, gap: wp.float64, max_move: wp.float64, force_left: wp.float64,
                force_right: wp.float64, stiffness: wp.float64, force_limit: wp.float64):
     """The jaw's new gap (m) after one driver step: ``driver.driver_step`` for one world (speed
@@ -217,13 +229,7 @@ def move_pads(q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d), ga
             g = g0 + (g - g0) * f
     quat = flange_quat(qw)
     R = quat_matrix(quat)
-    left = left_pad_center(g)
-    lateral = wp.vec3d(R[0, 0], R[1, 0], R[2, 0]) * (left[0] + backing / _F(2.0))
-    down = wp.vec3d(R[0, 1], R[1, 1], R[2, 1]) * left[1]
-    across = wp.vec3d(R[0, 2], R[1, 2], R[2, 2]) * left[2]
-    pos = wp.vec3d(qw[0], qw[1], qw[2])
-    c0 = pos + ((lateral + down) + across)
-    c1 = pos + ((-lateral + down) + across)
+    c0, c1 = pad_box_centers(wp.vec3d(qw[0], qw[1], qw[2]), R, g, backing)
     reach = (-(wp.abs(R[1, 0]) * half_extents[0]) - wp.abs(R[1, 2]) * half_extents[2]) - wp.abs(R[1, 1]) * half_extents[1]
     lowest = wp.min(c0[1], c1[1]) + reach
     lifted = qw
