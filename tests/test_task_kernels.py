@@ -101,10 +101,11 @@ def _random_worlds(rng, w, config):
     return q, gap, tip, forces, feature, finite, embedding, penetration, solver_diverged, live
 
 
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
 @pytest.mark.parametrize("friction", [0.0, 0.8])
-def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction):
+def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, device):
     w, steps = 4000, 3
-    config = PickupConfig(pad_friction=friction, goal=(0.0, 0.6, 0.0))
+    config = PickupConfig(pad_friction=friction, goal=(0.0, 0.6, 0.0), device=device)
     task = PickupTask(config, w, max_episode_steps=5)
     rng = np.random.default_rng(7 if friction else 8)
     held = rng.integers(0, task.hold_steps + 1, w)  # some worlds one step from their success
@@ -119,9 +120,10 @@ def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction):
                                held, elapsed, config, task.hold_steps, 5)
         elapsed = want["elapsed"]
         records = wp.zeros(w, dtype=SolveRecord, device="cpu")
-        r = records.numpy()
+        r = records.numpy()  # a view on the CPU
         r["penetration"], r["diverged"] = penetration, solver_diverged
-        d = "cpu"
+        d = device
+        records = wp.clone(records, device=d)
         args = [wp.array(q, dtype=gk.vec6d, device=d), wp.array(gap, dtype=wp.float64, device=d),
                 wp.array(tip, dtype=wp.vec2d, device=d), wp.array(forces, dtype=wp.vec3d, device=d),
                 wp.array(feature, dtype=wp.vec3d, device=d), wp.array(finite.astype(np.int32), dtype=wp.int32, device=d),
@@ -229,3 +231,31 @@ def test_vector_env_outputs_follow_the_numpy_rules_along_episodes_with_autoreset
         np.testing.assert_array_equal(obs["environment_state"][:, :3], r.feature_position.astype(np.float32))
         np.testing.assert_array_equal(info["mean_von_mises"], scene.state.mean_von_mises.numpy().astype(np.float64))
     assert resets_seen >= 2 and column("reward") == AGENT_POS.size + ENV_STATE.size
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
+def test_torch_outputs_equal_the_numpy_outputs(device):
+    """``torch_outputs=True``: observations, reward, terminated and truncated as torch tensors on
+    the simulation's device equal (float32 rounding of the reward) what the numpy env returns for
+    the same seeds and actions; actions may be given as a torch tensor."""
+    torch = pytest.importorskip("torch")
+    envs = [gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point", device=device,
+                         torch_outputs=flag, max_episode_steps=3) for flag in (False, True)]
+    (obs_np, _), (obs_t, _) = (e.reset(seed=5) for e in envs)
+    rng = np.random.default_rng(5)
+    ended = False
+    for k in range(5):
+        action = rng.uniform(-1, 1, (3, 7)).astype(np.float32)
+        out_np = envs[0].step(action)
+        out_t = envs[1].step(torch.as_tensor(action, device=device))
+        for got, want in zip(out_t[:4], out_np[:4]):
+            if isinstance(want, dict):
+                for key in want:
+                    assert got[key].device.type == torch.device(device).type and got[key].dtype == torch.float32
+                    np.testing.assert_array_equal(got[key].cpu().numpy(), want[key])
+            else:
+                assert got.device.type == torch.device(device).type
+                np.testing.assert_array_equal(got.cpu().numpy(), want.astype(got.cpu().numpy().dtype))
+        np.testing.assert_array_equal(out_t[4]["grasp_quality"], out_np[4]["grasp_quality"])
+        ended |= bool(out_np[3].all())
+    assert ended  # the episodes of 3 steps were truncated (and autoreset on the next step)

@@ -32,12 +32,12 @@ from ..sim.solve_report import SolveReport
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
 from ..transforms import quat_to_matrix
-from ..wrist.force_limit import FORCE_TOLERANCE, actuator_load, limited_substep, wrist_force
+from ..wrist.force_limit import FORCE_TOLERANCE, limited_substep
 from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model
-from .scene_kernels import (gather_rows, pack_pad_loads, scatter_rows, zero_float_rows_of_worlds,
+from .scene_kernels import (gather_rows, scatter_rows, solve_loads, zero_float_rows_of_worlds,
                             zero_vec3_rows_of_worlds)
 
 
@@ -142,8 +142,7 @@ class PickupScene:
         self._readouts = SceneReadouts(self.model, [self.state, self._next_state],
                                        [object_keypoints(s.object_name, config.object_resolution) for s in setups])
         self._report = SolveReport(self.num_worlds, self.model.device)  # the control step's solver report
-        self._pad_loads = wp.zeros(self.num_worlds * self.model.pads_per_world, dtype=wp.vec4,
-                                   device=self.model.device)  # a solve's pad forces, packed for one download
+        self._loads = wp.zeros(self.num_worlds, dtype=wp.vec4d, device=self.model.device)  # ``solve_loads``
         self._launches = LaunchCache(self.model.device)  # per-solve launches, recorded once and replayed
         self._solves = 0  # solves run by ``_solve_substep`` (the wrist limit's accepted solve is its last)
         #: world-solves run since the scene was built: per solver call, the worlds it computed (all of
@@ -260,7 +259,6 @@ class PickupScene:
         self.gripper.begin_step(target_pos, target_quat, target_gap, active)
         count = self.substeps
         h = self.config.dt / count
-        limits = self.config.wrist_force_limit, self.config.gripper.grip_force_limit
         for k in range(count):
             self.gripper.plan_substep(k, count, h)
             solved = None  # the fraction [W] each world's last solve of this substep moved by
@@ -269,22 +267,15 @@ class PickupScene:
                 # a retry re-solves only the worlds whose fraction changed: the others' last solve
                 # (in the other state, untouched since) is what a new one would give
                 nonlocal solved
-                worlds = None if solved is None else fraction != solved
-                number, tip, pads = self._solve_substep(fraction, h, worlds=worlds)
+                number, _, _, load = self._solve_substep(fraction, h, worlds=fraction != solved)
                 solved = np.array(fraction, dtype=np.float64)
-                load = actuator_load(wrist_force(pads), tip, *limits)
-                over = load > 1.0 + FORCE_TOLERANCE
-                if over.any():
-                    # an unconverged stiff contact can read kN where its solution reads tens of N:
-                    # over the limit, the forces of a converged solve decide
-                    patient = over & ~self._last_solve_converged()
-                    if patient.any():
-                        number, tip, pads = self._solve_substep(fraction, h, patient, worlds=patient)
-                        load = actuator_load(wrist_force(pads), tip, *limits)
-                return (number, tip, pads), load
+                return self._patient_if_over(number, load, fraction, h)
 
-            load_before, held = self.gripper.held_at_limit()
-            (number, _, _), _, _ = limited_substep(solve, load_before, held=held)
+            # the first try, as planned on the device (held worlds stay): no transfer before it
+            number, load_before, held, load = self._solve_substep(None, h)
+            solved = np.where(held, 0.0, 1.0)
+            first = self._patient_if_over(number, load, solved, h)
+            number, _, _ = limited_substep(solve, load_before, held=held, first=first)
             if number != self._solves:
                 raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
                                    "the last solve's state, report and the gripper's move are kept")
@@ -297,27 +288,44 @@ class PickupScene:
             self.state, self._next_state = self._home_state, self.state
         return self._report.download()
 
-    def _solve_substep(self, fraction: np.ndarray, h: float, patient: np.ndarray | None = None,
+    def _patient_if_over(self, number: int, load: np.ndarray, fraction: np.ndarray, h: float):
+        """(solve number, load [W]) of a solve, re-solved patiently in the worlds over an actuator
+        limit whose solve is unconverged: an unconverged stiff contact can read kN where its
+        solution reads tens of N, so over the limit the forces of a converged solve decide."""
+        over = load > 1.0 + FORCE_TOLERANCE
+        if over.any():
+            patient = over & ~self._last_solve_converged()
+            if patient.any():
+                number, _, _, load = self._solve_substep(fraction, h, patient, worlds=patient)
+        return number, load
+
+    def _solve_substep(self, fraction: np.ndarray | None, h: float, patient: np.ndarray | None = None,
                        worlds: np.ndarray | None = None):
         """One solve of the planned substep from its start (``state``, left untouched) into the
         other state, with ``fraction`` [W] of the actuators' motion (the force limit's retry,
-        ``Gripper.move``), the ``patient`` worlds [W] iterated to convergence, of the ``worlds`` [W]
-        bool (default all; the others keep their last solve: ``ImplicitSolver.advance``). Returns
-        (the solve's number, pad normal forces [W, P] N, the object's total force on each pad
-        [W, P, 3] N (world) of each world's last solve), from one download of the pad loads; the
-        report stays on the device."""
-        self.gripper.move(fraction)  # writes the control's pad targets
+        ``Gripper.move``; None: the plan's first try, ``Gripper.move_as_planned``), the ``patient``
+        worlds [W] iterated to convergence, of the ``worlds`` [W] bool (default all; the others keep
+        their last solve: ``ImplicitSolver.advance``). Returns (the solve's number, the actuator
+        load at the substep start [W], the worlds held at their limit [W] bool, the solve's
+        actuator load [W] (``wrist.force_limit.actuator_load``: 1 = at a limit)) from one download
+        (``scene_kernels.solve_loads``); the report and the forces stay on the device."""
+        if fraction is None:
+            self.gripper.move_as_planned()  # writes the control's pad targets
+        else:
+            self.gripper.move(fraction)
         out = self._next_state
         self.solver.advance(self.state, out, self._control, h, patient, worlds)
         self.world_solves += self.num_worlds if worlds is None else int(np.count_nonzero(worlds))
-        self._launches.launch(("pack", id(out)), pack_pad_loads, len(self._pad_loads),
-                              [out.pad_normal_force, out.pad_force], [self._pad_loads], keep=(out,))
-        loads = self._pad_loads.numpy().reshape(self.num_worlds, -1, 4).copy()  # CPU: numpy() views
-        bad = ~np.isfinite(loads).all(axis=(1, 2))
+        wrist_limit, grip_limit = self.config.wrist_force_limit, self.config.gripper.grip_force_limit
+        self._launches.launch(("loads", id(out), wrist_limit, grip_limit), solve_loads, self.num_worlds,
+                              [out.pad_normal_force, out.pad_force, self.gripper.plan_limits, wrist_limit, grip_limit],
+                              [self._loads], keep=(out,))
+        loads = self._loads.numpy().copy()  # CPU: numpy() views
+        bad = loads[:, 3] == 0.0
         if bad.any():  # the gripper's kernels would carry them into the jaw and the force limit
             raise FloatingPointError(f"the solver returned non-finite pad forces in worlds {np.flatnonzero(bad).tolist()}")
         self._solves += 1
-        return self._solves, loads[..., 0], loads[..., 1:]
+        return self._solves, loads[:, 0], loads[:, 1] > 0.0, loads[:, 2]
 
     def _last_solve_converged(self) -> np.ndarray:
         """[W] bool: the last solve met the Newton tolerance in every substep and did not diverge

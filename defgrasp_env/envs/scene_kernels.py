@@ -2,7 +2,7 @@
 state remap of a rebuild (worlds whose object changed at a reset), the per-world readouts of a
 step (feature point, keypoints, finiteness, object material inside a pad), which reduce the full
 state to small [W, ...] arrays,
-the pad loads of a solve and the readouts packed for one download.
+the force limit's loads of a solve and the readouts, each packed for one download.
 Kernels take arrays and scalars only; the launchers are in ``scene.py`` / ``readouts.py``."""
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from typing import Any
 
 import warp as wp
 
+from ..gripper.kernels import actuator_load
 from ..sim.kernels.contact import box_penetration
 
 
@@ -87,13 +88,27 @@ def zero_float_rows_of_worlds(a: wp.array(dtype=wp.float32), row_world: wp.array
 
 
 @wp.kernel
-def pack_pad_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.array(dtype=wp.vec3),
-                   loads: wp.array(dtype=wp.vec4)):
-    """``loads[p] = (pad_normal_force[p], pad_force[p])``: what the host needs of the pads after a
-    solve, packed for one download."""
-    p = wp.tid()
-    f = pad_force[p]
-    loads[p] = wp.vec4(pad_normal_force[p], f[0], f[1], f[2])
+def solve_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.array(dtype=wp.vec3),
+                limits: wp.array(dtype=wp.vec2d), wrist_limit: wp.float64, grip_limit: wp.float64,
+                loads: wp.array(dtype=wp.vec4d)):
+    """What the actuator force limit needs of world w after a solve (its two pads' normal forces
+    ``pad_normal_force[2w], [2w+1]`` and total forces ``pad_force``, N), packed for one download:
+    ``loads[w]`` = (the load at the substep start and 1 if held at the limit, ``limits[w]`` of
+    ``Gripper.plan_substep``; the solve's actuator load, ``wrist.force_limit.actuator_load``; 1 if
+    the pad forces are all finite, else 0)."""
+    w = wp.tid()
+    a = pad_force[2 * w]
+    b = pad_force[2 * w + 1]
+    n0 = pad_normal_force[2 * w]
+    n1 = pad_normal_force[2 * w + 1]
+    left = wp.vec3d(wp.float64(a[0]), wp.float64(a[1]), wp.float64(a[2]))
+    right = wp.vec3d(wp.float64(b[0]), wp.float64(b[1]), wp.float64(b[2]))
+    load = actuator_load(left, right, wp.float64(n0), wp.float64(n1), wrist_limit, grip_limit)
+    finite = wp.float64(0.0)
+    if wp.isfinite(a) and wp.isfinite(b) and wp.isfinite(n0) and wp.isfinite(n1):
+        finite = wp.float64(1.0)
+    lim = limits[w]
+    loads[w] = wp.vec4d(lim[0], lim[1], load, finite)
 
 
 @wp.kernel

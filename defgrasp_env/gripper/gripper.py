@@ -238,6 +238,12 @@ class Gripper:
         return GripperArrays(self._q, self._gap, self._tip_force, self._pad_force)
 
     @property
+    def plan_limits(self) -> wp.array:
+        """[W] vec2d Warp array: :meth:`held_at_limit` on the device, (load, 1.0 if held else 0.0),
+        written by :meth:`plan_substep`."""
+        return self._limits
+
+    @property
     def q(self) -> np.ndarray:
         return self._numpy("_q")
 
@@ -343,7 +349,8 @@ class Gripper:
                      [self._q, self._gap, self._tip_force, self._pad_force, self._grip_stiffness, self._stopped_push,
                       self._q_start, self._q_move, self._target_gap, self._active, (k + 1) / count,
                       config.closing_speed * h, config.grip_force_limit, self.wrist_force_limit, HOLD_COSINE],
-                     [self._q_before, self._q_plan, self._gap_before, self._gap_plan, self._force_before, self._limits])
+                     [self._q_before, self._q_plan, self._gap_before, self._gap_plan, self._force_before, self._limits,
+                      self._fraction])
         self._host.pop("_limits", None)
 
     def held_at_limit(self) -> tuple[np.ndarray, np.ndarray]:
@@ -374,6 +381,16 @@ class Gripper:
             self._fraction.fill_(1.0)
         else:
             self._fraction.assign(np.asarray(fraction, dtype=np.float64).reshape(self.num_worlds))
+        self._move_by_fraction()
+
+    def move_as_planned(self) -> None:
+        """:meth:`move` with the force limit's first try, set on the device by :meth:`plan_substep`
+        (no transfer): fraction 0 in the worlds held at their limit (:meth:`held_at_limit`), 1
+        (the whole planned motion) elsewhere."""
+        self._move_by_fraction()
+
+    def _move_by_fraction(self) -> None:
+        """The move kernel with the fraction array as it is."""
         self._launch("move", gk.move_pads, _move_pads_inputs(self._q_before, self._q_plan, self._gap_before,
                                                               self._gap_plan, self._fraction),
                      [self._q, self._gap, self._pad_center, self._pad_quat, *self.pad_targets])

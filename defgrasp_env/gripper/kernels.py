@@ -175,12 +175,13 @@ def plan_substep(q: wp.array(dtype=vec6d), gap: wp.array(dtype=wp.float64), tip_
                  grip_limit: wp.float64, wrist_limit: wp.float64, hold_cosine: wp.float64,
                  q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d), gap_before: wp.array(dtype=wp.float64),
                  gap_plan: wp.array(dtype=wp.float64), force_before: wp.array(dtype=wp.float64),
-                 limits: wp.array(dtype=wp.vec2d)):
+                 limits: wp.array(dtype=wp.vec2d), fraction: wp.array(dtype=wp.float64)):
     """Plan world w's substep: the jaw driver's gap on the last sensed forces, the wrist
     ``period_fraction`` of the way from ``q_start`` by ``q_move`` (joint limits kept), the state at
     the substep start kept for ``move`` and ``sense``; an inactive world keeps wrist and jaw.
     ``limits[w]`` = (actuator load at the start, 1 if the world stays held at its limit
-    (``Gripper.held_at_limit``) else 0)."""
+    (``Gripper.held_at_limit``) else 0); ``fraction[w]``: the part of the plan a first try
+    applies (``Gripper.move_as_planned``): 0 where held, else 1."""
     w = wp.tid()
     t = tip_force[w]
     g = gap[w]
@@ -203,6 +204,7 @@ def plan_substep(q: wp.array(dtype=vec6d), gap: wp.array(dtype=wp.float64), tip_
     if norms > _F(0.0) and wp.dot(stopped, push) >= hold_cosine * norms and load >= _F(1.0):
         held = _F(1.0)
     limits[w] = wp.vec2d(load, held)
+    fraction[w] = _F(1.0) - held
 
 
 @wp.kernel

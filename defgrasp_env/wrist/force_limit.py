@@ -78,7 +78,8 @@ def next_scale(lo, hi, f_lo, f_hi, limit) -> np.ndarray:
 
 
 def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], load_before: np.ndarray,
-                    tolerance: float = FORCE_TOLERANCE, retries: int = MAX_RETRIES, held: np.ndarray | None = None):
+                    tolerance: float = FORCE_TOLERANCE, retries: int = MAX_RETRIES, held: np.ndarray | None = None,
+                    first: tuple[object, np.ndarray] | None = None):
     """Run one substep with the actuator load limited to 1 (+ ``tolerance``).
 
     Args:
@@ -91,13 +92,15 @@ def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], lo
             planned motion: those at a limit whose actuators the limit stopped before on a motion in
             the same direction (``Gripper.held_at_limit``). Trying it would read over the limit and
             stop them again, at the cost of a solve and a patient re-solve per substep.
+        first: (result, load) of the first try, ``solve(scale)`` with ``scale`` 0 where ``held`` and
+            1 elsewhere, when the caller ran it already (default: run here).
     Returns:
         (result, load [W], scale [W]) of the accepted solve, which is always the last one run.
     """
     limit = 1.0
     load_before = np.asarray(load_before, dtype=np.float64)
     scale = np.ones_like(load_before) if held is None else np.where(held, 0.0, 1.0)
-    result, load = solve(scale)
+    result, load = solve(scale) if first is None else first
     over = (load > limit * (1.0 + tolerance)) & (scale > 0.0)  # a held world has no motion to take back
     if not over.any():
         return result, load, scale
