@@ -171,7 +171,8 @@ class DeformablePickupEnv(gym.Env):
         self.action_space = action_space(self.config)
         self.scene: PickupScene | None = None
         self._scene_origin: ReplaySpec | None = None  # the reset that built ``scene``
-        self.task = PickupTask(self.config, 1)
+        #: the task's observations, reward and flags on the simulation's device (made at the first reset)
+        self.task: PickupTask | None = None
         self._camera = SceneCamera(self.config)
 
     # -- gym API ---------------------------------------------------------------------------
@@ -185,6 +186,8 @@ class DeformablePickupEnv(gym.Env):
         else:
             self.scene.reset_worlds(np.ones(1, bool), [setup])
             spec = dataclasses.replace(spec, scene_origin=self._scene_origin)
+        if self.task is None:
+            self.task = PickupTask(self.config, 1)
         self.task.reset(np.ones(1, bool))
         self.task.observe(self.scene)
         if self._viewer is not None:

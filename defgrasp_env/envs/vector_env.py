@@ -134,7 +134,8 @@ class DeformablePickupVectorEnv(VectorEnv):
         self.torch_outputs = bool(torch_outputs)
         self._rngs = [seeding.np_random(None)[0] for _ in range(num_envs)]
         self.scene: PickupScene | None = None
-        self.task = PickupTask(self.config, num_envs, self.max_episode_steps)
+        #: the task's observations, reward and flags on the simulation's device (made at the first reset)
+        self.task: PickupTask | None = None
         self._needs_reset = np.zeros(num_envs, bool)
         self._origins = [None] * num_envs  # each world's ReplaySpec of the reset that built its object
         self._camera = SceneCamera(self.config)
@@ -252,6 +253,8 @@ class DeformablePickupVectorEnv(VectorEnv):
             self.scene = PickupScene(self.config, setups)
         else:
             self.scene.reset_worlds(mask, setups)
+        if self.task is None:
+            self.task = PickupTask(self.config, self.num_envs, self.max_episode_steps)
         self.task.reset(mask)
         self.task.observe(self.scene)
         self._needs_reset[mask] = False
