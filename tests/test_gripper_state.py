@@ -125,7 +125,7 @@ def test_scene_owns_the_substeps():
 def test_camera_task_and_recorders_use_public_scene_accessors():
     public = {"config", "num_worlds", "gripper", "model", "state", "solver", "substeps", "object_names", "setups",
               "materials", "mesh", "node_positions", "feature_points", "keypoint_positions", "finite", "pad_embedding", "step",
-              "device_readouts", "solve_report",
+              "device_readouts", "solve_report", "step_to_gripper_targets",
               "reset_worlds"}
     files = [ROOT / "defgrasp_env/envs" / n for n in ("common.py", "task.py", "actions.py", "pickup_env.py",
                                                        "vector_env.py")]

@@ -6,10 +6,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import warp as wp
 
 from ..gripper import Gripper
-from ..layout import ABSOLUTE_ACTION, DELTA_ACTION, TOPDOWN_ACTION, jaw_command_to_gap
+from ..layout import ABSOLUTE_ACTION, ACTION_LAYOUTS, DELTA_ACTION, TOPDOWN_ACTION, jaw_command_to_gap
+from ..sim.launch_cache import LaunchCache
 from ..transforms import axis_angle_to_quat, quat_multiply, quat_normalize
+from .action_kernels import TARGET_KERNELS, ActionScales
 from .config import PickupConfig
 
 
@@ -34,14 +37,19 @@ def delta_targets(gripper: Gripper, config: PickupConfig, action: np.ndarray):
     return target_pos, target_quat, jaw_command_to_gap(DELTA_ACTION.get(action, "jaw")[:, 0])
 
 
-def absolute_targets(gripper: Gripper, config: PickupConfig, action: np.ndarray):
-    """Targets for absolute actions [W, 8] (``ABSOLUTE_ACTION``): the flange moves toward the
-    target pose no faster than the configured speeds; the gap is the commanded one."""
+def check_absolute_orientations(action: np.ndarray) -> None:
+    """ValueError where an absolute action's [W, 8] target quaternion is (near) zero (norm < 1e-6)."""
     quat = ABSOLUTE_ACTION.get(action, "orientation")
     norm = np.linalg.norm(quat, axis=1)
     if np.any(norm < 1e-6):
         raise ValueError(f"absolute action quaternion must be non-zero, got {quat[norm < 1e-6][0].tolist()}")
-    target_quat = quat_normalize(quat)
+
+
+def absolute_targets(gripper: Gripper, config: PickupConfig, action: np.ndarray):
+    """Targets for absolute actions [W, 8] (``ABSOLUTE_ACTION``): the flange moves toward the
+    target pose no faster than the configured speeds; the gap is the commanded one."""
+    check_absolute_orientations(action)
+    target_quat = quat_normalize(ABSOLUTE_ACTION.get(action, "orientation"))
     pos, quat = gripper.flange_pose()
     d = ABSOLUTE_ACTION.get(action, "position") - pos
     dist = np.linalg.norm(d, axis=1, keepdims=True)
@@ -97,3 +105,30 @@ def targets(gripper: Gripper, config: PickupConfig, actions: np.ndarray):
     """Flange position [W, 3], orientation [W, 4] and jaw-gap [W] targets for checked actions [W, A]
     of ``config.action_mode``."""
     return DECODERS[config.action_mode](gripper, config, actions)
+
+
+class DeviceActionDecoder:
+    """Decodes checked actions [W, A] of ``config.action_mode`` into the gripper's targets
+    (``Gripper.targets``) on the simulation's device (``action_kernels``: the rules of the numpy
+    decoders above, which stay the reference): one upload of the actions, one kernel launch."""
+
+    def __init__(self, config: PickupConfig, num_worlds: int):
+        self.mode = config.action_mode
+        self.kernel = TARGET_KERNELS[config.action_mode]
+        self.scales = ActionScales()
+        self.scales.linear_speed = float(config.max_linear_speed)
+        self.scales.angular_speed = float(config.max_angular_speed)
+        self.scales.dt = float(config.dt)
+        self.actions = wp.zeros((num_worlds, ACTION_LAYOUTS[config.action_mode].size), dtype=wp.float64,
+                                device=config.device)
+        self._launches = LaunchCache(self.actions.device)
+
+    def decode(self, gripper: Gripper, actions: np.ndarray) -> None:
+        """Write ``gripper.targets`` for checked actions [W, A] (float64, ``check_actions``)."""
+        if self.mode == "absolute":
+            check_absolute_orientations(actions)
+        self.actions.assign(actions)
+        targets = gripper.targets
+        self._launches.launch(id(gripper), self.kernel, len(actions),
+                              [self.actions, gripper.arrays.q, self.scales],
+                              [targets.position, targets.orientation, targets.gap], keep=(gripper,))

@@ -8,7 +8,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from .actions import check_actions, targets
+from .actions import DeviceActionDecoder, check_actions
 from .common import SceneCamera, draw_world, observations, step_infos
 from .config import PickupConfig
 from .replay_spec import ReplaySpec
@@ -173,6 +173,7 @@ class DeformablePickupEnv(gym.Env):
         self._scene_origin: ReplaySpec | None = None  # the reset that built ``scene``
         #: the task's observations, reward and flags on the simulation's device (made at the first reset)
         self.task: PickupTask | None = None
+        self._decoder: DeviceActionDecoder | None = None  # the actions' decoding on the device (the same)
         self._camera = SceneCamera(self.config)
 
     # -- gym API ---------------------------------------------------------------------------
@@ -188,6 +189,7 @@ class DeformablePickupEnv(gym.Env):
             spec = dataclasses.replace(spec, scene_origin=self._scene_origin)
         if self.task is None:
             self.task = PickupTask(self.config, 1)
+            self._decoder = DeviceActionDecoder(self.config, 1)
         self.task.reset(np.ones(1, bool))
         self.task.observe(self.scene)
         if self._viewer is not None:
@@ -200,7 +202,8 @@ class DeformablePickupEnv(gym.Env):
         if self.scene is None:
             raise RuntimeError("call reset() before step()")
         a = check_actions(action, self.action_space.shape, self.action_space.low, self.action_space.high)[None]
-        stats = self.scene.step(*targets(self.scene.gripper, self.config, a))
+        self._decoder.decode(self.scene.gripper, a)  # the targets, on the device
+        stats = self.scene.step_to_gripper_targets()
         self.task.evaluate(self.scene)  # on the device; observations too
         result = self.task.result()
         info = {k: v[0].item() for k, v in step_infos(result, stats).items()}

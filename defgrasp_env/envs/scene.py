@@ -255,8 +255,18 @@ class PickupScene:
         force limit plus it, ``wrist.force_limit``), and the gripper reads the new pad forces
         (``Gripper.sense``). Worlds with ``active == False`` keep their wrist and jaw
         still."""
-        self._readout = None
         self.gripper.begin_step(target_pos, target_quat, target_gap, active)
+        return self._advance_period()
+
+    def step_to_gripper_targets(self, active: np.ndarray | None = None) -> SolveStats:
+        """:meth:`step` toward the targets already in ``gripper.targets`` on the device (written by a
+        kernel: the env's action decoding), with no transfer of them."""
+        self.gripper.begin_step_to_targets(active)
+        return self._advance_period()
+
+    def _advance_period(self) -> SolveStats:
+        """The control period's substeps after the gripper's ``begin_step``."""
+        self._readout = None
         count = self.substeps
         h = self.config.dt / count
         for k in range(count):

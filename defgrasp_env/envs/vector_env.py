@@ -12,7 +12,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .actions import check_actions, targets
+from .actions import DeviceActionDecoder, check_actions
 from .common import SceneCamera, draw_world, observations, step_infos
 from .config import PickupConfig
 from .pickup_env import make_config, render_fps
@@ -136,6 +136,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         self.scene: PickupScene | None = None
         #: the task's observations, reward and flags on the simulation's device (made at the first reset)
         self.task: PickupTask | None = None
+        self._decoder: DeviceActionDecoder | None = None  # the actions' decoding on the device (the same)
         self._needs_reset = np.zeros(num_envs, bool)
         self._origins = [None] * num_envs  # each world's ReplaySpec of the reset that built its object
         self._camera = SceneCamera(self.config)
@@ -172,7 +173,8 @@ class DeformablePickupVectorEnv(VectorEnv):
         a = check_actions(actions, (n,) + self.single_action_space.shape, self.single_action_space.low,
                           self.single_action_space.high)
         resetting = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
-        stats = self.scene.step(*targets(self.scene.gripper, self.config, a), active=~resetting)
+        self._decoder.decode(self.scene.gripper, a)  # the targets, on the device
+        stats = self.scene.step_to_gripper_targets(active=~resetting)
         self.task.evaluate(self.scene, live=~resetting)  # on the device; observations too
         result = self.task.result()  # the one download of the step's outputs
         terminated, truncated, reward = result["terminated"], result["truncated"], result["reward"]
@@ -255,6 +257,7 @@ class DeformablePickupVectorEnv(VectorEnv):
             self.scene.reset_worlds(mask, setups)
         if self.task is None:
             self.task = PickupTask(self.config, self.num_envs, self.max_episode_steps)
+            self._decoder = DeviceActionDecoder(self.config, self.num_envs)
         self.task.reset(mask)
         self.task.observe(self.scene)
         self._needs_reset[mask] = False

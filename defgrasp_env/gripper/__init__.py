@@ -17,7 +17,7 @@ from .driver import (
     update_grip_stiffness,
 )
 from .gripper import (GROUND_CLEARANCE, PAD_BACKING, PAD_BOX_HALF_EXTENTS, START_FLANGE_HEIGHT, Gripper, GripperArrays,
-                      lift_above_ground, pad_box_poses, pad_reach)
+                      GripperTargets, lift_above_ground, pad_box_poses, pad_reach)
 from .linkage import (
     ARC_PHASE,
     ARC_RADIUS,
@@ -39,7 +39,7 @@ from .linkage import (
 
 __all__ = [
     "ARC_PHASE", "ARC_RADIUS", "CLOSING_SPEED_RANGE_MM_S", "CONTACT_FORCE", "GAP_MAX", "GAP_MIN", "GAP_OFFSET",
-    "GRIP_FORCE_RANGE", "GROUND_CLEARANCE", "Gripper", "GripperArrays", "GripperConfig", "lift_above_ground", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS",
+    "GRIP_FORCE_RANGE", "GROUND_CLEARANCE", "Gripper", "GripperArrays", "GripperConfig", "GripperTargets", "lift_above_ground", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS",
     "START_FLANGE_HEIGHT", "GripperDriver", "PAD_HALF_EXTENTS", "PAD_INWARD_NORMALS",
     "PAD_NAMES", "THETA_MAX", "THETA_MIN", "driver_step", "gap_from_theta", "pad_arc_centers",
     "pad_boxes", "pad_centers", "tcp_offset", "theta_from_gap", "update_grip_stiffness",

@@ -31,14 +31,14 @@ import numpy as np
 import warp as wp
 
 from ..sim.launch_cache import LaunchCache
-from ..transforms import quat_rotate, quat_to_matrix
-from ..wrist import clamp_joints, fk_analytic, ik_joints
+from ..transforms import QUAT_NORM_TOL, quat_rotate, quat_to_matrix
+from ..wrist import fk_analytic
 from ..wrist.force_limit import wrist_force
 from . import kernels as gk
 from .driver import GripperConfig, GripperDriver
 from .linkage import GAP_MAX, GAP_MIN, _finite, pad_boxes, pad_centers, theta_from_gap
 
-__all__ = ["GROUND_CLEARANCE", "Gripper", "GripperArrays", "lift_above_ground", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
+__all__ = ["GROUND_CLEARANCE", "Gripper", "GripperArrays", "GripperTargets", "lift_above_ground", "pad_box_poses", "pad_reach", "PAD_BACKING", "PAD_BOX_HALF_EXTENTS", "START_FLANGE_HEIGHT"]
 
 #: Extra thickness (m) of each pad's collision box behind its inner face, so that a fast-closing pad
 #: can never push a node through itself; the inner face stays where the linkage puts it.
@@ -121,6 +121,29 @@ class GripperArrays(NamedTuple):
     pad_force: wp.array  # [W, 2] vec3d: the object's total force on each pad, N
 
 
+class GripperTargets(NamedTuple):
+    """A control period's targets of the W grippers as Warp arrays on the simulation's device
+    (float64, world frame; ``Gripper.targets``)."""
+
+    position: wp.array     # [W] vec3d: flange position, m
+    orientation: wp.array  # [W] vec4d: flange orientation, xyzw (unit; renormalised when read)
+    gap: wp.array          # [W] float64: jaw gap, m (clipped to the stroke by the driver)
+
+
+def _unit_quat(quat, name: str) -> np.ndarray:
+    """``quat`` [..., 4] as float64 after checking it is finite and of unit norm (within
+    ``transforms.QUAT_NORM_TOL``; the kernels renormalise it)."""
+    q = _finite(quat, name)
+    norm = np.linalg.norm(q, axis=-1) if q.ndim and q.shape[-1] == 4 else None
+    if norm is None:
+        raise ValueError(f"{name} must have shape [..., 4], got {q.shape}")
+    bad = np.abs(norm - 1.0) > QUAT_NORM_TOL
+    if np.any(bad):
+        raise ValueError(f"{name} must be a unit quaternion (|norm - 1| <= {QUAT_NORM_TOL}), got norm "
+                         f"{float(norm[bad].flat[0]):.6g}")
+    return q
+
+
 def _read_only(a: np.ndarray) -> np.ndarray:
     view = a.view()
     view.flags.writeable = False
@@ -169,8 +192,11 @@ class Gripper:
         # the control period: start joints, joint motion, jaw target, active worlds
         self._q_start = wp.zeros(n, dtype=gk.vec6d, device=d)
         self._q_move = wp.zeros(n, dtype=gk.vec6d, device=d)
+        self._target_position = wp.zeros(n, dtype=wp.vec3d, device=d)
+        self._target_orientation = wp.array(np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)), dtype=wp.vec4d, device=d)
         self._target_gap = wp.zeros(n, dtype=f64, device=d)
         self._active = wp.zeros(n, dtype=wp.int32, device=d)
+        self._active_host = np.zeros(n, np.int32)  # what ``_active`` holds
         # the running substep: its start and plan, the fraction of it applied, (load, held) at its start
         self._q_before = wp.zeros(n, dtype=gk.vec6d, device=d)
         self._q_plan = wp.zeros(n, dtype=gk.vec6d, device=d)
@@ -236,6 +262,12 @@ class Gripper:
     def arrays(self) -> GripperArrays:
         """The state's Warp arrays (read them in kernels; the gripper's kernels write them)."""
         return GripperArrays(self._q, self._gap, self._tip_force, self._pad_force)
+
+    @property
+    def targets(self) -> GripperTargets:
+        """The control period's targets as Warp arrays on the device (written by :meth:`begin_step`,
+        or by a kernel before :meth:`begin_step_to_targets`)."""
+        return GripperTargets(self._target_position, self._target_orientation, self._target_gap)
 
     @property
     def plan_limits(self) -> wp.array:
@@ -324,17 +356,32 @@ class Gripper:
         enforced; the wrist turns the shortest way round) and the jaw gap ``target_gap`` [W] (m,
         finite; clipped to the stroke by the driver). Worlds with ``active == False`` [W] (default:
         all active) keep wrist and jaw this period."""
+        n = self.num_worlds
         target_gap = _finite(target_gap, "target_gap")
-        if target_gap.shape != (self.num_worlds,):
-            raise ValueError(f"target_gap must have shape [{self.num_worlds}], got {target_gap.shape}")
-        q_start = self.q
-        q_move = clamp_joints(ik_joints(target_pos, target_quat)) - q_start
-        q_move[:, 3:] = (q_move[:, 3:] + np.pi) % (2 * np.pi) - np.pi
-        wp.copy(self._q_start, self._q)
-        self._q_move.assign(q_move)
-        self._target_gap.assign(target_gap)
-        active = np.ones(self.num_worlds, bool) if active is None else np.asarray(active, dtype=bool)
-        self._active.assign(active.astype(np.int32))
+        if target_gap.shape != (n,):
+            raise ValueError(f"target_gap must have shape [{n}], got {target_gap.shape}")
+        target_pos = _finite(target_pos, "target_pos")
+        if target_pos.shape != (n, 3):
+            raise ValueError(f"target_pos must have shape [{n}, 3], got {target_pos.shape}")
+        target_quat = _unit_quat(target_quat, "target_quat")
+        if target_quat.shape != (n, 4):
+            raise ValueError(f"target_quat must have shape [{n}, 4], got {target_quat.shape}")
+        position, orientation, gap = self.targets
+        position.assign(target_pos)
+        orientation.assign(target_quat)
+        gap.assign(target_gap)
+        self.begin_step_to_targets(active)
+
+    def begin_step_to_targets(self, active: np.ndarray | None = None) -> None:
+        """:meth:`begin_step` toward the targets in :attr:`targets` as they are on the device (a
+        kernel wrote them: the env's action decoding), with no transfer but ``active`` [W] bool's
+        (default all; uploaded when it changes)."""
+        active = np.ones(self.num_worlds, np.int32) if active is None else np.asarray(active, dtype=bool).astype(np.int32)
+        if not np.array_equal(active, self._active_host):
+            self._active.assign(active)
+            self._active_host = active
+        position, orientation, _ = self.targets
+        self._launch("begin", gk.begin_period, [self._q, position, orientation], [self._q_start, self._q_move])
 
     def plan_substep(self, k: int, count: int, h: float) -> None:
         """Plan substep ``k`` of ``count`` (length ``h`` s): the jaw driver moves the gap toward

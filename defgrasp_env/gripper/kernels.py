@@ -13,6 +13,7 @@ pitch, yaw)`` as ``vec6d``; pad 0 = left (+x_G), 1 = right.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import warp as wp
@@ -38,6 +39,8 @@ _KNUCKLE_PAD_LATERAL = wp.constant(_F(KNUCKLE_LATERAL + PAD_LATERAL))
 _KNUCKLE_PAD_APPROACH = wp.constant(_F(KNUCKLE_APPROACH + PAD_APPROACH))
 _CONTACT_FORCE = wp.constant(_F(CONTACT_FORCE))
 _MAX_GRIP_STIFFNESS = wp.constant(_F(MAX_GRIP_STIFFNESS))
+_PI = wp.constant(_F(math.pi))
+_TWO_PI = wp.constant(_F(2.0 * math.pi))
 _JOINT_LOWER = wp.constant(vec6d(*(float(v) for v in JOINT_LOWER)))
 _JOINT_UPPER = wp.constant(vec6d(*(float(v) for v in JOINT_UPPER)))
 
@@ -96,6 +99,48 @@ def left_pad_center(gap: wp.float64):
     lateral = _KNUCKLE_PAD_LATERAL + _FINGER_LATERAL * wp.cos(t) - _FINGER_APPROACH * wp.sin(t)
     down = _KNUCKLE_PAD_APPROACH + _FINGER_LATERAL * wp.sin(t) + _FINGER_APPROACH * wp.cos(t)
     return wp.vec3d(lateral, -down, _F(0.0))
+
+
+@wp.func
+def _rot_z(a: wp.float64):
+    c = wp.cos(a)
+    s = wp.sin(a)
+    return wp.mat33d(c, -s, _F(0.0), s, c, _F(0.0), _F(0.0), _F(0.0), _F(1.0))
+
+
+@wp.func
+def _rot_x(a: wp.float64):
+    c = wp.cos(a)
+    s = wp.sin(a)
+    return wp.mat33d(_F(1.0), _F(0.0), _F(0.0), _F(0.0), c, -s, _F(0.0), s, c)
+
+
+@wp.func
+def ik_joints(pos: wp.vec3d, quat: wp.vec4d):
+    """Wrist joints (clamped to the limits) for a flange target at ``pos`` (m) with orientation
+    ``quat`` (xyzw, renormalised): ``wrist.analytic.ik_joints`` for one target (roll and pitch from
+    the flange's y axis, 0 roll at the gimbal lock, the least-squares yaw of the rest)."""
+    R = quat_matrix(quat)
+    r0 = R[0, 1]
+    r1 = R[1, 1]
+    pitch = wp.asin(wp.min(wp.max(R[2, 1], _F(-1.0)), _F(1.0)))
+    roll = _F(0.0)
+    if wp.sqrt(r0 * r0 + r1 * r1) >= _F(1e-9):
+        roll = wp.atan2(-r0, r1)
+    roll = wp.min(wp.max(roll, _JOINT_LOWER[3]), _JOINT_UPPER[3])
+    pitch = wp.min(wp.max(pitch, _JOINT_LOWER[4]), _JOINT_UPPER[4])
+    M = wp.transpose(_rot_z(roll) * _rot_x(pitch)) * R
+    yaw = wp.atan2(M[0, 2] - M[2, 0], M[0, 0] + M[2, 2])
+    return clamp_joints(vec6d(pos[0], pos[1], pos[2], roll, pitch, yaw))
+
+
+@wp.func
+def wrap_angle(a: wp.float64):
+    """``a`` (rad) wrapped to [-pi, pi): ``(a + pi) % (2 pi) - pi`` with numpy's floored remainder."""
+    m = wp.mod(a + _PI, _TWO_PI)
+    if m < _F(0.0):
+        m = m + _TWO_PI
+    return m - _PI
 
 
 @wp.func
@@ -164,6 +209,21 @@ def actuator_load(pad_left: wp.vec3d, pad_right: wp.vec3d, tip_left: wp.float64,
         return _F(0.0)
     wrist = wp.length(pad_left + pad_right)
     return wp.max(wrist / wrist_limit, wp.max(tip_left, tip_right) / (grip_limit + wrist_limit))
+
+
+@wp.kernel
+def begin_period(q: wp.array(dtype=vec6d), target_position: wp.array(dtype=wp.vec3d),
+                 target_orientation: wp.array(dtype=wp.vec4d), q_start: wp.array(dtype=vec6d),
+                 q_move: wp.array(dtype=vec6d)):
+    """World w's control period toward its flange target: the joints at its start and the joint
+    motion to the target's (``ik_joints``), the wrist's angles the shortest way round."""
+    w = wp.tid()
+    qs = q[w]
+    q_start[w] = qs
+    m = ik_joints(target_position[w], target_orientation[w]) - qs
+    for i in range(3, 6):
+        m[i] = wrap_angle(m[i])
+    q_move[w] = m
 
 
 @wp.kernel
