@@ -73,7 +73,8 @@ def test_absolute_decoding_rejects_a_zero_quaternion_before_any_upload():
 def test_begin_period_matches_numpy_ik_and_the_shortest_turn(device):
     """``begin_period``'s joint motion = ``ik_joints(target)`` - q with the angles wrapped to
     [-pi, pi) (the numpy ``begin_step``), for targets within and beyond the limits, pointing down,
-    turned past pi from the start and at the gimbal lock (flange y axis along world z)."""
+    turned past pi from the start and at the gimbal lock (flange y axis along world z; there within
+    asin's conditioning at 1, below)."""
     n = 4000
     rng = np.random.default_rng(11)
     q = _random_joints(rng, n)
@@ -89,7 +90,12 @@ def test_begin_period_matches_numpy_ik_and_the_shortest_turn(device):
     g = _gripper_at(q, device)
     g.begin_step(pos, quat, np.full(n, 0.05))
     got = g._q_move.numpy()
-    np.testing.assert_allclose(got, want, rtol=RTOL, atol=1e-14)
+    lock = np.zeros(n, bool)
+    lock[200:300] = True
+    np.testing.assert_allclose(got[~lock], want[~lock], rtol=RTOL, atol=1e-14)
+    # at the gimbal lock the pitch is asin of an entry within an ulp of 1, where an ulp (1.1e-16)
+    # moves asin by sqrt(2 x 1.1e-16) = 1.5e-8 rad (a GPU's matrix entry may differ by one)
+    np.testing.assert_allclose(got[lock], want[lock], rtol=0, atol=5e-8)
     assert (np.abs(got[:, 3:]) <= np.pi).all() and (got[:200, 5] != 0).any()
 
 
