@@ -20,7 +20,7 @@ import warp as wp
 from defgrasp_env.envs.config import PickupConfig
 from defgrasp_env.envs.task import (GRASP_FORCE, LIFT_SCALE, PIERCE_DEPTH, PLACE_SCALE, REACH_SCALE, REWARD_TERMS,
                                     PickupTask, feature_beyond_pad_faces, grasp_quality, shaped_progress)
-from defgrasp_env.envs.task_kernels import OUTPUT_COLUMNS, column, evaluate_worlds, observe_worlds
+from defgrasp_env.envs.task_kernels import OUTPUT_COLUMNS, RESULT_COLUMNS, column, evaluate_worlds, observe_worlds
 from defgrasp_env.gripper import Gripper, GripperConfig, pad_box_poses
 from defgrasp_env.gripper import kernels as gk
 from defgrasp_env.layout import AGENT_POS, ENV_STATE, NUM_KEYPOINTS
@@ -115,7 +115,13 @@ def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, de
     seen = {name: 0 for name in FLAGS}
     for _ in range(steps):
         q, gap, tip, forces, feature, finite, embedding, penetration, solver_diverged, live = _random_worlds(rng, w, config)
+        # world 0: grasped, one pad's force NaN, the other's inside the cone; world 1: grasped with
+        # a NaN feature point (a diverged world): numpy's quality is NaN there, so neither holds well
+        tip[:2] = 5.0
+        forces[:2, 1] = -quat_to_matrix(fk_analytic(q[:2])[1])[:, :, 0] * 5.0
         forces[0, 0] = np.nan
+        forces[1, 0] = quat_to_matrix(fk_analytic(q[1:2])[1])[:, :, 0] * 5.0
+        feature[1], finite[1] = np.nan, False
         want, held = reference(q, gap, tip, forces, feature, finite, embedding, penetration, solver_diverged, live,
                                held, elapsed, config, task.hold_steps, 5)
         elapsed = want["elapsed"]
@@ -138,7 +144,8 @@ def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, de
             else:
                 np.testing.assert_allclose(got[name], value, rtol=RTOL, atol=ATOL, err_msg=name)
         np.testing.assert_array_equal(task._held.numpy(), held)
-        assert got["grasp_quality"][0] == 0.0  # NaN forces (world 0): no hold quality
+        assert got["grasp_quality"][0] == got["grasp_quality"][1] == 0.0  # NaN inputs: no hold quality
+        assert not np.isnan(got["reward"][1:2]).any() and not got["sim_diverged"][1] ^ bool(live[1])
         seen = {name: seen[name] + int(want[name].sum()) for name in FLAGS}
     # the regimes were all visited: every flag both set and clear, holds of every quality
     assert all(0 < count < steps * w for count in seen.values()), seen
@@ -172,7 +179,9 @@ def test_device_observations_are_the_states_copies():
     # the orientation's float64 may differ from numpy's in the last bit (sin / cos): the rest is exact
     keep = np.r_[0:3, 7:10]
     np.testing.assert_array_equal(obs["agent_pos"][:, keep], want_agent[:, keep].astype(np.float32))
-    assert len(OUTPUT_COLUMNS) == task.outputs.shape[1]
+    assert OUTPUT_COLUMNS[:AGENT_POS.size + ENV_STATE.size] == (*AGENT_POS.names, *ENV_STATE.names)
+    assert len(OUTPUT_COLUMNS) == AGENT_POS.size + ENV_STATE.size + len(RESULT_COLUMNS)
+    assert len(set(RESULT_COLUMNS)) == len(RESULT_COLUMNS)  # (the info's gap and tip forces repeat agent_pos's)
 
 
 def test_vector_env_outputs_follow_the_numpy_rules_along_episodes_with_autoresets():
@@ -257,3 +266,41 @@ def test_torch_outputs_equal_the_numpy_outputs(device):
             np.testing.assert_array_equal(info["grasp_quality"], out_np[4]["grasp_quality"])
         ended |= bool(truncated.all())
     assert ended  # the episodes of 3 steps were truncated (and autoreset on the next step)
+
+
+def test_torch_outputs_with_pixels():
+    """``obs_type="pixels"`` with ``torch_outputs=True``: the pixels as a uint8 tensor on the
+    simulation's device (no state observation to take the device from)."""
+    torch = pytest.importorskip("torch")
+    venv = gym.make_vec("DeformablePickup-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                        obs_type="pixels", torch_outputs=True)
+    obs, _ = venv.reset(seed=0)
+    obs, reward, *_ = venv.step(np.zeros((2, 7), np.float32))
+    cam = venv.unwrapped.config.camera
+    assert set(obs) == {"pixels"} and obs["pixels"].dtype == torch.uint8
+    assert tuple(obs["pixels"].shape) == (2, cam.height, cam.width, 3) and reward.shape == (2,)
+
+
+def test_a_rebuilt_scene_is_freed():
+    """The task's and the action decoder's recorded launches are dropped when the scene they read is
+    replaced (the single env builds a new scene for another object): the old scene's state is freed."""
+    import gc
+    import weakref
+
+    env = gym.make("DeformablePickup-v0", object=("cuboid", "torus"))
+    refs = []
+    for name in ("cuboid", "torus", "cuboid"):
+        env.reset(seed=0, options={"object": name})
+        env.step(np.zeros(7, np.float32))
+        refs.append(weakref.ref(env.unwrapped.scene.state.mean_von_mises))
+    gc.collect()
+    assert refs[0]() is None and refs[1]() is None and refs[2]() is not None
+
+
+def test_max_episode_steps_changed_after_the_first_step_applies():
+    venv = gym.make_vec("DeformablePickup-v0", num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=50)
+    venv.reset(seed=0)
+    venv.step(np.zeros((2, 7), np.float32))
+    venv.unwrapped.max_episode_steps = 2
+    truncated = venv.step(np.zeros((2, 7), np.float32))[3]
+    assert truncated.all()

@@ -122,6 +122,7 @@ class DeviceActionDecoder:
         self.actions = wp.zeros((num_worlds, ACTION_LAYOUTS[config.action_mode].size), dtype=wp.float64,
                                 device=config.device)
         self._launches = LaunchCache(self.actions.device)
+        self._gripper: Gripper | None = None  # the gripper the record is bound to
 
     def decode(self, gripper: Gripper, actions: np.ndarray) -> None:
         """Write ``gripper.targets`` for checked actions [W, A] (float64, ``check_actions``)."""
@@ -129,6 +130,7 @@ class DeviceActionDecoder:
             check_absolute_orientations(actions)
         self.actions.assign(actions)
         targets = gripper.targets
-        self._launches.launch(id(gripper), self.kernel, len(actions),
-                              [self.actions, gripper.arrays.q, self.scales],
-                              [targets.position, targets.orientation, targets.gap], keep=(gripper,))
+        if gripper is not self._gripper:  # a new scene's gripper: no record keeps the old one alive
+            self._launches, self._gripper = LaunchCache(self.actions.device), gripper
+        self._launches.launch("decode", self.kernel, len(actions), [self.actions, gripper.arrays.q, self.scales],
+                              [targets.position, targets.orientation, targets.gap])

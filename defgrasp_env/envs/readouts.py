@@ -40,7 +40,7 @@ class StepReadout:
 class SceneReadouts:
     """Device buffers and recorded launches of the readouts of one model's states.
 
-    Public device arrays (valid after ``compute``, overwritten by the next): ``feature_position``,
+    Public device arrays (valid after ``launch`` or ``compute``, overwritten by the next): ``feature_position``,
     ``feature_velocity`` ([W] vec3d), ``keypoints`` ([W*NUM_KEYPOINTS] vec3), ``finite`` ([W] int32),
     ``pad_embedding`` ([W] float32, m).
 

@@ -119,6 +119,16 @@ def action_space(config: PickupConfig) -> spaces.Box:
     return _box(ACTION_LAYOUTS[config.action_mode])
 
 
+def _step_limit(max_episode_steps: int | None) -> int:
+    """``max_episode_steps`` as the kernels' int32 (None or beyond int32: never)."""
+    limit = np.iinfo(np.int32).max
+    if max_episode_steps is None:
+        return limit
+    if int(max_episode_steps) < 1:
+        raise ValueError(f"max_episode_steps must be >= 1, got {max_episode_steps!r}")
+    return min(int(max_episode_steps), limit)
+
+
 class PickupTask:
     """Observations, reward, success and termination of the worlds of a ``PickupScene``, computed
     on the simulation's device (``task_kernels``: one thread per world) from the gripper's state, the
@@ -145,7 +155,7 @@ class PickupTask:
         p.success_tolerance = float(config.success_tolerance)
         p.friction_cone = float(np.cos(np.arctan(config.pad_friction)))
         p.hold_steps = self.hold_steps
-        p.max_episode_steps = np.iinfo(np.int32).max if max_episode_steps is None else int(max_episode_steps)
+        p.max_episode_steps = _step_limit(max_episode_steps)
         p.grasp_force = GRASP_FORCE
         p.pierce_depth = PIERCE_DEPTH
         p.reach_scale, p.lift_scale, p.place_scale, p.centre_scale = REACH_SCALE, LIFT_SCALE, PLACE_SCALE, CENTRE_SCALE
@@ -158,6 +168,17 @@ class PickupTask:
         self._live_host = np.ones(num_worlds, np.int32)
         self._host: np.ndarray | None = None  # ``outputs`` downloaded since its last change
         self._launches = LaunchCache(d)
+        self._bound: tuple = ()  # the scene arrays the recorded launches are bound to (ids)
+
+    def _records_for(self, *arrays) -> LaunchCache:
+        """The launch records for kernels reading ``arrays`` (arrays the records hold, so their ids
+        stay unique while bound): dropped when the scene's arrays were replaced (a rebuilt scene),
+        so that no record keeps an old scene's arrays alive."""
+        ids = tuple(id(a) for a in arrays)
+        if ids != self._bound:
+            self._launches = LaunchCache(self.device)
+            self._bound = ids
+        return self._launches
 
     @property
     def elapsed(self) -> np.ndarray:
@@ -174,26 +195,31 @@ class PickupTask:
         self._observe(scene, scene.device_readouts())
 
     def _observe(self, scene: PickupScene, r) -> None:
-        g = scene.gripper.arrays
-        self._launches.launch(("observe", id(r), id(g.q)), observe_worlds, self.num_worlds,
-                              [g.q, g.gap, g.tip_force, r.feature_position, r.feature_velocity, r.keypoints,
-                               self.params], [self.outputs], keep=(r, g.q))
+        g, st, report = scene.gripper.arrays, scene.state, scene.solve_report.records
+        self._records_for(r.feature_position, g.q, st.mean_von_mises, report).launch(
+            "observe", observe_worlds, self.num_worlds,
+            [g.q, g.gap, g.tip_force, r.feature_position, r.feature_velocity, r.keypoints, self.params], [self.outputs])
         self._host = None
 
-    def evaluate(self, scene: PickupScene, live: np.ndarray | None = None) -> None:
+    def evaluate(self, scene: PickupScene, live: np.ndarray | None = None,
+                 max_episode_steps: int | None = None) -> None:
         """After a control step: write every column of ``outputs`` (observations and the step's
         result: reward terms, success, divergence, termination, truncation, info readings) and
         advance the worlds' step and goal-hold counters. ``live`` [W] bool (default all): worlds
-        whose step counts; the others (being reset) get no reward and no flags."""
+        whose step counts; the others (being reset) get no reward and no flags.
+        ``max_episode_steps``: the truncation limit from now on (default: unchanged)."""
         r, g, st, report = scene.device_readouts(), scene.gripper.arrays, scene.state, scene.solve_report.records
         live = np.ones(self.num_worlds, np.int32) if live is None else np.asarray(live, dtype=bool).astype(np.int32)
         if not np.array_equal(live, self._live_host):  # uploaded only when it changes
             self._live.assign(live)
             self._live_host = live
-        self._launches.launch(("evaluate", id(r), id(g.q), id(st), id(report)), evaluate_worlds, self.num_worlds,
-                              [g.q, g.gap, g.tip_force, g.pad_force, r.feature_position, r.finite, r.pad_embedding,
-                               report, st.mean_von_mises, self._live, self.params, self._held, self._elapsed],
-                              [self.outputs], keep=(r, g.q, st, report))
+        records = self._records_for(r.feature_position, g.q, st.mean_von_mises, report)
+        if max_episode_steps is not None and _step_limit(max_episode_steps) != self.params.max_episode_steps:
+            self.params.max_episode_steps = _step_limit(max_episode_steps)
+            records = self._launches = LaunchCache(self.device)  # the records bake the parameters in
+        records.launch("evaluate", evaluate_worlds, self.num_worlds,
+                       [g.q, g.gap, g.tip_force, g.pad_force, r.feature_position, r.finite, r.pad_embedding,
+                        report, st.mean_von_mises, self._live, self.params, self._held, self._elapsed], [self.outputs])
         self._observe(scene, r)
 
     def download(self) -> np.ndarray:
@@ -228,6 +254,7 @@ class PickupTask:
         import torch
 
         wp.synchronize_device(self.device)  # ``outputs`` written (Warp's stream) before torch reads it
+        # (two whole-device synchronisations: ~10 us each, against a step's milliseconds)
         t = wp.to_torch(self.outputs)
         values = {name: t[:, sl].to(torch.float32) for name, sl in self._observation_columns()}
         for name in names:

@@ -2,7 +2,8 @@
 episode bookkeeping of every world, one thread per world, float64, on the simulation's device.
 
 A control step's outputs are one packed row per world (``OUTPUT_COLUMNS``, float64): the
-observation vectors (``AGENT_POS`` then ``ENV_STATE``, float32 values widened exactly) and the
+observation vectors (``AGENT_POS`` then ``ENV_STATE``: the float64 state and the float32
+keypoints, rounded to float32 when read as observations) and the
 step's result (reward, its terms, flags, the info readings), written by ``observe_worlds`` and
 ``evaluate_worlds`` from the gripper's state, the scene's readouts and the solver's report, all
 device arrays: the host downloads the row block once per step (numpy users) or reads it as a torch
@@ -73,7 +74,7 @@ class TaskParams:
     goal: wp.vec3d                 # m, world
     success_tolerance: wp.float64  # m
     friction_cone: wp.float64      # cos(atan(pad_friction)): 1 for frictionless pads
-    hold_steps: wp.int32           # control steps at the goal that make a success (>= 1)
+    hold_steps: wp.int32           # control steps at the goal that make a success (0 counts as 1)
     max_episode_steps: wp.int32    # truncation after this many steps
     grasp_force: wp.float64        # N, both tip forces above it: grasped
     pierce_depth: wp.float32       # m, compared with the float32 readings as numpy compares them
@@ -181,7 +182,8 @@ def evaluate_worlds(q: wp.array(dtype=gk.vec6d), gap: wp.array(dtype=wp.float64)
     beyond = wp.max(beyond_width(fp, c0, R), beyond_width(fp, c1, R))
     quality = margin * shaped_progress(beyond, params.centre_scale)
     held_well = _F(0.0)
-    if grasped and wp.isfinite(quality):
+    # numpy's max / clip carry a NaN into the quality where Warp's min / max drop it: check the inputs
+    if grasped and wp.isfinite(quality) and wp.isfinite(f0) and wp.isfinite(f1) and wp.isfinite(fp):
         held_well = quality
     embedding = pad_embedding[w]
     pierced = rec.penetration > params.pierce_depth or embedding > params.pierce_depth

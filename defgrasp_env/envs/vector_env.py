@@ -8,6 +8,7 @@ from typing import Any
 import dataclasses
 
 import numpy as np
+import warp as wp
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -86,11 +87,12 @@ class DeformablePickupVectorEnv(VectorEnv):
     Every world (re)set by ``reset`` or by an autoreset in ``step`` gets a ``ReplaySpec`` in
     ``info["replay_spec"]`` (object array [N], mask ``info["_replay_spec"]``): the seed or RNG state,
     options, object, material and pose with which a single env repeats that world's episode start.
-    ``torch_outputs=True`` returns observations (float32), reward (float32 [N]), terminated and
-    truncated (bool [N]) as torch tensors on the simulation's device, made there from the task's
-    device outputs (``PickupTask``: observations, reward and flags are computed by Warp kernels on
-    that device; no host round trip); ``info`` stays numpy (one download of the step's outputs a
-    step, which the resets need anyway). ``step`` also takes the actions as a torch tensor.
+    ``torch_outputs=True`` returns observations (float32; pixels uint8), reward (float32 [N]),
+    terminated and truncated (bool [N]) as torch tensors on the simulation's device, made there
+    from the task's device outputs (``PickupTask``: observations, reward and flags are computed by
+    Warp kernels on that device, not uploaded from the host; pixels are rendered on the host);
+    ``info`` stays numpy (one download of the step's outputs a step, which the resets need anyway).
+    ``step`` also takes the actions as a torch tensor (copied to the host and uploaded once).
     ``full_state_torch()`` gives the complete FEM state as zero-copy torch views of the simulation's
     own arrays (on the GPU when ``device="cuda:0"``): node positions/velocities/forces [N, 3] and
     von Mises stress [T] of all worlds, with ``model.node_start`` / ``model.tet_start`` offsets.
@@ -175,7 +177,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         resetting = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
         self._decoder.decode(self.scene.gripper, a)  # the targets, on the device
         stats = self.scene.step_to_gripper_targets(active=~resetting)
-        self.task.evaluate(self.scene, live=~resetting)  # on the device; observations too
+        self.task.evaluate(self.scene, live=~resetting, max_episode_steps=self.max_episode_steps)  # on the device
         result = self.task.result()  # the one download of the step's outputs
         terminated, truncated, reward = result["terminated"], result["truncated"], result["reward"]
         if self.torch_outputs:
@@ -217,8 +219,6 @@ class DeformablePickupVectorEnv(VectorEnv):
         the next ``step``/``reset`` writes into them; copy what must be kept."""
         if self.scene is None:
             raise RuntimeError("call reset() before full_state_torch()")
-        import warp as wp
-
         st = self.scene.state
         return {name: wp.to_torch(getattr(st, name)) for name in (
             "positions", "velocities", "elastic_force", "contact_force", "von_mises", "mean_von_mises",
@@ -278,7 +278,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         if pixels is not None:
             import torch
 
-            obs["pixels"] = torch.from_numpy(pixels).to(obs["agent_pos"].device)
+            obs["pixels"] = torch.from_numpy(pixels).to(wp.device_to_torch(self.task.device))
         return obs
 
     def _render_world(self, w: int) -> np.ndarray:

@@ -388,7 +388,9 @@ class Gripper:
         the period's target (speed and force limits, ``gripper.driver``) on the forces of the last
         :meth:`sense` and the wrist is to move ``(k + 1) / count`` of the way. Inactive worlds keep
         wrist and jaw. Nothing moves until :meth:`move`. Also finds, per world, the actuator load
-        at the substep start and whether the world stays held at its limit (:meth:`held_at_limit`)."""
+        at the substep start and whether the world stays held at its limit (:meth:`held_at_limit`),
+        and sets the fraction of the plan a first try applies (:meth:`move_as_planned`: 0 where
+        held, 1 elsewhere; a :meth:`move` with a fraction replaces it)."""
         config = self.driver.config
         key = ("plan", k, count, h, config.closing_speed, config.grip_force_limit, self.wrist_force_limit,
                HOLD_COSINE)  # every scalar argument: a record replays the values it was made with
@@ -433,7 +435,8 @@ class Gripper:
     def move_as_planned(self) -> None:
         """:meth:`move` with the force limit's first try, set on the device by :meth:`plan_substep`
         (no transfer): fraction 0 in the worlds held at their limit (:meth:`held_at_limit`), 1
-        (the whole planned motion) elsewhere."""
+        (the whole planned motion) elsewhere. Call it after :meth:`plan_substep` and before any
+        :meth:`move` with a fraction in that substep (which overwrites the fraction)."""
         self._move_by_fraction()
 
     def _move_by_fraction(self) -> None:
