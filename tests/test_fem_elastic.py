@@ -153,3 +153,43 @@ def test_fixed_axes_prescribe_positions_exactly():
     positions = mesh.nodes * 1.1
     force, vm = evaluate_at(mesh, MATERIAL, positions)
     assert np.all(np.isfinite(force)) and np.all(vm > 0)
+
+
+@pytest.mark.parametrize("deformation", list(DEFORMATIONS))
+def test_newton_pass_sums_the_strain_energy_of_the_line_search(deformation):
+    """``evaluate_tets(add_energy=1)`` (the substep's first Newton pass, which also sums the line
+    search's start energy) against ``tet_energy`` (the line search's own energy pass) and the
+    analytic energy of a homogeneous deformation, V (mu |A - R|^2 + lam / 2 (J - 1)^2): equal to
+    float32 rounding (per-tet terms in float32, summed in float64: 1e-5 relative to the analytic
+    value at strains >= 0.05, 1e-6 between the two kernels, which share F and differ only in
+    the polar rotation's last iterate)."""
+    import warp as wp
+
+    from defgrasp_env.sim.kernels import elastic as ke
+    from defgrasp_env.sim.kernels import energy as kenergy
+
+    mesh = patch_meshes()["jittered_box"]
+    model = build_model([mesh], [MATERIAL], device="cpu")
+    a = DEFORMATIONS[deformation]
+    x = wp.array((mesh.nodes @ a.T).astype(np.float32), dtype=wp.vec3, device="cpu")
+    t, n = model.num_tets, model.num_nodes
+    rotation_in = wp.zeros(t, dtype=wp.quat, device="cpu")
+    wp.launch(ke.seed_rotations, dim=t, inputs=[x, model.tets, model.tet_rest_inv, rotation_in], device="cpu")
+    rotation_out = wp.clone(rotation_in)
+    active = wp.ones(1, dtype=int, device="cpu")
+    summed, alone = wp.zeros(1, dtype=wp.float64, device="cpu"), wp.zeros(1, dtype=wp.float64, device="cpu")
+    z = lambda dtype, size: wp.zeros(size, dtype=dtype, device="cpu")  # noqa: E731
+    wp.launch(ke.evaluate_tets, dim=t, inputs=[x, model.tets, model.tet_rest_inv, model.tet_rest_volume, model.tet_mu,
+                                               model.tet_lambda, model.tet_world, active, rotation_out, z(wp.vec3, n),
+                                               z(wp.mat33, n), z(wp.vec3, n), z(wp.mat33, t), z(float, t),
+                                               z(wp.mat33, t), z(float, t), 0, 1, summed], device="cpu")
+    wp.launch(kenergy.tet_energy, dim=t, inputs=[x, model.tets, model.tet_rest_inv, model.tet_rest_volume, model.tet_mu,
+                                                 model.tet_lambda, model.tet_world, active, rotation_in, alone],
+              device="cpu")
+    mu, lam = MATERIAL.lame
+    u, _, vt = np.linalg.svd(a)
+    j = np.linalg.det(a)
+    want = model.tet_rest_volume.numpy().astype(np.float64).sum() * (
+        mu * np.sum((a - u @ vt) ** 2) + 0.5 * lam * (j - 1.0) ** 2)
+    assert summed.numpy()[0] == pytest.approx(want, rel=1e-5)
+    assert summed.numpy()[0] == pytest.approx(alone.numpy()[0], rel=1e-6)

@@ -311,7 +311,7 @@ class ImplicitSolver:
         self.loops.extra_iterations(run.depth, lambda: self._newton_iteration(run, first=False), patient_iterations)
 
     def _newton_iteration(self, run: SubstepLaunches, first: bool) -> None:
-        for cmd in run.evaluate:
+        for cmd in run.evaluate_first if first else run.evaluate:
             cmd.launch()
         self._run_cg(run)
         for cmd in run.coarse_post:
@@ -342,13 +342,13 @@ class ImplicitSolver:
 
     def _line_search(self, run: SubstepLaunches, first: bool) -> None:
         """Per world, halve the Newton step until the incremental potential does not increase.
-        The start energy is evaluated at the first Newton iteration of a substep; later ones start
-        from the energy of the step accepted last (kept by ``end_line_search_trial``)."""
+        The start energy is evaluated at the first Newton iteration of a substep (its tets' part by
+        that iteration's evaluation, which computes their F and R anyway); later ones start from the
+        energy of the step accepted last (kept by ``end_line_search_trial``)."""
         cfg = self.config
         if cfg.line_search_steps == 0:
             return
-        if first:
-            self.scratch.energy0.zero_()
+        if first:  # the tets' part was summed by the first evaluation (cleared there)
             for cmd in run.energy0:
                 cmd.launch()
         run.begin_search.launch()

@@ -71,6 +71,7 @@ class SubstepLaunches:
     begin: list         # [substeps] launches: substep start, initial guess (prescribed axes at (k+1)/K)
     lag: list
     evaluate: list
+    evaluate_first: list  # the substep's first evaluation: also the tets' part of ``energy0``
     cg: list
     cg_listed: list     # the same CG iterations over the listed worlds' rows (WorldCompaction; [] if unused)
     list_cg_worlds: list  # list the worlds still iterating CG (WorldCompaction.record_list; [] if unused)
@@ -170,16 +171,18 @@ def _keep_edge_depth(c: _Context, x) -> list:
                   m.free_axes, s.lag_normal_force, m.pads_per_world, e.push, e.push_normal, x)]
 
 
-def _tets(c: _Context, x, active, energy=None, outputs: int = 0):
-    """Elastic terms of every tet at ``x`` for a Newton iteration, or (``outputs`` = 1) for the
-    outputs pass (``kernels/elastic.py``), or their energy."""
+def _tets(c: _Context, x, active, energy=None, outputs: int = 0, add_energy=None):
+    """Elastic terms of every tet at ``x`` for a Newton iteration (``add_energy``: also summing
+    their energy into that per-world array), or (``outputs`` = 1) for the outputs pass
+    (``kernels/elastic.py``), or their energy alone (``energy``)."""
     m, s, work = c.model, c.scratch, c.work
     if energy is not None:
         return c.rec(kenergy.tet_energy, m.num_tets, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
                      m.tet_lambda, m.tet_world, active, s.tet_rotation, energy)
     return c.rec(ke.evaluate_tets, m.num_tets, x, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda,
                  m.tet_world, active, s.tet_rotation, s.residual, s.diag_block, work.elastic_force, s.cofactor,
-                 work.von_mises, s.tet_r, s.tet_twist, outputs)
+                 work.von_mises, s.tet_r, s.tet_twist, outputs, int(add_energy is not None),
+                 s.energy0 if add_energy is None else add_energy)
 
 
 def _begin_solve(c: _Context, active):
@@ -253,9 +256,14 @@ def _lag(c: _Context) -> list:
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
 
 
-def _evaluate(c: _Context, config) -> list:
+def _evaluate(c: _Context, config, start_energy: bool = False) -> list:
+    """A Newton iteration's evaluation; ``start_energy``: the substep's first, which also sums the
+    tets' part of the line search's start energy (``energy0``, cleared here; the nodes' part
+    follows in ``energy0``'s launches)."""
     s, x = c.scratch, c.work.positions
-    return [*_nodes(c, x, s.newton_active, 0), _tets(c, x, s.newton_active), _begin_solve(c, s.newton_active),
+    clear = [c.rec(kls.clear_world_energy, c.model.num_worlds, s.energy0)] if start_energy else []
+    return [*clear, *_nodes(c, x, s.newton_active, 0),
+            _tets(c, x, s.newton_active, add_energy=s.energy0 if start_energy else None), _begin_solve(c, s.newton_active),
             *_coarse_before(c, s.newton_active),
             c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.substep_newton_it, s.patient, s.last_dx,
                   config.newton_tolerance, config.cg_tolerance, config.cg_tolerance_far, s.rz, s.rz_stop,
@@ -336,11 +344,12 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
 
     return SubstepLaunches(
         pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c, config)),
+        evaluate_first=seq(_evaluate(c, config, start_energy=config.line_search_steps > 0)),
         cg=seq(_cg(c, config) * block),
         cg_listed=seq(_cg(c, config, listed=True) * block) if listed_cg else [],
         list_cg_worlds=seq(compaction.record_list(scratch.cg_active)) if listed_cg else [],
         coarse_post=seq(_coarse_after(c, s.newton_active)),
-        energy0=seq([*_nodes(c, x, s.newton_active, 0, s.energy0), _tets(c, x, s.newton_active, s.energy0)]),
+        energy0=seq(_nodes(c, x, s.newton_active, 0, s.energy0)),  # the tets' part: ``evaluate_first``
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
         trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=_depth(c),

@@ -159,13 +159,17 @@ def evaluate_tets(
     tet_r: wp.array(dtype=wp.mat33),
     tet_twist: wp.array(dtype=float),
     outputs: int,
+    add_energy: int,
+    energy: wp.array(dtype=wp.float64),
 ):
     """Add each tet's elastic force to ``residual`` and store the polar rotation of F (the next warm
     start); then, in a Newton iteration (``outputs`` = 0), add its Hessian diagonal blocks to
     ``diag_block`` and store cof(F), R as a matrix and the twist factor for the Hessian products,
     or, in the outputs pass after a solve (``outputs`` = 1), add the force to ``elastic_force`` and
     store the von Mises stress: each pass writes only what is read after it (the same values as
-    both passes writing everything)."""
+    both passes writing everything). ``add_energy`` = 1: also add V0 psi(F) (``energy.tet_energy``'s
+    term, with the rotation just found) to ``energy[world]`` (the line search's start energy, from
+    the F and R this pass computes anyway)."""
     t = wp.tid()
     if world_active[tet_world[t]] == 0:
         return
@@ -180,6 +184,10 @@ def evaluate_tets(
     p = first_piola(f, cof, r, mu, lam)
     v0 = rest_volume[t]
     tet_rotation[t] = q
+    if add_energy != 0:
+        d = f - r
+        j = wp.determinant(f)
+        wp.atomic_add(energy, tet_world[t], wp.float64(v0 * (mu * wp.ddot(d, d) + 0.5 * lam * (j - 1.0) * (j - 1.0))))
     if outputs == 0:
         tet_cof[t] = cof
         tet_r[t] = r

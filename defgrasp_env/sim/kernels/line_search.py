@@ -17,6 +17,12 @@ def trial_positions(
 
 
 @wp.kernel
+def clear_world_energy(energy: wp.array(dtype=wp.float64)):
+    """``energy[w] = 0`` (a per-world sum about to be accumulated)."""
+    energy[wp.tid()] = wp.float64(0.0)
+
+
+@wp.kernel
 def begin_line_search(
     newton_active: wp.array(dtype=int),
     step_length: wp.array(dtype=float),
