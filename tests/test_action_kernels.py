@@ -8,12 +8,10 @@ compiled sin / cos / atan2 may differ from numpy's in the last bit)."""
 
 import numpy as np
 import pytest
-import warp as wp
 
 from defgrasp_env.envs.actions import DECODERS, DeviceActionDecoder, check_actions
 from defgrasp_env.envs.config import PickupConfig
 from defgrasp_env.gripper import Gripper, GripperConfig
-from defgrasp_env.gripper import kernels as gk
 from defgrasp_env.layout import ACTION_LAYOUTS
 from defgrasp_env.transforms import axis_angle_to_quat, quat_multiply
 from defgrasp_env.wrist import ik_joints
