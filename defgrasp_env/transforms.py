@@ -27,6 +27,7 @@ __all__ = [
     "xyzw_to_wxyz",
     "wxyz_to_xyzw",
     "quat_normalize",
+    "unit_quat",
     "quat_conjugate",
     "quat_multiply",
     "quat_rotate",
@@ -67,8 +68,9 @@ def _as_array(x, last: tuple[int, ...], name: str) -> np.ndarray:
     return a
 
 
-def _unit_quat(q, name: str = "quat") -> np.ndarray:
-    """Validate a quaternion array ``[..., 4]`` and return it renormalised (float64)."""
+def unit_quat(q, name: str = "quat") -> np.ndarray:
+    """Validate a quaternion array ``[..., 4]`` (finite, |norm - 1| <= ``QUAT_NORM_TOL``; ValueError
+    naming ``name`` otherwise) and return it renormalised (float64)."""
     a = _as_array(q, (4,), name)
     norm = np.linalg.norm(a, axis=-1, keepdims=True)
     bad = np.abs(norm - 1.0) > QUAT_NORM_TOL
@@ -130,7 +132,7 @@ def quat_normalize(q) -> np.ndarray:
 
 def quat_conjugate(q) -> np.ndarray:
     """Inverse rotation of unit ``q [..., 4]`` (x, y, z, w): ``(-x, -y, -z, w)``."""
-    a = _unit_quat(q)
+    a = unit_quat(q)
     return np.concatenate([-a[..., :3], a[..., 3:]], axis=-1)
 
 
@@ -154,7 +156,7 @@ def quat_multiply(a, b) -> np.ndarray:
     ``quat_to_matrix(a * b) == quat_to_matrix(a) @ quat_to_matrix(b)`` (apply b first, then a).
     The result is canonical (``w >= 0``).
     """
-    return _canonical(_mul(_unit_quat(a, "a"), _unit_quat(b, "b")))
+    return _canonical(_mul(unit_quat(a, "a"), unit_quat(b, "b")))
 
 
 def quat_rotate(q, v) -> np.ndarray:
@@ -169,7 +171,7 @@ def quat_rotate(q, v) -> np.ndarray:
 
 def quat_to_matrix(q) -> np.ndarray:
     """Unit quaternion ``[..., 4]`` (x, y, z, w) -> rotation matrix ``[..., 3, 3]``."""
-    x, y, z, w = np.moveaxis(_unit_quat(q), -1, 0)
+    x, y, z, w = np.moveaxis(unit_quat(q), -1, 0)
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
@@ -266,7 +268,7 @@ def axis_angle_to_quat(axis_angle) -> np.ndarray:
 
 def quat_to_axis_angle(q) -> np.ndarray:
     """Unit quaternion ``[..., 4]`` (x, y, z, w) -> rotation vector ``[..., 3]``, angle in [0, pi] rad."""
-    a = _canonical(_unit_quat(q))
+    a = _canonical(unit_quat(q))
     xyz, w = a[..., :3], a[..., 3:]
     s = np.linalg.norm(xyz, axis=-1, keepdims=True)
     angle = 2.0 * np.arctan2(s, w)
@@ -277,7 +279,7 @@ def quat_to_axis_angle(q) -> np.ndarray:
 
 def quat_angle_between(a, b) -> np.ndarray:
     """Geodesic angle ``[...]`` (rad, in [0, pi]) between unit quaternions ``a``, ``b`` [..., 4]."""
-    qa, qb = _unit_quat(a, "a"), _unit_quat(b, "b")
+    qa, qb = unit_quat(a, "a"), unit_quat(b, "b")
     # q and -q are the same rotation: align the hemispheres first
     qb = np.where(np.sum(qa * qb, axis=-1, keepdims=True) < 0.0, -qb, qb)
     # a.b = cos(angle/2) and |a -+ b| = 2 sin/cos(angle/4): 4*atan2 is accurate near 0, acos is not

@@ -214,8 +214,9 @@ class PickupTask:
             self._live.assign(live)
             self._live_host = live
         records = self._records_for(r.feature_position, g.q, st.mean_von_mises, report)
-        if max_episode_steps is not None and _step_limit(max_episode_steps) != self.params.max_episode_steps:
-            self.params.max_episode_steps = _step_limit(max_episode_steps)
+        limit = self.params.max_episode_steps if max_episode_steps is None else _step_limit(max_episode_steps)
+        if limit != self.params.max_episode_steps:
+            self.params.max_episode_steps = limit
             records = self._launches = LaunchCache(self.device)  # the records bake the parameters in
         records.launch("evaluate", evaluate_worlds, self.num_worlds,
                        [g.q, g.gap, g.tip_force, g.pad_force, r.feature_position, r.finite, r.pad_embedding,

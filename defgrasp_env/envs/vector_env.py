@@ -22,6 +22,10 @@ from .seeds import world_seeds
 from .task import PickupTask, action_space, observation_spaces
 
 
+#: The step result columns ``torch_outputs`` returns as tensors (with the observations).
+_STEP_RESULT = ("reward", "terminated", "truncated")
+
+
 def check_world_objects(world_objects: Sequence[str] | None, num_envs: int,
                         allowed: tuple[str, ...]) -> tuple[str, ...] | None:
     """``world_objects`` as a tuple after checking it: None, or ``num_envs`` names each in
@@ -180,8 +184,6 @@ class DeformablePickupVectorEnv(VectorEnv):
         self.task.evaluate(self.scene, live=~resetting, max_episode_steps=self.max_episode_steps)  # on the device
         result = self.task.result()  # the one download of the step's outputs
         terminated, truncated, reward = result["terminated"], result["truncated"], result["reward"]
-        if self.torch_outputs:
-            torch_result = self.task.torch_outputs(("reward", "terminated", "truncated"))
         info = step_infos(result, stats)
         live = ~resetting
         info = {**info, **{f"_{k}": live.copy() for k in list(info)}}
@@ -190,7 +192,9 @@ class DeformablePickupVectorEnv(VectorEnv):
             # after the step: the worlds' frozen-gripper step is discarded, and their first
             # observation is the state the reset sets, as a single env's reset returns it
             info.update(self._reset_worlds(resetting))
-        obs = self._obs()
+        obs = self._obs(_STEP_RESULT)  # a reset rewrites the observation columns only
+        if self.torch_outputs:
+            reward, terminated, truncated = (obs.pop(name) for name in _STEP_RESULT)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self._needs_reset = done
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
@@ -202,8 +206,6 @@ class DeformablePickupVectorEnv(VectorEnv):
             obs = self._obs()
         if self._viewer is not None:
             self.render()
-        if self.torch_outputs:
-            reward, terminated, truncated = (torch_result[k] for k in ("reward", "terminated", "truncated"))
         return obs, reward, terminated, truncated, info
 
     def render(self):
@@ -268,13 +270,15 @@ class DeformablePickupVectorEnv(VectorEnv):
         return {"replay_spec": specs, "_replay_spec": reset.copy(), "object": objects, "_object": reset.copy(),
                 "youngs_modulus": moduli, "_youngs_modulus": reset.copy()}
 
-    def _obs(self):
+    def _obs(self, result_names: tuple[str, ...] = ()):
+        """The observation dict; with ``torch_outputs`` also the step result columns
+        ``result_names`` as tensors (``PickupTask.torch_outputs``: one conversion a step)."""
         pixels = None
         if "pixels" in self.single_observation_space.spaces:
             pixels = np.stack([self._render_world(w) for w in range(self.num_envs)])
         if not self.torch_outputs:
             return observations(self.task, pixels)
-        obs = self.task.torch_outputs()
+        obs = self.task.torch_outputs(result_names)
         if pixels is not None:
             import torch
 

@@ -31,7 +31,7 @@ import numpy as np
 import warp as wp
 
 from ..sim.launch_cache import LaunchCache
-from ..transforms import QUAT_NORM_TOL, quat_rotate, quat_to_matrix
+from ..transforms import quat_rotate, quat_to_matrix, unit_quat
 from ..wrist import fk_analytic
 from ..wrist.force_limit import wrist_force
 from . import kernels as gk
@@ -128,20 +128,6 @@ class GripperTargets(NamedTuple):
     position: wp.array     # [W] vec3d: flange position, m
     orientation: wp.array  # [W] vec4d: flange orientation, xyzw (unit; renormalised when read)
     gap: wp.array          # [W] float64: jaw gap, m (clipped to the stroke by the driver)
-
-
-def _unit_quat(quat, name: str) -> np.ndarray:
-    """``quat`` [..., 4] as float64 after checking it is finite and of unit norm (within
-    ``transforms.QUAT_NORM_TOL``; the kernels renormalise it)."""
-    q = _finite(quat, name)
-    norm = np.linalg.norm(q, axis=-1) if q.ndim and q.shape[-1] == 4 else None
-    if norm is None:
-        raise ValueError(f"{name} must have shape [..., 4], got {q.shape}")
-    bad = np.abs(norm - 1.0) > QUAT_NORM_TOL
-    if np.any(bad):
-        raise ValueError(f"{name} must be a unit quaternion (|norm - 1| <= {QUAT_NORM_TOL}), got norm "
-                         f"{float(norm[bad].flat[0]):.6g}")
-    return q
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:
@@ -363,7 +349,8 @@ class Gripper:
         target_pos = _finite(target_pos, "target_pos")
         if target_pos.shape != (n, 3):
             raise ValueError(f"target_pos must have shape [{n}, 3], got {target_pos.shape}")
-        target_quat = _unit_quat(target_quat, "target_quat")
+        unit_quat(target_quat, "target_quat")  # checked; the kernels renormalise it
+        target_quat = np.asarray(target_quat, dtype=np.float64)
         if target_quat.shape != (n, 4):
             raise ValueError(f"target_quat must have shape [{n}, 4], got {target_quat.shape}")
         position, orientation, gap = self.targets
