@@ -113,6 +113,7 @@ class SubstepMonitor:
         self.substeps, self.tip, self.wrist = 0, 0.0, 0.0
         self._pending, self._start = None, None
         solver = scene.solver
+        scene.period_graphs = False  # every solve through ``advance``, from the host (none inside a period's graph)
         advance = solver.advance
         half = PAD_BOX_HALF_EXTENTS
 

@@ -24,9 +24,13 @@ for the device, "auto" in the table), a row each side by side.
 ``--edge-contact on|off|both``: pad edge contact (``PickupConfig.edge_contact``, on by default;
 both: a row each, side by side). ``--split``: also time the solver's share of each step: every
 ``ImplicitSolver.advance`` is bracketed by ``wp.synchronize_device`` (one more synchronisation per
-solve, so the step itself is then slightly slower) and the row gives the median ms per step inside
+solve, so the step itself is then slightly slower; and the scene steps substep by substep from the
+host, ``PickupScene.period_graphs`` off: a solve inside a control period's graph cannot be timed on
+its own) and the row gives the median ms per step inside
 the solver and outside it (the policy's actions where ``expert`` or ``press`` computes them, the
-gripper, force limits, readouts, observations, reward: the host side and its transfers).
+gripper, force limits, readouts, observations, reward: the host side and its transfers). The last
+column: the share of the timed substeps that ran inside a control period's graph (the others ran
+substep by substep: from a first try over an actuator limit on, ``PickupScene``).
 Printed per row: median, mean (what a learner waits for on average, slow steps included) and p95 ms
 per step, world-steps/s (W / median), the physics substeps per
 control step, the deepest solver-reported penetration (mm) and largest wrist force (N) over the timed
@@ -138,6 +142,8 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
     times, solver_times, depth, wrist, successes, newton, cg = [], [], 0.0, 0.0, 0, [], []
     rotation = DELTA_ACTION.slice("angular_velocity")
     scene = env.unwrapped.scene
+    if clock is not None:  # a solve inside a control period's graph could not be timed on its own
+        scene.period_graphs = False
     for k in range(warmup + steps):
         wp.synchronize_device(device)
         t0 = time.perf_counter()
@@ -151,7 +157,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
                 action = np.clip(action + rng.normal(0.0, noise, action.shape), -1.0, 1.0).astype(np.float32)
                 action[:, rotation] = 0.0
         if k == warmup:
-            solves_before = scene.world_solves
+            solves_before, graphed_before = scene.world_solves, scene.device_substeps
         if clock is not None:
             clock.seconds = 0.0
         obs, _, terminated, _, info = env.step(action)
@@ -166,6 +172,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
             cg.append(info["cg_iterations"])
     substeps = scene.substeps
     solves = (scene.world_solves - solves_before) / (worlds * substeps * steps)
+    graphed = (scene.device_substeps - graphed_before) / (substeps * steps)
     env.close()
     t, solver_t, newton, cg = np.array(times), np.array(solver_times), np.array(newton), np.array(cg)
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
@@ -174,7 +181,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "solver_ms": 1e3 * float(np.median(solver_t)), "outside_ms": 1e3 * float(np.median(t - solver_t)),
             "substeps": substeps, "depth_mm": 1e3 * depth, "wrist_N": wrist, "successes": successes,
-            "solves": solves, "newton": (float(np.median(newton.max(axis=1))), float(newton.mean())),
+            "solves": solves, "graphed": graphed, "newton": (float(np.median(newton.max(axis=1))), float(newton.mean())),
             "cg": (float(np.median(cg.max(axis=1))), float(cg.mean()))}
 
 
@@ -185,15 +192,16 @@ def _ms(value: float) -> str:
 def table(rows: list[dict]) -> str:
     lines = ["| W | actions | step graphs | edge contact | CG listed at <= worlds | object | E (Pa) | substeps | median ms | mean ms | p95 ms | "
              "world-steps/s | deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / "
-             "mean | CG / step, slowest / mean | episodes won | solver ms (median) | outside the solver ms (median) |",
-             "|---" * 20 + "|"]
+             "mean | CG / step, slowest / mean | episodes won | solver ms (median) | outside the solver ms (median) | "
+             "substeps in period graphs |",
+             "|---" * 21 + "|"]
     for r in rows:
         won = r["successes"] if r["policy"].startswith("expert") else "-"
         lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['listed']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
                      f"{r['median_ms']:.1f} | {r['mean_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
                      f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['solves']:.3f} | {r['newton'][0]:.0f} / "
                      f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} | {_ms(r['solver_ms'])} | "
-                     f"{_ms(r['outside_ms'])} |")
+                     f"{_ms(r['outside_ms'])} | {r['graphed']:.0%} |")
     return "\n".join(lines)
 
 

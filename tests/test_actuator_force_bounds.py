@@ -139,6 +139,7 @@ def test_force_limit_retries_keep_vector_worlds_equal_to_single_envs():
         obs, _ = env.reset(seed=i_seed)
         if spy is not None:
             scene = env.unwrapped.scene
+            scene.period_graphs = False  # every solve through ``advance`` (the single env's periods run as graphs)
             advance = scene.solver.advance
 
             def counted(state_in, state_out, control, dt, patient=None, worlds=None):

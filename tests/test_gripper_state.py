@@ -117,6 +117,7 @@ def test_scene_owns_the_substeps():
     calls = []
     advance = scene.solver.advance
     scene.solver.advance = lambda *a, **k: calls.append(a[3]) or advance(*a, **k)  # a[3]: dt
+    scene.period_graphs = False  # every solve through ``advance``
     pos, quat = scene.gripper.flange_pose()
     scene.step(pos, quat, scene.gripper.gap.copy())
     assert calls == [cfg.dt / 4] * 4
@@ -190,6 +191,7 @@ def test_wrist_limit_retries_solve_from_the_untouched_substep_start():
         solves.append(state_out)
 
     scene.solver.advance = checked
+    scene.period_graphs = False  # every solve through ``advance``, checked one by one
     pos, quat = scene.gripper.flange_pose()
     steps = 30
     for k in range(steps):  # down at 0.1 m/s from 0.3 m: the closed pads reach the cuboid's top at ~0.19 m
@@ -300,6 +302,7 @@ def test_non_finite_pad_forces_from_the_solver_are_refused():
         state_out.pad_normal_force.assign(forces)
 
     scene.solver.advance = poisoned
+    scene.period_graphs = False  # every solve through ``advance``
     pos, quat = scene.gripper.flange_pose()
     with pytest.raises(FloatingPointError, match=r"non-finite pad forces in worlds \[1\]"):
         scene.step(pos, quat, scene.gripper.gap.copy())

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,8 +38,8 @@ from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model
-from .scene_kernels import (gather_rows, scatter_rows, solve_loads, zero_float_rows_of_worlds,
-                            zero_vec3_rows_of_worlds)
+from .scene_kernels import (close_gate_if_limited, gather_rows, mark_substep, open_period_gate, scatter_rows,
+                            solve_loads, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
 
 
 @functools.lru_cache(maxsize=16)
@@ -96,7 +97,8 @@ class PickupScene:
     Public: ``config``, ``num_worlds``, ``gripper`` (the W grippers' state and kinematics),
     ``model`` / ``state`` (the FEM's static data and current full state, Newton style: read, do not
     write), ``solver`` (built with ``substeps=1``),
-    ``substeps``, and the read-only accessors ``object_names``, ``setups``, ``materials``,
+    ``substeps``, ``period_graphs`` and ``device_substeps`` (a control period as one graph), and
+    the read-only accessors ``object_names``, ``setups``, ``materials``,
     ``mesh(w)`` and the readouts below (``readout()``: reduced on the device once per state).
     ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object: read
     them from the scene after each reset rather than holding on to them. Between resets ``state``
@@ -116,6 +118,10 @@ class PickupScene:
         travel = max_pad_travel(linear, angle, pad_reach(), config.gripper.closing_speed * config.dt)
         self.substeps = substeps_for_travel(travel, config.solver.substeps)
         self._gripper = Gripper(config.gripper, self.num_worlds, config.device, config.wrist_force_limit)
+        #: run each control period as one graph where the solver captures graphs (``_period_on_device``;
+        #: the same results, bit for bit on the CPU); False: substep by substep from the host (a
+        #: benchmark timing each solve on its own sets it)
+        self.period_graphs = True
         self._build(setups)
         self._setups = list(setups)  # the setup each world was last reset to (initial pose, material)
         self.reset_worlds(np.ones(self.num_worlds, bool), setups)
@@ -143,6 +149,16 @@ class PickupScene:
                                        [object_keypoints(s.object_name, config.object_resolution) for s in setups])
         self._report = SolveReport(self.num_worlds, self.model.device)  # the control step's solver report
         self._loads = wp.zeros(self.num_worlds, dtype=wp.vec4d, device=self.model.device)  # ``solve_loads``
+        # a control period as one graph (``_period_on_device``): its gate (open, last substep tried),
+        # the graphs by scalar key, the keys whose first period ran on the host
+        self._gate = wp.zeros(2, dtype=wp.int32, device=self.model.device)
+        self._period_graphs: dict = {}
+        self._periods_recorded: set = set()
+        self._period_graph_failed = False
+        #: substeps accepted inside a control period's graph since the scene was built (the others
+        #: ran substep by substep on the host: the first period, and from a first try that needed the
+        #: force limit's decision on)
+        self.device_substeps = 0
         self._launches = LaunchCache(self.model.device)  # per-solve launches, recorded once and replayed
         self._solves = 0  # solves run by ``_solve_substep`` (the wrist limit's accepted solve is its last)
         #: world-solves run since the scene was built: per solver call, the worlds it computed (all of
@@ -265,38 +281,117 @@ class PickupScene:
         return self._advance_period()
 
     def _advance_period(self) -> SolveStats:
-        """The control period's substeps after the gripper's ``begin_step``."""
+        """The control period's substeps after the gripper's ``begin_step``: as one graph on the
+        device while no world's first try needs the force limit (``_period_on_device``), then the
+        rest here, each substep's first try followed by the force limit's decision on the host."""
         self._readout = None
         count = self.substeps
         h = self.config.dt / count
-        for k in range(count):
-            self.gripper.plan_substep(k, count, h)
-            solved = None  # the fraction [W] each world's last solve of this substep moved by
-
-            def solve(fraction):
-                # a retry re-solves only the worlds whose fraction changed: the others' last solve
-                # (in the other state, untouched since) is what a new one would give
-                nonlocal solved
-                number, _, _, load = self._solve_substep(fraction, h, worlds=fraction != solved)
-                solved = np.array(fraction, dtype=np.float64)
-                return self._patient_if_over(number, load, fraction, h)
-
-            # the first try, as planned on the device (held worlds stay): no transfer before it
-            number, load_before, held, load = self._solve_substep(None, h)
-            solved = np.where(held, 0.0, 1.0)
-            first = self._patient_if_over(number, load, solved, h)
-            number, _, _ = limited_substep(solve, load_before, held=held, first=first)
-            if number != self._solves:
-                raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
-                                   "the last solve's state, report and the gripper's move are kept")
-            self.state, self._next_state = self._next_state, self.state
-            self._report.fold(self.solver.scratch, self.solver.config.penetration_bound, first=k == 0)
-            # the accepted solve is the last: its forces, and its move's fraction as the limit's scale
-            self.gripper.sense(self.state.pad_normal_force, self.state.pad_force, record_limit=True)
+        k, tried = self._period_on_device(count, h)
+        for k in range(k, count):
+            if tried:  # the graph ran this substep's first try and stopped: the force limit decides here
+                first_try = (self._solves, *self._read_loads())
+                tried = False
+            else:
+                self.gripper.plan_substep(k, count, h)
+                first_try = self._solve_substep(None, h)  # as planned on the device (held worlds stay)
+            self._limit_and_accept(k, h, *first_try)
         if self.state is not self._home_state:  # an odd number of substeps
             self._home_state.copy_from(self.state)
             self.state, self._next_state = self._home_state, self.state
         return self._report.download()
+
+    def _limit_and_accept(self, k: int, h: float, number: int, load_before: np.ndarray, held: np.ndarray,
+                          load: np.ndarray) -> None:
+        """Substep ``k`` after its first try (solve ``number``: actuator loads at its start and of
+        its solve, the worlds held at their limit): the force limit's retries and patient
+        re-solves where a load is over a limit, then the accepted solve's state becomes current,
+        its report is folded in and the gripper senses its pad forces."""
+        solved = np.where(held, 0.0, 1.0)  # the fraction [W] each world's last solve of this substep moved by
+
+        def solve(fraction):
+            # a retry re-solves only the worlds whose fraction changed: the others' last solve
+            # (in the other state, untouched since) is what a new one would give
+            nonlocal solved
+            number, _, _, load = self._solve_substep(fraction, h, worlds=fraction != solved)
+            solved = np.array(fraction, dtype=np.float64)
+            return self._patient_if_over(number, load, fraction, h)
+
+        first = self._patient_if_over(number, load, solved, h)
+        number, _, _ = limited_substep(solve, load_before, held=held, first=first)
+        if number != self._solves:
+            raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
+                               "the last solve's state, report and the gripper's move are kept")
+        self.state, self._next_state = self._next_state, self.state
+        self._accept_launches(k, self.state)
+
+    def _accept_launches(self, k: int, accepted: State) -> None:
+        """Substep ``k``'s accepted solve (in ``accepted``): its report folded in, its pad forces
+        sensed, its move's fraction the limit's scale (launches only)."""
+        self._report.fold(self.solver.scratch, self.solver.config.penetration_bound, first=k == 0)
+        self.gripper.sense(accepted.pad_normal_force, accepted.pad_force, record_limit=True)
+
+    def _period_on_device(self, count: int, h: float) -> tuple[int, bool]:
+        """Run the control period as one graph (where the solver captures graphs): per substep the
+        gripper's plan, the first try as planned, its loads, and, while no world's first try is
+        over an actuator limit (+ ``FORCE_TOLERANCE``) or has non-finite pad forces
+        (``close_gate_if_limited``), its acceptance; the graph skips what follows a substep that
+        needs the host's decision. Returns (the first substep not accepted, whether its first try
+        ran): (``count``, False) when the graph took the whole period. The same launches in the same
+        order as the host's loop (bit-identical on the CPU); one download of the gate. The first
+        period with a set of scalars runs on the host (it loads the kernels and records the
+        launches the graph replays); the graph is captured at the second."""
+        if not (self.period_graphs and self.solver.graphs) or self._period_graph_failed:
+            return 0, False
+        gripper = self.gripper
+        key = (count, h, gripper.driver.config, gripper.wrist_force_limit)
+        graph = self._period_graphs.get(key)
+        if graph is None:
+            if key not in self._periods_recorded:
+                self._periods_recorded.add(key)
+                return 0, False
+            try:
+                graph = self._period_graphs[key] = self._capture_period(count, h)
+            except RuntimeError as exc:
+                self._period_graph_failed = True
+                warnings.warn(f"capturing a control period as a graph failed on {self.model.device} ({exc}); "
+                              "stepping substep by substep from now on", RuntimeWarning, stacklevel=3)
+                return 0, False
+        self.solver.select_all_worlds()
+        wp.capture_launch(graph)
+        self.gripper.device_state_changed()
+        open_gate, tried = (int(v) for v in self._gate.numpy())
+        accepted = count if open_gate else tried
+        solves = accepted if open_gate else accepted + 1
+        self._solves += solves
+        self.world_solves += solves * self.num_worlds
+        self.device_substeps += accepted
+        if accepted % 2:  # the graph's states alternate from the home state
+            self.state, self._next_state = self._next_state, self.state
+        return accepted, not open_gate
+
+    def _capture_period(self, count: int, h: float):
+        """The graph of ``_period_on_device`` from the home state (captured once per key)."""
+        d = self.model.device
+        wp.launch(open_period_gate, dim=1, inputs=[self._gate], device=d)  # loads the module before the capture
+        states = (self.state, self._next_state)
+
+        def first_try(k):
+            src, dst = states[k % 2], states[(k + 1) % 2]
+            self._launches.launch(("mark", k), mark_substep, 1, [k], [self._gate])
+            self.gripper.plan_substep(k, count, h)
+            self.gripper.move_as_planned()
+            self.solver.launch_advance(src, dst, self._control, h)
+            self._launch_loads(dst)
+            self._launches.launch(("gate", FORCE_TOLERANCE), close_gate_if_limited, self.num_worlds,
+                                  [self._loads, FORCE_TOLERANCE], [self._gate])
+
+        with wp.ScopedCapture(device=d, force_module_load=False) as capture:
+            self._launches.launch(("open",), open_period_gate, 1, [], [self._gate])
+            for k in range(count):
+                wp.capture_if(self._gate, on_true=functools.partial(first_try, k))
+                wp.capture_if(self._gate, on_true=functools.partial(self._accept_launches, k, states[(k + 1) % 2]))
+        return capture.graph
 
     def _patient_if_over(self, number: int, load: np.ndarray, fraction: np.ndarray, h: float):
         """(solve number, load [W]) of a solve, re-solved patiently in the worlds over an actuator
@@ -315,10 +410,8 @@ class PickupScene:
         other state, with ``fraction`` [W] of the actuators' motion (the force limit's retry,
         ``Gripper.move``; None: the plan's first try, ``Gripper.move_as_planned``), the ``patient``
         worlds [W] iterated to convergence, of the ``worlds`` [W] bool (default all; the others keep
-        their last solve: ``ImplicitSolver.advance``). Returns (the solve's number, the actuator
-        load at the substep start [W], the worlds held at their limit [W] bool, the solve's
-        actuator load [W] (``wrist.force_limit.actuator_load``: 1 = at a limit)) from one download
-        (``scene_kernels.solve_loads``); the report and the forces stay on the device."""
+        their last solve: ``ImplicitSolver.advance``). Returns (the solve's number, then
+        ``_read_loads``'s three arrays); the report and the forces stay on the device."""
         if fraction is None:
             self.gripper.move_as_planned()  # writes the control's pad targets
         else:
@@ -326,16 +419,27 @@ class PickupScene:
         out = self._next_state
         self.solver.advance(self.state, out, self._control, h, patient, worlds)
         self.world_solves += self.num_worlds if worlds is None else int(np.count_nonzero(worlds))
+        self._launch_loads(out)
+        loads = self._read_loads()
+        self._solves += 1
+        return (self._solves, *loads)
+
+    def _launch_loads(self, out: State) -> None:
+        """``solve_loads`` of the solve in ``out`` into ``_loads``."""
         wrist_limit, grip_limit = self.config.wrist_force_limit, self.config.gripper.grip_force_limit
         self._launches.launch(("loads", id(out), wrist_limit, grip_limit), solve_loads, self.num_worlds,
                               [out.pad_normal_force, out.pad_force, self.gripper.plan_limits, wrist_limit, grip_limit],
                               [self._loads], keep=(out,))
+
+    def _read_loads(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The last solve's loads from one download (``scene_kernels.solve_loads``): the actuator
+        load at the substep start [W], the worlds held at their limit [W] bool, the solve's
+        actuator load [W] (``wrist.force_limit.actuator_load``: 1 = at a limit)."""
         loads = self._loads.numpy().copy()  # CPU: numpy() views
         bad = loads[:, 3] == 0.0
         if bad.any():  # the gripper's kernels would carry them into the jaw and the force limit
             raise FloatingPointError(f"the solver returned non-finite pad forces in worlds {np.flatnonzero(bad).tolist()}")
-        self._solves += 1
-        return self._solves, loads[:, 0], loads[:, 1] > 0.0, loads[:, 2]
+        return loads[:, 0], loads[:, 1] > 0.0, loads[:, 2]
 
     def _last_solve_converged(self) -> np.ndarray:
         """[W] bool: the last solve met the Newton tolerance in every substep and did not diverge

@@ -152,3 +152,28 @@ def pack_readouts(feature_position: wp.array(dtype=wp.vec3d), feature_velocity: 
             out[w, 6 + 3 * k + i] = wp.float64(p[i])
     out[w, 6 + 3 * per_world] = wp.float64(finite[w])
     out[w, 7 + 3 * per_world] = wp.float64(pad_embedding[w])
+
+
+@wp.kernel
+def open_period_gate(gate: wp.array(dtype=wp.int32)):
+    """``gate`` = (1, 0) at the start of a control period captured as one graph
+    (``PickupScene``): its substeps may run on the device; none has been tried yet."""
+    gate[0] = 1
+    gate[1] = 0
+
+
+@wp.kernel
+def mark_substep(k: int, gate: wp.array(dtype=wp.int32)):
+    """``gate[1] = k``: substep ``k``'s first try is the last one the period's graph ran."""
+    gate[1] = k
+
+
+@wp.kernel
+def close_gate_if_limited(loads: wp.array(dtype=wp.vec4d), tolerance: wp.float64, gate: wp.array(dtype=wp.int32)):
+    """``gate[0] = 0`` where world w's first try needs the actuator force limit's decision on the
+    host (``wrist.force_limit.limited_substep``, ``PickupScene._patient_if_over``): its load
+    (``loads[w][2]``, ``solve_loads``) above 1 + ``tolerance`` (a retry or a patient re-solve), or
+    pad forces that are not finite (``loads[w][3]`` = 0: the host raises). NaN loads close it too."""
+    load = loads[wp.tid()]
+    if not (load[3] == wp.float64(1.0) and load[2] <= wp.float64(1.0) + tolerance):
+        gate[0] = 0

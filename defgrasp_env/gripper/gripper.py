@@ -240,6 +240,12 @@ class Gripper:
     def _changed(self) -> None:
         self._host.clear()
 
+    def device_state_changed(self) -> None:
+        """Tell the gripper that its device arrays changed outside its own calls (a replayed graph
+        of its launches: ``PickupScene``'s control period): the host copies its readers return
+        (``gap``, ``q``, ``tip_force``, ...) are read again."""
+        self._changed()
+
     def _launch(self, key, kernel, inputs: list, outputs: list, keep: tuple = ()) -> None:
         """Launch ``kernel`` over the worlds, recorded under ``key`` and replayed (``LaunchCache``)."""
         self._launches.launch(key, kernel, self.num_worlds, inputs, outputs, keep)

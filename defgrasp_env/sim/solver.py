@@ -249,6 +249,25 @@ class ImplicitSolver:
         if patient_any:
             s.patient.zero_()
 
+    def select_all_worlds(self) -> None:
+        """Select every world for the next solves (``advance`` with ``worlds=None`` does this
+        itself; a caller replaying ``launch_advance`` inside its own graph calls it before)."""
+        self._select_worlds(None)
+
+    def launch_advance(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
+        """The launches of ``advance(state_in, state_out, control, dt)`` (every world, none
+        patient; ``state_in`` and ``state_out`` distinct) on the device's current stream, not its
+        own graph: for a caller capturing them into a larger graph (``PickupScene``'s control
+        period). Needs ``graphs`` (the loops' exit tests on the device) and every world selected
+        (``select_all_worlds``) when the launches run."""
+        if not self.graphs:
+            raise RuntimeError("launch_advance needs a solver whose loops test on the device (graphs=True)")
+        if state_in is state_out:
+            raise ValueError("launch_advance needs distinct input and output states")
+        check_range("dt", dt, 0.0, math.inf, "s")
+        run, _ = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
+        self._advance(run, state_in, state_out, control, False)
+
     # -- internals ---------------------------------------------------------------------------
     def _select_worlds(self, worlds: np.ndarray | None) -> bool:
         """Set ``scratch.solve_worlds`` to ``worlds`` [W] bool (None: all); False if none is set."""

@@ -1,0 +1,116 @@
+"""A control period as one graph (``PickupScene._period_on_device``): the scene's substeps replayed
+on the device while no world's first try needs the actuator force limit's decision, the rest
+substep by substep from the host. The reference is the same scene stepping every substep from the
+host (``period_graphs = False``): the same kernels in the same order, so on the CPU every output
+must be equal bit for bit, through periods the graph takes whole and periods it hands to the host
+after substep k (odd k included: the states alternate)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import warp as wp
+
+import defgrasp_env  # noqa: F401
+from defgrasp_env.envs.config import PickupConfig
+from defgrasp_env.envs.scene_kernels import close_gate_if_limited
+from defgrasp_env.policies import ScriptedPickupExpert
+from defgrasp_env.wrist.force_limit import FORCE_TOLERANCE
+
+
+def _run(period_graphs: bool, substeps: int, steps: int, device: str = "cpu", modulus: float = 1e6):
+    """W = 3 cuboid worlds (E = 1e6 by default): the expert, the expert with noise, and a world closing over
+    the object and pressing it into the ground at full speed (its wrist at the force limit: first
+    tries over the limit, retries, patient re-solves). Returns every output array and the number
+    of substeps each step's graph accepted."""
+    solver = dataclasses.replace(PickupConfig().solver, substeps=substeps)
+    env = gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point", object="cuboid",
+                       youngs_modulus=modulus, solver=solver, device=device)
+    obs, _ = env.reset(seed=3)
+    scene = env.unwrapped.scene
+    scene.period_graphs = period_graphs
+    expert = ScriptedPickupExpert.from_env(env)
+    expert.reset()
+    rng = np.random.default_rng(0)
+    out, graphed = {}, []
+    for k in range(steps):
+        action = expert(obs)
+        action[1] = np.clip(action[1] + rng.normal(0.0, 0.5, action[1].shape), -1.0, 1.0)
+        action[2, :3] = [0.0, -1.0, 0.0]
+        action[2, -1] = 1.0
+        before = scene.device_substeps
+        obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
+        graphed.append(scene.device_substeps - before)
+        out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
+        out[f"{k}/reward"] = np.asarray(reward)
+        out.update({f"{k}/info/{name}": np.asarray(v) for name, v in info.items()})
+        g = scene.gripper  # its host readers (teleop, viewers, scripted controllers read these)
+        out.update({f"{k}/gripper/{name}": np.array(v) for name, v in
+                    (("q", g.q), ("gap", g.gap), ("tip_force", g.tip_force), ("pad_force", g.pad_force),
+                     ("grip_stiffness", g.grip_stiffness), ("held", g.held_at_limit()[1]))})
+    for name in ("positions", "velocities", "elastic_force", "contact_force", "von_mises", "pad_normal_force",
+                 "pad_force"):
+        out[f"state/{name}"] = getattr(scene.state, name).numpy().copy()
+    out["world_solves"] = np.array(scene.world_solves)
+    env.close()
+    return out, np.array(graphed), scene.substeps
+
+
+@pytest.mark.parametrize("substeps", [4, 5])
+def test_a_period_on_the_device_gives_the_bits_of_substeps_from_the_host(substeps):
+    """Bit for bit on the CPU, with 4 substeps (the env's) and 5 (odd: the period ends with a copy
+    back into the home state). The graph took whole periods, handed some to the host after an odd
+    and some after an even number of accepted substeps, and none in the reference."""
+    steps = 60
+    graphed_out, graphed, count = _run(True, substeps, steps)
+    host_out, host, _ = _run(False, substeps, steps)
+    assert count == substeps
+    assert host.sum() == 0
+    assert graphed[0] == 0  # the first period records the launches on the host
+    assert (graphed == count).sum() >= steps // 2, graphed
+    handed = graphed[(graphed < count) & (np.arange(steps) > 0)]
+    assert (handed % 2 == 1).any() and (handed % 2 == 0).any(), graphed
+    assert graphed_out.keys() == host_out.keys()
+    differ = [k for k in host_out if not np.array_equal(graphed_out[k], host_out[k], equal_nan=True)
+              or graphed_out[k].dtype != host_out[k].dtype]
+    assert not differ, differ[:10]
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
+def test_the_gate_closes_exactly_where_the_host_would_decide(device):
+    """``close_gate_if_limited`` against the host's rule (``PickupScene._read_loads`` raises on
+    non-finite pad forces; ``_patient_if_over`` / ``limited_substep`` act on a load above
+    1 + FORCE_TOLERANCE): loads at, just above and far over the bound, NaN, and non-finite forces."""
+    if device != "cpu" and not wp.is_cuda_available():
+        pytest.skip("no CUDA device")
+    bound = 1.0 + FORCE_TOLERANCE
+    cases = [  # (load, finite, gate stays open)
+        (0.0, 1.0, True), (1.0, 1.0, True), (bound, 1.0, True), (np.nextafter(bound, 2.0), 1.0, False),
+        (1e6, 1.0, False), (np.nan, 1.0, False), (0.5, 0.0, False), (np.inf, 1.0, False),
+    ]
+    for load, finite, stays_open in cases:
+        for others in (0, 3):  # the world alone, or among worlds that pass
+            rows = [(0.2, 0.0, 0.5, 1.0)] * others + [(0.9, 1.0, load, finite)]
+            loads = wp.array(np.array(rows, dtype=np.float64), dtype=wp.vec4d, device=device)
+            gate = wp.array(np.array([1, 7], dtype=np.int32), dtype=wp.int32, device=device)
+            wp.launch(close_gate_if_limited, dim=len(rows), inputs=[loads, FORCE_TOLERANCE], outputs=[gate],
+                      device=device)
+            assert gate.numpy().tolist() == [int(stays_open), 7], (load, finite, others)
+
+
+@pytest.mark.cuda
+def test_a_period_on_the_device_agrees_with_substeps_from_the_host_on_cuda():
+    """On CUDA the float atomics' order differs run to run, so the two paths agree within rounding:
+    5 steps of the approach (no contact yet; the pressing world touches at the 7th) move the
+    nodes within 1e-5 m of each other, with the graph taking every period after the first."""
+    if not wp.is_cuda_available():
+        pytest.skip("no CUDA device")
+    graphed_out, graphed, count = _run(True, 4, 5, "cuda:0")
+    host_out, _, _ = _run(False, 4, 5, "cuda:0")
+    assert graphed[1:].tolist() == [count] * 4
+    np.testing.assert_allclose(graphed_out["state/positions"], host_out["state/positions"], atol=1e-5)
+    np.testing.assert_allclose(graphed_out["4/reward"], host_out["4/reward"], atol=1e-4)
+    np.testing.assert_allclose(graphed_out["4/gripper/q"], host_out["4/gripper/q"], atol=1e-6)
