@@ -1,6 +1,6 @@
 """Native vector env with one object versus mixed objects: reset cost and step rate on this machine.
 
-    .venv/bin/python benchmarks/bench_vector_env.py [--worlds 16 64] [--steps 5] [--no-append]
+    .venv/bin/python benchmarks/bench_vector_env.py [--worlds 16 64] [--steps 5] [--device cpu] [--no-append]
 
 Per W and per ``object`` ("cuboid": one object; "random": a fresh object per world per episode):
 ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` with defaults (E = 1e5 Pa, 20 Hz,
@@ -9,7 +9,11 @@ a full ``reset()`` (continuing the RNGs: with "random" most worlds change object
 arrays are rebuilt), a partial reset of a quarter of the worlds (and whether it rebuilt), the step after it (a
 rebuilt solver records its launches there), and, after 2 more warm-up steps, ``--steps`` steps with seeded uniform random actions (median, p95,
 world-steps/s, and node-steps/s = world-steps/s x mean nodes per world, since the five objects
-differ in size). Prints a table and appends it with the machine and load to benchmarks/RESULTS.md.
+differ in size). ``--episode-steps N``: also the rate of ``--steps`` steps of an env whose episodes
+end after N steps (``max_episode_steps``, next-step autoresets: W / N worlds reset a step, with
+"random" most to another object: a learner's batch), after N warm-up steps. A slotted scene
+(``PickupScene.slots``, the default on CUDA with several objects) changes objects in place; a
+packed one rebuilds. Prints a table and appends it with the machine and load to benchmarks/RESULTS.md.
 """
 
 from __future__ import annotations
@@ -35,14 +39,17 @@ from machine import append_results, git_state, host  # noqa: E402
 
 
 def _timed(fn) -> float:
+    """Wall seconds of ``fn()``, its device work included (synchronised before and after)."""
+    wp.synchronize()
     t0 = time.perf_counter()
     fn()
+    wp.synchronize()
     return time.perf_counter() - t0
 
 
-def run(worlds: int, obj: str, steps: int) -> dict:
+def run(worlds: int, obj: str, steps: int, device: str = "cpu") -> dict:
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point", object=obj,
-                       autoreset_mode=AutoresetMode.DISABLED)
+                       autoreset_mode=AutoresetMode.DISABLED, device=device)
     build = _timed(lambda: env.reset(seed=0))
     full = _timed(lambda: env.reset())
     scene = env.unwrapped.scene
@@ -69,15 +76,45 @@ def run(worlds: int, obj: str, steps: int) -> dict:
             "load": os.getloadavg()[0]}
 
 
+def autoreset_rate(worlds: int, obj: str, steps: int, device: str, episode_steps: int) -> dict:
+    """World-steps/s of ``steps`` random-action steps with episodes of ``episode_steps`` steps
+    (autoresets), after ``episode_steps`` warm-up steps that stagger the episodes (at warm-up step
+    k the worlds w = k mod ``episode_steps`` are reset: from then on 1 / ``episode_steps`` of the
+    worlds end an episode at every step, as terminations spread a learner's episodes); whether the
+    scene is slotted and whether its model was rebuilt during the timed steps."""
+    env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point", object=obj,
+                       max_episode_steps=episode_steps, device=device)
+    env.reset(seed=0)
+    space = env.action_space
+    space.seed(1)
+    for k in range(episode_steps):
+        env.reset(options={"reset_mask": np.arange(worlds) % episode_steps == k})
+        env.step(space.sample())
+    scene = env.unwrapped.scene
+    model = scene.model
+    times = []
+    for _ in range(steps):
+        a = space.sample()
+        times.append(_timed(lambda: env.step(a)))
+    out = {"auto_median_ms": 1e3 * float(np.median(times)), "auto_rate": worlds / float(np.median(times)),
+           "slotted": getattr(scene, "slots", None) is not None, "auto_rebuilt": scene.model is not model}
+    env.close()
+    return out
+
+
 def table(rows: list[dict]) -> str:
     lines = ["| W | object | nodes (all worlds) | first reset (build) ms | full reset ms | reset of W/4 ms "
-             "(rebuilt?) | next step ms | step median ms | step p95 ms | world-steps/s | node-steps/s | load |",
-             "|---" * 12 + "|"]
+             "(rebuilt?) | next step ms | step median ms | step p95 ms | world-steps/s | node-steps/s | "
+             "with autoresets: step median ms | world-steps/s (slotted? rebuilt?) | load |",
+             "|---" * 14 + "|"]
     for r in rows:
+        auto = ("- | -" if "auto_rate" not in r else
+                f"{r['auto_median_ms']:.0f} | {r['auto_rate']:.0f} ({'slotted' if r['slotted'] else 'packed'}, "
+                f"{'rebuilt' if r['auto_rebuilt'] else 'not rebuilt'})")
         lines.append(f"| {r['W']} | {r['object']} | {r['nodes']} | {r['build_ms']:.0f} | {r['full_ms']:.0f} | "
                      f"{r['partial_ms']:.0f} ({'yes' if r['rebuilt'] else 'no'}) | {r['first_ms']:.0f} | "
                      f"{r['median_ms']:.0f} | {r['p95_ms']:.0f} | {r['rate']:.0f} | {r['rate'] * r['nodes'] / r['W']:.0f} | "
-                     f"{r['load']:.1f} |")
+                     f"{auto} | {r['load']:.1f} |")
     return "\n".join(lines)
 
 
@@ -85,13 +122,21 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--worlds", type=int, nargs="+", default=[16, 64])
     p.add_argument("--steps", type=int, default=5)
+    p.add_argument("--device", default="cpu", help="the simulation's Warp device (cpu, cuda:0)")
+    p.add_argument("--episode-steps", type=int, default=0,
+                   help="also time steps with episodes of this many steps (autoresets; 0: off)")
     p.add_argument("--no-append", action="store_true", help="do not append to benchmarks/RESULTS.md")
     args = p.parse_args(argv)
     wp.config.quiet = True
-    rows = [run(w, obj, args.steps) for w in args.worlds for obj in ("cuboid", "random")]
+    rows = []
+    for w in args.worlds:
+        for obj in ("cuboid", "random"):
+            rows.append(run(w, obj, args.steps, args.device))
+            if args.episode_steps > 0:
+                rows[-1].update(autoreset_rate(w, obj, args.steps, args.device, args.episode_steps))
     out = (f"\n## Vector env, one object vs mixed objects (bench_vector_env.py), "
            f"{datetime.datetime.now().isoformat(timespec='seconds')}\n\n"
-           f"Machine: {host()}; Warp CPU; commit {git_state()}; random actions, {args.steps} timed steps after 3 "
+           f"Machine: {host()}; Warp {args.device}; commit {git_state()}; random actions, {args.steps} timed steps after 3 "
            f"warm-up ('next step': the first of those, after the reset of W/4); load average (1 min) after each row in the table.\n\n{table(rows)}\n")
     print(out)
     if not args.no_append:

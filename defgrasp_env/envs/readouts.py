@@ -56,10 +56,9 @@ class SceneReadouts:
         self.num_worlds = w
         self._device = d
         self._node_start = wp.array(model.node_start.astype(np.int32), dtype=wp.int32, device=d)
-        index = np.full((w, NUM_KEYPOINTS), -1, np.int32)
-        for i, local in enumerate(keypoints):  # once per build, not per step
-            index[i, : len(local)] = np.asarray(local) + model.node_start[i]
-        self._keypoint_index = wp.array(index.ravel(), dtype=wp.int32, device=d)
+        self._node_end = wp.zeros(w, dtype=wp.int32, device=d)
+        self._keypoint_index = wp.zeros(w * NUM_KEYPOINTS, dtype=wp.int32, device=d)
+        self.set_objects(model, keypoints)
         self.feature_position = wp.zeros(w, dtype=wp.vec3d, device=d)
         self.feature_velocity = wp.zeros(w, dtype=wp.vec3d, device=d)
         self.keypoints = wp.zeros(w * NUM_KEYPOINTS, dtype=wp.vec3, device=d)
@@ -76,12 +75,22 @@ class SceneReadouts:
                                outputs=[self.pad_embedding], device=d, record_cmd=True) for state in states]
         # recorded once (a couple of microseconds of Python per launch, as the solver's launches)
         self._launches = [(state, (
-            wp.launch(world_readouts, dim=w, inputs=[state.positions, state.velocities, self._node_start],
+            wp.launch(world_readouts, dim=w, inputs=[state.positions, state.velocities, self._node_start,
+                                                     self._node_end],
                       outputs=[self.feature_position, self.feature_velocity, self.finite], device=d,
                       record_cmd=True),
             wp.launch(gather_keypoints, dim=w * NUM_KEYPOINTS, inputs=[state.positions, self._keypoint_index],
                       outputs=[self.keypoints], device=d, record_cmd=True), embed, pack))
             for state, embed in zip(states, embedding)]
+
+    def set_objects(self, model: Model, keypoints: list[np.ndarray]) -> None:
+        """The worlds' objects (their node rows ``Model.node_start`` .. ``node_end`` and ``keypoints``:
+        per world, object-local node ids), again after a slotted model's objects changed in place."""
+        index = np.full((self.num_worlds, NUM_KEYPOINTS), -1, np.int32)
+        for i, local in enumerate(keypoints):
+            index[i, : len(local)] = np.asarray(local) + model.node_start[i]
+        self._keypoint_index.assign(index.ravel())
+        self._node_end.assign(model.node_end.astype(np.int32))
 
     def launch(self, state: State) -> None:
         """Launch the readout kernels on ``state`` (one of the constructor's ``states``): the public

@@ -27,7 +27,7 @@ from ..layout import NUM_KEYPOINTS
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.launch_cache import LaunchCache
-from ..sim.model import ContactParams, set_world_material
+from ..sim.model import SPARE_POSITION, ContactParams, set_world_material
 from ..sim.pad_motion import max_pad_travel, substeps_for_travel
 from ..sim.solve_report import SolveReport
 from ..sim.solver import ImplicitSolver, SolveStats
@@ -37,7 +37,7 @@ from ..wrist.force_limit import FORCE_TOLERANCE, limited_substep
 from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
-from .world_models import assemble_model
+from .world_models import assemble_model, rewrite_worlds, slot_sizes
 from .scene_kernels import (close_gate_if_limited, gather_rows, mark_substep, open_period_gate, scatter_rows,
                             solve_loads, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
 
@@ -108,9 +108,16 @@ class PickupScene:
     substeps ends with one copy back.
     """
 
-    def __init__(self, config: PickupConfig, setups: list[WorldSetup]):
+    def __init__(self, config: PickupConfig, setups: list[WorldSetup], slotted: bool | None = None):
         self.config = config
         self.num_worlds = len(setups)
+        if slotted is None:  # a rebuild recaptures every graph: on a GPU it costs more than spare rows do
+            slotted = len(config.object_names) > 1 and wp.get_device(config.device).is_cuda
+        #: the slot of every world (``world_models.SlotSizes``: each world's rows fit any of the
+        #: config's objects, so that a reset changes a world's object in place), or None: packed
+        #: rows, and a reset that changes an object rebuilds every array (``_rebuild``)
+        self.slots = slot_sizes([object_mesh(name, config.object_resolution) for name in config.object_names]
+                                ) if slotted else None
         #: physics substeps per control period, looped by ``step`` (the solver takes one per call):
         #: ``config.solver.substeps``, or more where the largest legal move of the pads in a period
         #: would exceed ``sim.pad_motion.MAX_PAD_TRAVEL`` per substep (a function of the config only)
@@ -135,7 +142,8 @@ class PickupScene:
                                 edge_contact=config.edge_contact)
         half = Gripper.pad_half_extents
         self.model = assemble_model(self._meshes, [s.material for s in setups],
-                                    [(s.position, s.quat) for s in setups], [half, half], contact, config.device)
+                                    [(s.position, s.quat) for s in setups], [half, half], contact, config.device,
+                                    self.slots)
         self.solver = ImplicitSolver(self.model, dataclasses.replace(config.solver, substeps=1))
         self.state = State.from_model(self.model)
         self._home_state = self.state  # what ``state`` is between steps
@@ -200,9 +208,13 @@ class PickupScene:
     def reset_worlds(self, mask: np.ndarray, setups: list[WorldSetup]) -> None:
         """Put the worlds in ``mask`` back to their initial state with the given setups; other
         worlds are left untouched, bit for bit (their full state and their gripper). A world whose
-        object changes makes the scene rebuild its flat arrays (``_rebuild``)."""
-        if any(setups[w].object_name != self._object_names[w] for w in np.flatnonzero(mask)):
+        object changes has its rows rewritten in place (``slots``: ``_rewrite``), or makes the scene
+        rebuild its flat arrays (packed rows: ``_rebuild``)."""
+        changed = [w for w in np.flatnonzero(mask) if setups[w].object_name != self._object_names[w]]
+        if changed and self.slots is None:
             self._rebuild(mask, setups)
+        elif changed:
+            self._rewrite(changed, setups)
         m = self.model
         rows, values = [], []
         flange_xz = np.zeros((self.num_worlds, 2))
@@ -210,8 +222,10 @@ class PickupScene:
             s = setups[w]
             sl = m.world_nodes(w)
             local = self._meshes[w].nodes
-            rows.append(np.arange(sl.start, sl.stop, dtype=np.int32))
-            values.append((local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32))
+            spare = int(m.node_start[w + 1]) - sl.stop  # a slot's spare rows go back to where they rest
+            rows.append(np.arange(sl.start, sl.stop + spare, dtype=np.int32))
+            values.append(np.concatenate([(local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32),
+                                          np.tile(np.float32(SPARE_POSITION), (spare, 1))]))
             if s.material != self._setups[w].material:
                 set_world_material(m, w, s.material)
             self._setups[w] = s
@@ -246,6 +260,26 @@ class PickupScene:
             wp.launch(gather_rows, dim=len(dst), inputs=[getattr(old_state, name), index, dst], device=new.device)
         for name in ("pad_positions", "pad_orientations", "mean_von_mises", "pad_normal_force", "pad_force"):
             wp.copy(getattr(self.state, name), getattr(old_state, name))  # [W] / [W*P]: same layout
+
+    def _rewrite(self, worlds: list[int], setups: list[WorldSetup]) -> None:
+        """Give ``worlds`` their setups' objects in place (a slotted model, ``slots``): their rows of
+        the model (``world_models.rewrite_worlds``), of the solver's copies of it, of the control's
+        prescribed positions and of the readouts; every array, and with them the recorded launches
+        and captured graphs, stays. The worlds' states are then set by ``reset_worlds``."""
+        config = self.config
+        half = Gripper.pad_half_extents
+        meshes = [object_mesh(setups[w].object_name, config.object_resolution) for w in worlds]
+        rewrite_worlds(self.model, worlds, meshes, [setups[w].material for w in worlds],
+                       [(setups[w].position, setups[w].quat) for w in worlds], [half, half])
+        self.solver.scratch.rewrite_worlds(self.model, worlds)
+        wp.copy(self._control.prescribed_positions, self.model.rest_positions)  # Control.from_model's
+        names = list(self._object_names)
+        for w, mesh in zip(worlds, meshes):
+            self._meshes[w] = mesh
+            names[w] = setups[w].object_name
+            self._setups[w] = setups[w]  # built with its new material: no material update needed
+        self._object_names = tuple(names)
+        self._readouts.set_objects(self.model, [object_keypoints(n, config.object_resolution) for n in names])
 
     def _zero_outputs(self, mask: np.ndarray) -> None:
         """Velocities, forces and stresses of freshly reset worlds (at rest shape, untouched): zeroed

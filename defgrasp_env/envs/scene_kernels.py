@@ -13,6 +13,8 @@ import warp as wp
 
 from ..gripper.kernels import actuator_load
 from ..sim.kernels.contact import box_penetration
+from ..sim.kernels.elastic import spare_tet
+from ..sim.kernels.world_rows import scatter_rows  # noqa: F401  (the scene's row writes)
 
 
 @wp.kernel
@@ -26,14 +28,15 @@ def gather_rows(src: wp.array(dtype=Any), index: wp.array(dtype=wp.int32), dst: 
 
 @wp.kernel
 def world_readouts(x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), node_start: wp.array(dtype=wp.int32),
-                   feature_position: wp.array(dtype=wp.vec3d), feature_velocity: wp.array(dtype=wp.vec3d),
-                   finite: wp.array(dtype=wp.int32)):
-    """One thread per world w: the mean node position and velocity (float64, summed in node order,
-    as ``numpy.add.reduceat`` over float64 rows sums them) and whether every node position and
-    velocity of the world is finite (1) or not (0)."""
+                   node_end: wp.array(dtype=wp.int32), feature_position: wp.array(dtype=wp.vec3d),
+                   feature_velocity: wp.array(dtype=wp.vec3d), finite: wp.array(dtype=wp.int32)):
+    """One thread per world w over its object's nodes ``node_start[w]:node_end[w]`` (``Model``):
+    the mean node position and velocity (float64, summed in node order, as ``numpy.add.reduceat``
+    over float64 rows sums them) and whether every node position and velocity of the world is
+    finite (1) or not (0)."""
     w = wp.tid()
     start = node_start[w]
-    end = node_start[w + 1]
+    end = node_end[w]
     sx = wp.vec3d()
     sv = wp.vec3d()
     ok = int(1)
@@ -60,13 +63,6 @@ def gather_keypoints(x: wp.array(dtype=wp.vec3), index: wp.array(dtype=wp.int32)
         out[k] = x[j]
     else:
         out[k] = wp.vec3()
-
-
-@wp.kernel
-def scatter_rows(values: wp.array(dtype=Any), index: wp.array(dtype=wp.int32), dst: wp.array(dtype=Any)):
-    """``dst[index[k]] = values[k]``."""
-    k = wp.tid()
-    dst[index[k]] = values[k]
 
 
 @wp.kernel
@@ -126,6 +122,8 @@ def deepest_material_in_pads(x: wp.array(dtype=wp.vec3), tets: wp.array(dtype=wp
     w = tet_world[t]
     pad = w * pads_per_world + tid % pads_per_world
     n = tets[t]
+    if spare_tet(n):  # parked 1 km above the task
+        return
     c = 0.25 * (x[n[0]] + x[n[1]] + x[n[2]] + x[n[3]])
     local = wp.quat_rotate_inv(pad_orientations[pad], c - pad_positions[pad])
     d, normal = box_penetration(local, pad_half[pad])

@@ -254,7 +254,8 @@ class DeformablePickupVectorEnv(VectorEnv):
             else:
                 specs[w] = dataclasses.replace(spec, scene_origin=self._origins[w])
         if built:
-            self.scene = PickupScene(self.config, setups)
+            # fixed objects never change a world's rows: packed (no spare rows to step)
+            self.scene = PickupScene(self.config, setups, slotted=False if self.world_objects is not None else None)
         else:
             self.scene.reset_worlds(mask, setups)
         if self.task is None:

@@ -2,7 +2,14 @@
 
 Every world holds one soft object (its own tetrahedral mesh and material) and ``pads_per_world``
 kinematic boxes (the gripper pads). Nodes and tets of all worlds live in flat arrays; world ``w``
-owns nodes ``node_start[w]:node_start[w+1]`` and tets ``tet_start[w]:tet_start[w+1]``.
+owns the rows ``node_start[w]:node_start[w+1]`` and ``tet_start[w]:tet_start[w+1]``, its object the
+first of them: nodes ``node_start[w]:node_end[w]`` (``world_nodes``), tets ``tet_start[w]:tet_end[w]``
+(``world_tets``). In a packed model (``build_model``) the two coincide. In a slotted model
+(``envs.world_models.assemble_model`` with slot sizes) every world has the same number of rows, so
+that a world's object can change in place; the rows past its object are spare: spare nodes are
+parked at ``SPARE_POSITION``, fixed, massless and without contact stiffness; spare tets name the
+world's first spare node four times with zero rest matrix, volume and Lamé parameters. They add
+exact zeros to every sum of the solver, so a world's results do not depend on its slot.
 """
 
 from __future__ import annotations
@@ -17,6 +24,10 @@ import warp as wp
 from ..transforms import quat_normalize, quat_to_matrix
 from .aggregates import bisect_nodes
 from .materials import Material, check_range
+
+#: Where the spare node rows of a slotted model rest (m, world frame): far above the task, out of
+#: reach of the pads and the ground.
+SPARE_POSITION = (0.0, 1000.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -80,8 +91,10 @@ class Model:
     device: str
     num_worlds: int
     pads_per_world: int
-    node_start: np.ndarray        # [W+1] int64 host: first node of each world
-    tet_start: np.ndarray         # [W+1] int64 host: first tet of each world
+    node_start: np.ndarray        # [W+1] int64 host: first node row of each world
+    tet_start: np.ndarray         # [W+1] int64 host: first tet row of each world
+    node_end: np.ndarray          # [W] int64 host: one past the last node of each world's object
+    tet_end: np.ndarray           # [W] int64 host: one past the last tet of each world's object
     surfaces: list[np.ndarray]    # W x [S_w,3] int32 host: boundary triangles, world-local node ids
     node_aggregate: np.ndarray    # [N] int32 host: world-local coarse aggregate of each node (``aggregates.py``,
                                   # cut in the object frame: the same for every pose)
@@ -100,6 +113,11 @@ class Model:
     pad_half_extents: wp.array    # [W*P] vec3, m: half sizes of the pad boxes in their own frame
     gravity: wp.vec3              # m/s^2
     contact: ContactParams
+    #: coarse aggregates per world the solver allocates at least (a slotted model: the most of any
+    #: object it may hold; 0: the most of the worlds' ``node_aggregate``)
+    max_aggregates: int = 0
+    #: surface triangle rows per world (a slotted model; 0: each world's own surface, packed)
+    triangle_slot: int = 0
 
     @property
     def num_nodes(self) -> int:
@@ -110,10 +128,12 @@ class Model:
         return int(self.tet_start[-1])
 
     def world_nodes(self, w: int) -> slice:
-        return slice(int(self.node_start[w]), int(self.node_start[w + 1]))
+        """The rows of world ``w``'s object's nodes (its spare rows excluded)."""
+        return slice(int(self.node_start[w]), int(self.node_end[w]))
 
     def world_tets(self, w: int) -> slice:
-        return slice(int(self.tet_start[w]), int(self.tet_start[w + 1]))
+        """The rows of world ``w``'s object's tets (its spare rows excluded)."""
+        return slice(int(self.tet_start[w]), int(self.tet_end[w]))
 
 
 def _check_mesh(w: int, nodes: np.ndarray, tets: np.ndarray) -> None:
@@ -218,6 +238,8 @@ def build_model(
         pads_per_world=pads,
         node_start=np.asarray(node_start, dtype=np.int64),
         tet_start=np.asarray(tet_start, dtype=np.int64),
+        node_end=np.asarray(node_start[1:], dtype=np.int64),
+        tet_end=np.asarray(tet_start[1:], dtype=np.int64),
         surfaces=[np.asarray(mesh.surface, dtype=np.int32) for mesh in meshes],
         node_aggregate=cat(aggregates).astype(np.int32),
         rest_positions=arr(cat(positions).astype(np.float32), wp.vec3),

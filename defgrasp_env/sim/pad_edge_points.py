@@ -46,11 +46,23 @@ def pad_edge_points(half_extents: np.ndarray, spacing: float = EDGE_POINT_SPACIN
             np.concatenate(shares).astype(np.float32), np.asarray(first, dtype=np.int32))
 
 
+def world_surface_triangles(model: Model, w: int) -> np.ndarray:
+    """World ``w``'s boundary triangles (``Model.surfaces``, outward by the right-hand rule) as
+    global node ids [S, 3] int32; in a slotted model (``Model.triangle_slot``) padded to the slot
+    with spare triangles naming the world's first spare node three times (zero area, zero solid
+    angle, 1 km from the task: no point's nearest triangle)."""
+    tris = np.asarray(model.surfaces[w], dtype=np.int64).reshape(-1, 3) + int(model.node_start[w])
+    if model.triangle_slot:
+        if len(tris) > model.triangle_slot:
+            raise ValueError(f"world {w} has {len(tris)} surface triangles, more than its slot's {model.triangle_slot}")
+        spare = np.full((model.triangle_slot - len(tris), 3), int(model.node_end[w]))
+        tris = np.concatenate([tris, spare])
+    return tris.astype(np.int32)
+
+
 def surface_triangles(model: Model) -> tuple[np.ndarray, np.ndarray]:
-    """Every world's boundary triangles (``Model.surfaces``, outward by the right-hand rule) as
-    global node ids [T, 3] int32, and the world of each [T] int32."""
-    tris = [np.asarray(s, dtype=np.int64).reshape(-1, 3) + int(model.node_start[w])
-            for w, s in enumerate(model.surfaces)]
+    """Every world's ``world_surface_triangles`` [T, 3] int32, and the world of each [T] int32."""
+    tris = [world_surface_triangles(model, w) for w in range(model.num_worlds)]
     worlds = [np.full(len(t), w) for w, t in enumerate(tris)]
     if not tris:
         return np.zeros((0, 3), np.int32), np.zeros(0, np.int32)

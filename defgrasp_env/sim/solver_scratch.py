@@ -11,7 +11,8 @@ import numpy as np
 import warp as wp
 
 from .model import Model
-from .pad_edge_points import pad_edge_points, surface_triangles
+from .kernels.world_rows import scatter_rows
+from .pad_edge_points import pad_edge_points, surface_triangles, world_surface_triangles
 
 
 @dataclass
@@ -167,7 +168,7 @@ class SolverScratch:
             return wp.zeros(w, dtype=dtype, device=d)
 
         aggregate = model.node_aggregate
-        size = 3 * (int(aggregate.max()) + 1)
+        size = 3 * max(int(aggregate.max()) + 1, model.max_aggregates)
 
         def coarse(dtype, ndim):
             return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)
@@ -193,6 +194,30 @@ class SolverScratch:
         scratch.solve_worlds.fill_(1)
         scratch.step_length.fill_(1.0)  # begin_line_search resets it; with no line search it stays 1
         return scratch
+
+    def rewrite_worlds(self, model: Model, worlds) -> None:
+        """The rows of ``worlds`` that this scratch copies from ``model`` (coarse aggregates, surface
+        triangles), written again after ``model``'s rows of them changed in place (a slotted
+        model's object change, ``envs.world_models.rewrite_worlds``)."""
+        worlds = [int(w) for w in worlds]
+        if not worlds:
+            return
+        if int(model.node_aggregate.max()) + 1 > self.coarse_size // 3:
+            raise ValueError(f"the model's worlds now name {int(model.node_aggregate.max()) + 1} coarse aggregates, "
+                             f"more than the {self.coarse_size // 3} this scratch was made for")
+        d = model.device
+        rows = np.concatenate([np.arange(model.node_start[w], model.node_start[w + 1]) for w in worlds])
+        wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(model.node_aggregate[rows], dtype=int, device=d),
+                                                    wp.array(rows.astype(np.int32), dtype=int, device=d)],
+                  outputs=[self.node_aggregate], device=d)
+        e = self.edges
+        if e.triangles.shape[0]:
+            slot = model.triangle_slot
+            tris = np.concatenate([world_surface_triangles(model, w) for w in worlds])
+            rows = np.concatenate([np.arange(w * slot, (w + 1) * slot) for w in worlds])
+            wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(tris, dtype=wp.vec3i, device=d),
+                                                        wp.array(rows.astype(np.int32), dtype=int, device=d)],
+                      outputs=[e.triangles], device=d)
 
     @property
     def pads(self) -> list:

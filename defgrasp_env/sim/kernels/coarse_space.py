@@ -18,7 +18,7 @@ Newton iteration.
 
 import warp as wp
 
-from .elastic import pick_vertex, row, stress_differential
+from .elastic import pick_vertex, row, spare_tet, stress_differential
 
 
 @wp.func
@@ -101,6 +101,8 @@ def coarse_assemble_tets(
     if world_active[w] == 0:
         return
     idx = tets[t]
+    if spare_tet(idx):
+        return
     a0 = node_aggregate[idx[0]]
     all_free = free[idx[0]] + free[idx[1]] + free[idx[2]] + free[idx[3]]
     if (a0 == node_aggregate[idx[1]] and a0 == node_aggregate[idx[2]] and a0 == node_aggregate[idx[3]]

@@ -38,6 +38,13 @@ def row(m: wp.mat33, i: int):
 
 
 @wp.func
+def spare_tet(idx: wp.vec4i):
+    """Whether a tet is a spare row of a slotted model (``sim.model``: one node named four times;
+    an object's tets are never degenerate): it adds exact zeros, so the tet kernels skip it."""
+    return idx[0] == idx[1]
+
+
+@wp.func
 def pick_vertex(b0: wp.vec3, b1: wp.vec3, b2: wp.vec3, b3: wp.vec3, v: int):
     """The one of a tet's four shape-function gradients ``b0..b3`` (1/m) that belongs to vertex ``v``."""
     if v == 1:
@@ -174,6 +181,8 @@ def evaluate_tets(
     if world_active[tet_world[t]] == 0:
         return
     idx = tets[t]
+    if spare_tet(idx):
+        return
     dm_inv = rest_inv[t]
     f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], dm_inv)
     cof = cofactor(f)
@@ -245,6 +254,8 @@ def hessian_product_tets(
     if world_active[tet_world[t]] == 0:
         return
     idx = tets[t]
+    if spare_tet(idx):
+        return
     dm_inv = rest_inv[t]
     b1 = row(dm_inv, 0)
     b2 = row(dm_inv, 1)
@@ -271,4 +282,6 @@ def seed_rotations(
     so that results depend on the state only, not on the solver's history."""
     t = wp.tid()
     idx = tets[t]
+    if spare_tet(idx):
+        return
     tet_rotation[t] = svd_rotation(deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t]))

@@ -9,7 +9,7 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 import warp as wp
 
 from .contact import face_penetration, pad_slip, penalty_energy
-from .elastic import deformation_gradient, polar_rotation
+from .elastic import deformation_gradient, polar_rotation, spare_tet
 
 
 @wp.func
@@ -107,6 +107,8 @@ def tet_energy(
     if world_active[w] == 0:
         return
     idx = tets[t]
+    if spare_tet(idx):
+        return
     f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t])
     e = rest_volume[t] * strain_energy_density(f, tet_rotation[t], tet_mu[t], tet_lambda[t])
     wp.atomic_add(energy, w, wp.float64(e))

@@ -18,9 +18,14 @@ sequential launches) the results are bit-identical to a launch over all rows.
 ``WorldCompaction.record_list`` (``sim/world_compaction.py``) builds the list from a loop's
 per-world flags: ``compact_begin``, then ``compact_worlds`` over the W worlds, then ``compact_gate``
 (``cond`` = 1 where at most ``capacity`` worlds are flagged: the test of ``wp.capture_if``).
+
+``scatter_rows`` writes given rows of any array (a slotted model's worlds rewritten in place, a
+reset's node rows).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import warp as wp
 
@@ -76,3 +81,10 @@ def compact_gate(count: wp.array(dtype=wp.int32), capacity: int, cond: wp.array(
     if count[0] <= wp.int32(capacity):
         go = wp.int32(1)
     cond[0] = go
+
+
+@wp.kernel
+def scatter_rows(values: wp.array(dtype=Any), index: wp.array(dtype=wp.int32), dst: wp.array(dtype=Any)):
+    """``dst[index[k]] = values[k]``."""
+    k = wp.tid()
+    dst[index[k]] = values[k]

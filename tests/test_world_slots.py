@@ -1,0 +1,177 @@
+"""Slotted models (``envs.world_models``, ``PickupScene.slots``): every world's rows fit any of the
+config's objects, so a reset changes a world's object in place instead of rebuilding the arrays.
+The reference is the packed model, whose resets rebuild: the same episodes (objects redrawn at
+autoresets) must give the same outputs bit for bit on the CPU, the spare rows adding exact zeros,
+and a model rewritten in place must equal one assembled afresh for the same worlds."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import warp as wp
+
+import defgrasp_env  # noqa: F401
+from defgrasp_env.envs.config import PickupConfig
+from defgrasp_env.envs.scene import PickupScene, WorldSetup
+from defgrasp_env.envs.world_models import assemble_model, slot_sizes
+from defgrasp_env.policies import ScriptedPickupExpert
+from defgrasp_env.sim.materials import Material
+from defgrasp_env.sim.model import SPARE_POSITION, Model
+
+OBJECTS = ("cuboid", "torus", "rope")
+
+
+def _run(slotted: bool, steps: int, device: str = "cpu"):
+    """W = 3 worlds drawing from three objects at E = 1e6 (episodes of 15 steps, so autoresets
+    redraw objects): the expert, the expert with noise, and a world closing over the object and
+    pressing it into the ground. The scene is replaced after the first reset by a slotted or a
+    packed one (``slotted``) of the same setups. Returns every output and the
+    object names after each step."""
+    env = gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point", object=OBJECTS,
+                       youngs_modulus=1e6, max_episode_steps=15, device=device)
+    obs, _ = env.reset(seed=11)
+    venv = env.unwrapped
+    venv.scene = PickupScene(venv.config, list(venv.scene.setups), slotted=slotted)
+    scene = venv.scene
+    assert (scene.slots is not None) == slotted
+    model = scene.model
+    expert = ScriptedPickupExpert.from_env(env)
+    expert.reset()
+    rng = np.random.default_rng(0)
+    out, names = {}, []
+    for k in range(steps):
+        action = expert(obs)
+        action[1] = np.clip(action[1] + rng.normal(0.0, 0.5, action[1].shape), -1.0, 1.0)
+        action[2, :3] = [0.0, -1.0, 0.0]
+        action[2, -1] = 1.0
+        obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
+        expert.reset(np.asarray(terminated) | np.asarray(truncated))
+        names.append(venv.scene.object_names)
+        out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
+        out[f"{k}/reward"] = np.asarray(reward)
+        out.update({f"{k}/info/{name}": np.asarray(v) for name, v in info.items()
+                    if np.asarray(v).dtype != object})
+        s, m = venv.scene.state, venv.scene.model
+        for w in range(3):
+            for name in ("positions", "velocities", "elastic_force", "contact_force"):
+                out[f"{k}/state/{w}/{name}"] = getattr(s, name).numpy()[m.world_nodes(w)].copy()
+            out[f"{k}/state/{w}/von_mises"] = s.von_mises.numpy()[m.world_tets(w)].copy()
+        for name in ("mean_von_mises", "pad_normal_force", "pad_force"):
+            out[f"{k}/state/{name}"] = getattr(s, name).numpy().copy()
+    if slotted:
+        assert venv.scene.model is model  # the objects changed in place: never rebuilt
+    env.close()
+    return out, names, venv
+
+
+def test_slotted_episodes_give_the_bits_of_packed_ones_through_object_changes():
+    """Every observation, reward, info entry and state row of the objects equal to the packed
+    model's (which rebuilds at each object change), over 45 steps whose autoresets change objects
+    (asserted), with contact (the expert's grasps and the pressing world's force limit)."""
+    steps = 45
+    slotted, names, _ = _run(True, steps)
+    packed, packed_names, _ = _run(False, steps)
+    assert names == packed_names
+    assert len({n for step in names for n in step}) == 3 and len(set(names)) >= 3  # objects changed
+    assert slotted.keys() == packed.keys()
+    differ = [k for k in packed if not np.array_equal(slotted[k], packed[k], equal_nan=True)
+              or slotted[k].dtype != packed[k].dtype]
+    assert not differ, differ[:10]
+
+
+def _arrays(obj) -> dict:
+    return {name: value.numpy() for name, value in vars(obj).items() if isinstance(value, wp.array)}
+
+
+def test_a_model_rewritten_in_place_equals_one_assembled_afresh():
+    """After resets that change objects, the slotted scene's model (every device array and the host
+    offsets, surfaces and aggregates), the solver's copies of it and the control's prescribed
+    positions equal those of a slotted model assembled from the worlds' current setups; the spare
+    rows rest at SPARE_POSITION, fixed, massless, with zero-volume tets."""
+    config = PickupConfig(object=OBJECTS)
+
+    def setup(name, i, modulus):
+        return WorldSetup(name, Material(500.0 + 100 * i, modulus, 0.3), np.array([0.02 * i, 0.0, -0.01 * i]),
+                          np.array([0.0, np.sin(0.1 * i), 0.0, np.cos(0.1 * i)]))
+
+    first = [setup(n, i, 1e5) for i, n in enumerate(("rope", "cuboid", "torus", "cuboid"))]
+    scene = PickupScene(config, first, slotted=True)
+    model, scratch = scene.model, scene.solver.scratch
+    later = [setup(n, i + 4, 1e6) for i, n in enumerate(("cuboid", "rope", "torus", "torus"))]
+    scene.reset_worlds(np.array([True, True, False, True]), later)
+    scene.reset_worlds(np.array([False, False, True, False]), [None, None, setup("rope", 9, 1e4), None])
+    assert scene.model is model and scene.object_names == ("cuboid", "rope", "rope", "torus")
+    setups = scene.setups
+    fresh = assemble_model([scene.mesh(w) for w in range(4)], [s.material for s in setups],
+                           [(s.position, s.quat) for s in setups], [scene.gripper.pad_half_extents] * 2,
+                           model.contact, "cpu", scene.slots)
+    for name, value in _arrays(fresh).items():
+        assert np.array_equal(getattr(model, name).numpy(), value), name
+    for name in ("node_start", "tet_start", "node_end", "tet_end", "node_aggregate"):
+        assert np.array_equal(getattr(model, name), getattr(fresh, name)), name
+    assert all(np.array_equal(a, b) for a, b in zip(model.surfaces, fresh.surfaces))
+    fresh_solver = PickupScene(dataclasses.replace(config), list(setups), slotted=True).solver.scratch
+    assert np.array_equal(scratch.node_aggregate.numpy(), fresh_solver.node_aggregate.numpy())
+    assert np.array_equal(scratch.edges.triangles.numpy(), fresh_solver.edges.triangles.numpy())
+    assert scratch.coarse_size == fresh_solver.coarse_size == 3 * scene.slots.aggregates
+    assert np.array_equal(scene.solver.scratch.edges.triangle_first.numpy(), fresh_solver.edges.triangle_first.numpy())
+    for w in range(4):
+        spare = slice(int(model.node_end[w]), int(model.node_start[w + 1]))
+        assert spare.stop - spare.start >= 1
+        np.testing.assert_array_equal(model.rest_positions.numpy()[spare], np.float32(SPARE_POSITION)[None].repeat(
+            spare.stop - spare.start, 0))
+        np.testing.assert_array_equal(scene.state.positions.numpy()[spare], model.rest_positions.numpy()[spare])
+        assert not model.free_axes.numpy()[spare].any() and not model.node_mass.numpy()[spare].any()
+        tets = slice(int(model.tet_end[w]), int(model.tet_start[w + 1]))
+        assert not model.tet_rest_volume.numpy()[tets].any() and not model.tet_mu.numpy()[tets].any()
+        assert (model.tets.numpy()[tets] == spare.start).all()
+    pos, quat = scene.gripper.flange_pose()
+    scene.step(pos, quat, scene.gripper.gap.copy())  # spare rows stay where the control prescribes them
+    for w in range(4):
+        spare = slice(int(model.node_end[w]), int(model.node_start[w + 1]))
+        np.testing.assert_array_equal(scene.state.positions.numpy()[spare], model.rest_positions.numpy()[spare])
+        assert not scene.state.velocities.numpy()[spare].any()
+
+
+def test_an_object_larger_than_the_slot_is_refused():
+    config = PickupConfig(object=("cuboid", "sphere"))
+    setup = WorldSetup("rope", Material(500.0, 1e5, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
+    with pytest.raises(ValueError, match="does not fit the slot"):
+        PickupScene(config, [setup], slotted=True)
+
+
+def test_slots_are_the_default_on_cuda_for_several_objects_only():
+    """A CPU scene stays packed (spare rows would cost its solver time; a rebuild is cheap there);
+    one object never needs slots; fixed world objects (``world_objects``) never change."""
+    setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
+    assert PickupScene(PickupConfig(object=OBJECTS), [setup]).slots is None
+    sizes = slot_sizes([PickupScene(PickupConfig(object=o), [dataclasses.replace(setup, object_name=o)]).mesh(0)
+                        for o in OBJECTS])
+    assert PickupScene(PickupConfig(object=OBJECTS), [setup], slotted=True).slots == sizes
+    assert isinstance(PickupScene(PickupConfig(), [setup]).model, Model)
+
+
+@pytest.mark.cuda
+def test_random_objects_on_cuda_change_in_place_and_agree_with_packed():
+    """On CUDA ``object="random"`` is slotted by default: autoresets change objects without a
+    rebuild, and the first steps agree with a packed run within the float atomics' rounding."""
+    if not wp.is_cuda_available():
+        pytest.skip("no CUDA device")
+    env = gym.make_vec("DeformablePickup-v0", num_envs=8, vectorization_mode="vector_entry_point", object="random",
+                       max_episode_steps=3, device="cuda:0")
+    env.reset(seed=2)
+    scene = env.unwrapped.scene
+    model, names = scene.model, set()
+    assert scene.slots is not None
+    for _ in range(12):
+        _, reward, *_ = env.step(np.zeros((8, 7), np.float32))
+        names.add(scene.object_names)
+        assert np.isfinite(reward).all()
+    assert scene.model is model and len(names) > 2
+    slotted, _, _ = _run(True, 4, "cuda:0")
+    packed, _, _ = _run(False, 4, "cuda:0")
+    for w in range(3):
+        np.testing.assert_allclose(slotted[f"3/state/{w}/positions"], packed[f"3/state/{w}/positions"], atol=1e-5)
