@@ -47,9 +47,9 @@ def _timed(fn) -> float:
     return time.perf_counter() - t0
 
 
-def run(worlds: int, obj: str, steps: int, device: str = "cpu") -> dict:
+def run(worlds: int, obj: str, steps: int, device: str = "cpu", modulus=1e5) -> dict:
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point", object=obj,
-                       autoreset_mode=AutoresetMode.DISABLED, device=device)
+                       autoreset_mode=AutoresetMode.DISABLED, device=device, youngs_modulus=modulus)
     build = _timed(lambda: env.reset(seed=0))
     full = _timed(lambda: env.reset())
     scene = env.unwrapped.scene
@@ -76,14 +76,14 @@ def run(worlds: int, obj: str, steps: int, device: str = "cpu") -> dict:
             "load": os.getloadavg()[0]}
 
 
-def autoreset_rate(worlds: int, obj: str, steps: int, device: str, episode_steps: int) -> dict:
+def autoreset_rate(worlds: int, obj: str, steps: int, device: str, episode_steps: int, modulus=1e5) -> dict:
     """World-steps/s of ``steps`` random-action steps with episodes of ``episode_steps`` steps
     (autoresets), after ``episode_steps`` warm-up steps that stagger the episodes (at warm-up step
     k the worlds w = k mod ``episode_steps`` are reset: from then on 1 / ``episode_steps`` of the
     worlds end an episode at every step, as terminations spread a learner's episodes); whether the
     scene is slotted and whether its model was rebuilt during the timed steps."""
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point", object=obj,
-                       max_episode_steps=episode_steps, device=device)
+                       max_episode_steps=episode_steps, device=device, youngs_modulus=modulus)
     env.reset(seed=0)
     space = env.action_space
     space.seed(1)
@@ -123,20 +123,23 @@ def main(argv=None) -> int:
     p.add_argument("--worlds", type=int, nargs="+", default=[16, 64])
     p.add_argument("--steps", type=int, default=5)
     p.add_argument("--device", default="cpu", help="the simulation's Warp device (cpu, cuda:0)")
+    p.add_argument("--youngs-modulus", type=float, nargs="+", default=[1e5],
+                   help="E (Pa); several: drawn per world per episode (materials change at resets)")
     p.add_argument("--episode-steps", type=int, default=0,
                    help="also time steps with episodes of this many steps (autoresets; 0: off)")
     p.add_argument("--no-append", action="store_true", help="do not append to benchmarks/RESULTS.md")
     args = p.parse_args(argv)
     wp.config.quiet = True
+    modulus = args.youngs_modulus[0] if len(args.youngs_modulus) == 1 else tuple(args.youngs_modulus)
     rows = []
     for w in args.worlds:
         for obj in ("cuboid", "random"):
-            rows.append(run(w, obj, args.steps, args.device))
+            rows.append(run(w, obj, args.steps, args.device, modulus))
             if args.episode_steps > 0:
-                rows[-1].update(autoreset_rate(w, obj, args.steps, args.device, args.episode_steps))
+                rows[-1].update(autoreset_rate(w, obj, args.steps, args.device, args.episode_steps, modulus))
     out = (f"\n## Vector env, one object vs mixed objects (bench_vector_env.py), "
            f"{datetime.datetime.now().isoformat(timespec='seconds')}\n\n"
-           f"Machine: {host()}; Warp {args.device}; commit {git_state()}; random actions, {args.steps} timed steps after 3 "
+           f"Machine: {host()}; Warp {args.device}; commit {git_state()}; E = {modulus} Pa; random actions, {args.steps} timed steps after 3 "
            f"warm-up ('next step': the first of those, after the reset of W/4); load average (1 min) after each row in the table.\n\n{table(rows)}\n")
     print(out)
     if not args.no_append:

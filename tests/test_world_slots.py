@@ -175,3 +175,24 @@ def test_random_objects_on_cuda_change_in_place_and_agree_with_packed():
     packed, _, _ = _run(False, 4, "cuda:0")
     for w in range(3):
         np.testing.assert_allclose(slotted[f"3/state/{w}/positions"], packed[f"3/state/{w}/positions"], atol=1e-5)
+
+
+def test_materials_set_in_place_equal_a_model_built_with_them():
+    """``set_world_materials`` (one scatter per array for several worlds) and ``set_world_material``
+    (one world, its tets and volumes read back) give the arrays ``build_model`` makes with the new
+    materials, bit for bit; the other worlds' rows are untouched."""
+    from defgrasp_env.envs.scene import object_mesh
+    from defgrasp_env.sim.model import build_model, set_world_material, set_world_materials
+
+    meshes = [object_mesh(n, None) for n in ("cuboid", "torus", "sphere")]
+    a = [Material(400.0, 1e4, 0.3), Material(900.0, 2e5, 0.45), Material(1200.0, 3e6, 0.2)]
+    b = [Material(1500.0, 7e6, 0.35), a[1], Material(300.0, 5e4, 0.49)]
+    model = build_model(meshes, a)
+    expected = build_model(meshes, b)
+    volumes = [model.tet_rest_volume.numpy()[model.world_tets(w)] for w in range(3)]
+    set_world_materials(model, [0], [b[0]], [np.asarray(meshes[0].tets)], volumes[:1])
+    set_world_material(model, 2, b[2])
+    for name in ("node_mass", "node_contact_stiffness", "tet_mu", "tet_lambda"):
+        assert np.array_equal(getattr(model, name).numpy(), getattr(expected, name).numpy()), name
+    with pytest.raises(ValueError, match=r"world must be in \[0, 2\], got 3"):
+        set_world_materials(model, [3], [b[0]], [np.asarray(meshes[0].tets)], volumes[:1])

@@ -27,7 +27,7 @@ from ..layout import NUM_KEYPOINTS
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.launch_cache import LaunchCache
-from ..sim.model import SPARE_POSITION, ContactParams, set_world_material
+from ..sim.model import SPARE_POSITION, ContactParams
 from ..sim.pad_motion import max_pad_travel, substeps_for_travel
 from ..sim.solve_report import SolveReport
 from ..sim.solver import ImplicitSolver, SolveStats
@@ -37,7 +37,7 @@ from ..wrist.force_limit import FORCE_TOLERANCE, limited_substep
 from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
-from .world_models import assemble_model, rewrite_worlds, slot_sizes
+from .world_models import assemble_model, rewrite_worlds, set_materials, slot_sizes
 from .scene_kernels import (close_gate_if_limited, gather_rows, mark_substep, open_period_gate, scatter_rows,
                             solve_loads, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
 
@@ -216,7 +216,7 @@ class PickupScene:
         elif changed:
             self._rewrite(changed, setups)
         m = self.model
-        rows, values = [], []
+        rows, values, materials = [], [], []
         flange_xz = np.zeros((self.num_worlds, 2))
         for w in np.flatnonzero(mask):
             s = setups[w]
@@ -227,9 +227,11 @@ class PickupScene:
             values.append(np.concatenate([(local @ quat_to_matrix(s.quat).T + s.position).astype(np.float32),
                                           np.tile(np.float32(SPARE_POSITION), (spare, 1))]))
             if s.material != self._setups[w].material:
-                set_world_material(m, w, s.material)
+                materials.append(w)
             self._setups[w] = s
             flange_xz[w] = s.position[0], s.position[2]
+        set_materials(m, materials, [self._meshes[w] for w in materials], [setups[w].material for w in materials],
+                      [Gripper.pad_half_extents] * 2)
         self.gripper.reset(mask, flange_xz)
         self._readout = None
         if rows:  # only the reset worlds' rows travel (no full-state download)

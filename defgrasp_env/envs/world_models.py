@@ -21,7 +21,7 @@ import warp as wp
 from ..sim.aggregates import bisect_nodes
 from ..sim.materials import Material
 from ..sim.meshing import TetMesh
-from ..sim.model import SPARE_POSITION, ContactParams, Model, build_model
+from ..sim.model import SPARE_POSITION, ContactParams, Model, build_model, material_fields, set_world_materials
 from ..transforms import quat_normalize, quat_to_matrix
 from ..sim.kernels.world_rows import scatter_rows
 
@@ -42,16 +42,44 @@ class SlotSizes:
     aggregates: int
 
 
-@functools.lru_cache(maxsize=256)
-def _world_template(mesh: TetMesh, material: Material, pad_half_extents: tuple, contact: ContactParams) -> dict:
-    """Host arrays of the one-world model of ``mesh`` with ``material`` (identity pose)."""
-    m = build_model([mesh], [material], pad_half_extents=[list(h) for h in pad_half_extents], contact=contact,
+#: the material-independent rows of an object, cached per mesh (its tets, rest shape and volumes)
+_GEOMETRY_FIELDS = ("free_axes", "tet_rest_inv", "tet_rest_volume")
+
+
+@functools.lru_cache(maxsize=64)
+def _geometry(mesh: TetMesh, pad_half_extents: tuple, contact: ContactParams) -> dict:
+    """Host arrays of the one-world model of ``mesh`` (identity pose) that do not depend on its
+    material (``build_model`` inverts each tet's rest matrix: ~4 ms per world on this CPU)."""
+    m = build_model([mesh], [_REFERENCE], pad_half_extents=[list(h) for h in pad_half_extents], contact=contact,
                     device="cpu")
-    out = {name: getattr(m, name).numpy() for name in (*_NODE_FIELDS, *_TET_FIELDS)}
+    out = {name: getattr(m, name).numpy() for name in _GEOMETRY_FIELDS}
     out.update(tets=m.tets.numpy(), world_volume=m.world_volume.numpy(), pad_half_extents=m.pad_half_extents.numpy(),
                gravity=m.gravity, surface=m.surfaces[0], nodes=np.asarray(mesh.nodes, dtype=np.float64),
                node_aggregate=m.node_aggregate)
     return out
+
+
+_REFERENCE = Material(1000.0, 1e5, 0.3)  # the geometry's rows do not depend on it
+
+
+@functools.lru_cache(maxsize=1024)
+def _world_template(mesh: TetMesh, material: Material, pad_half_extents: tuple, contact: ContactParams) -> dict:
+    """Host arrays of the one-world model of ``mesh`` with ``material`` (identity pose): the
+    cached geometry and the material's rows (``sim.model.material_fields``, the arrays
+    ``build_model`` makes, bit for bit)."""
+    geometry = _geometry(mesh, pad_half_extents, contact)
+    return {**geometry, **material_fields(geometry["tets"], geometry["tet_rest_volume"], len(geometry["nodes"]),
+                                          material, contact)}
+
+
+def set_materials(model: Model, worlds: Sequence[int], meshes: Sequence[TetMesh], materials: Sequence[Material],
+                  pad_half_extents: Sequence[Sequence[float]]) -> None:
+    """``sim.model.set_world_materials`` of ``worlds`` (holding ``meshes``) with their tets and rest
+    volumes from the cached geometry: no transfer from the device, one scatter per array."""
+    half = tuple(tuple(float(v) for v in h) for h in pad_half_extents)
+    geometry = [_geometry(mesh, half, model.contact) for mesh in meshes]
+    set_world_materials(model, worlds, materials, [g["tets"] for g in geometry],
+                        [g["tet_rest_volume"] for g in geometry])
 
 
 def slot_sizes(meshes: Sequence[TetMesh]) -> SlotSizes:

@@ -23,6 +23,7 @@ import warp as wp
 
 from ..transforms import quat_normalize, quat_to_matrix
 from .aggregates import bisect_nodes
+from .kernels.world_rows import scatter_rows
 from .materials import Material, check_range
 
 #: Where the spare node rows of a slotted model rest (m, world frame): far above the task, out of
@@ -281,18 +282,49 @@ def contact_stiffness(tets: np.ndarray, volumes: np.ndarray, youngs_modulus: flo
     return np.minimum(contact.stiffness, contact.modulus_scale * youngs_modulus * np.cbrt(v))
 
 
+def material_fields(tets: np.ndarray, volumes: np.ndarray, num_nodes: int, material: Material,
+                    contact: ContactParams) -> dict[str, np.ndarray]:
+    """The material-dependent rows of one object (float32, as the model stores them): its nodes'
+    ``node_mass`` and ``node_contact_stiffness`` [num_nodes], its tets' ``tet_mu`` and
+    ``tet_lambda`` [T] (tets [T, 4] local indices, volumes [T] m^3; the arrays ``build_model``
+    makes, bit for bit)."""
+    mu, lam = material.lame
+    return {"node_mass": lumped_masses(tets, volumes, material.density, num_nodes).astype(np.float32),
+            "node_contact_stiffness": contact_stiffness(tets, volumes, material.youngs_modulus, num_nodes,
+                                                        contact).astype(np.float32),
+            "tet_mu": np.full(len(tets), mu).astype(np.float32), "tet_lambda": np.full(len(tets), lam).astype(np.float32)}
+
+
+def set_world_materials(model: Model, worlds, materials, tets, volumes) -> None:
+    """Replace the materials of ``worlds`` in place (Lamé parameters, masses, contact stiffness),
+    e.g. on an env reset: one upload and one scatter per array for all of them. ``tets`` and
+    ``volumes``: per world, its object's tets [T_w, 4] (world-local node ids) and rest volumes
+    [T_w] (m^3, as the model stores them), host copies."""
+    worlds = [int(w) for w in worlds]
+    if not worlds:
+        return
+    for w in worlds:
+        if not 0 <= w < model.num_worlds:
+            raise ValueError(f"world must be in [0, {model.num_worlds - 1}], got {w}")
+    fields, node_rows, tet_rows = [], [], []
+    for w, material, t, v in zip(worlds, materials, tets, volumes):
+        nl, tl = model.world_nodes(w), model.world_tets(w)
+        fields.append(material_fields(t, v, nl.stop - nl.start, material, model.contact))
+        node_rows.append(np.arange(nl.start, nl.stop))
+        tet_rows.append(np.arange(tl.start, tl.stop))
+    d = model.device
+    for rows, names in ((node_rows, ("node_mass", "node_contact_stiffness")), (tet_rows, ("tet_mu", "tet_lambda"))):
+        index = wp.array(np.concatenate(rows).astype(np.int32), dtype=wp.int32, device=d)
+        for name in names:
+            values = wp.array(np.concatenate([f[name] for f in fields]), dtype=wp.float32, device=d)
+            wp.launch(scatter_rows, dim=len(index), inputs=[values, index, getattr(model, name)], device=d)
+
+
 def set_world_material(model: Model, world: int, material: Material) -> None:
-    """Replace the material of one world in place (mass, stiffness and contact stiffness), e.g. on
-    an env reset."""
+    """Replace the material of one world in place (``set_world_materials`` with its tets and rest
+    volumes read from the model)."""
     if not 0 <= world < model.num_worlds:
         raise ValueError(f"world must be in [0, {model.num_worlds - 1}], got {world}")
     sl, nl = model.world_tets(world), model.world_nodes(world)
-    mu, lam = material.lame
-    model.tet_mu[sl].fill_(mu)
-    model.tet_lambda[sl].fill_(lam)
-    tets = model.tets[sl].numpy() - nl.start
-    m = lumped_masses(tets, model.tet_rest_volume[sl].numpy(), material.density, nl.stop - nl.start)
-    model.node_mass[nl].assign(m.astype(np.float32))
-    k = contact_stiffness(tets, model.tet_rest_volume[sl].numpy(), material.youngs_modulus, nl.stop - nl.start,
-                          model.contact)
-    model.node_contact_stiffness[nl].assign(k.astype(np.float32))
+    set_world_materials(model, [world], [material], [model.tets[sl].numpy() - nl.start],
+                        [model.tet_rest_volume[sl].numpy()])
