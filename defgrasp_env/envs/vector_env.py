@@ -60,28 +60,39 @@ class DeformablePickupVectorEnv(VectorEnv):
     ``world_objects`` (a sequence of N names, each one of the config's objects) instead fixes world
     ``i``'s object to ``world_objects[i]`` for every episode (the rest is drawn as before: E, pose,
     ...), as a single env reset with ``options={"object": world_objects[i]}`` draws it (its
-    ``ReplaySpec`` carries that option). Worlds with different objects then never rebuild the
-    model at a reset, which a GPU learner with thousands of worlds and autoresets every step needs:
-    with ``object="random"`` nearly every step resets some world to another object and rebuilds all
-    worlds' arrays and the solver's captured graphs. Example (each of the five objects in a fifth
-    of the worlds; ``OBJECT_SHAPES`` from ``defgrasp_env.sim``): ``gym.make_vec(..., num_envs=N,
+    ``ReplaySpec`` carries that option). Worlds with different objects then keep their rows for
+    good: packed (the solver's work is exactly the sum of the objects, the fastest layout when
+    the objects need not change). Example (each of the five objects in a fifth of the worlds;
+    ``OBJECT_SHAPES`` from ``defgrasp_env.sim``): ``gym.make_vec(..., num_envs=N,
     object="random", world_objects=[list(OBJECT_SHAPES)[i % 5] for i in range(N)])``.
 
-    Storage of worlds with different objects (node and tet counts differ by world): the worlds'
-    nodes and tets stay packed in flat arrays with per-world offsets (``model.node_start``,
-    ``model.tet_start``; no padding, so the solver's work is exactly the sum of the objects). A
-    reset that changes the object of any world rebuilds the model, solver and state for the new
-    objects (``PickupScene.reset_worlds``) and copies every other world's full state to its new
-    offsets with one gather kernel per state array on the simulation's device; the grippers'
-    per-world state has no offsets and is kept. Untouched worlds stay bit-identical, and step on
-    bit for bit as before (the solver keeps no state across steps). Cost: a reset that changes an
-    object pays the assembly of all worlds' model from cached one-world models
-    (``world_models.assemble_model``: concatenation, equal to ``build_model`` bit for bit), new
-    solver scratch and state arrays, and the solver's launch recording at the next step
-    (benchmarks/bench_vector_env.py: W = 16/64 on the CPU); a reset that keeps every object (a
-    single object, or the same draw) costs what it did. A pool of prebuilt worlds per object
-    would make such resets cheaper but multiply memory and the solver's work by the pool size;
-    per-world padding to the largest object would waste up to ~3x the work of the smallest.
+    Storage of worlds with different objects (node and tet counts differ by world), chosen by the
+    scene (``PickupScene.slots``; ``model.world_nodes(w)`` / ``world_tets(w)`` are a world's object
+    rows either way):
+    - Slotted (the default on a CUDA device when the config names several objects and
+      ``world_objects`` is not given): every world gets the rows of the largest of the config's
+      objects (``world_models.slot_sizes``), its object the first, the rest spare (parked 1 km up,
+      fixed, massless; spare tets are skipped by the tet kernels and add exact zeros). A reset that
+      changes a world's object rewrites that world's rows in place (``world_models.rewrite_worlds``,
+      one scatter per array for all reset worlds): no array is reallocated, so the solver's
+      recorded launches and captured graphs stay, and other worlds are not touched. Results are
+      the packed layout's, bit for bit on the CPU (``tests/test_world_slots.py``). Cost: the spare
+      rows' node work (on an H200, ``object="random"`` without resets 6-15 % below packed); a
+      learner's batch whose episodes end at different steps resets some world to another object
+      at nearly every step, which slots make 1.9-2.7x faster than rebuilding (benchmarks/RESULTS.md).
+    - Packed (the CPU default, a single object, or ``world_objects``): nodes and tets packed in flat
+      arrays with per-world offsets (``model.node_start``, ``model.tet_start``). A reset that changes
+      the object of any world rebuilds the model, solver and state for the new objects
+      (``PickupScene.reset_worlds``) and copies every other world's full state to its new offsets
+      with one gather kernel per state array on the simulation's device; the grippers' per-world
+      state has no offsets and is kept. Untouched worlds stay bit-identical, and step on bit for
+      bit as before (the solver keeps no state across steps). Cost: the assembly of all worlds'
+      model from cached one-world models (``world_models.assemble_model``: concatenation, equal
+      to ``build_model`` bit for bit), new solver scratch and state arrays, and the solver's launch
+      recording and graph captures at the next step (on a CPU with tens of worlds cheaper than
+      stepping spare rows).
+    A world's material drawn at a reset is written in place for all reset worlds at once
+    (``sim.model.set_world_materials``).
 
     Autoreset (``autoreset_mode``): ``NEXT_STEP`` (default: a world that ended is reset by the
     following ``step``, which returns its first observation with zero reward), ``SAME_STEP`` (reset
@@ -99,7 +110,8 @@ class DeformablePickupVectorEnv(VectorEnv):
     ``step`` also takes the actions as a torch tensor (copied to the host and uploaded once).
     ``full_state_torch()`` gives the complete FEM state as zero-copy torch views of the simulation's
     own arrays (on the GPU when ``device="cuda:0"``): node positions/velocities/forces [N, 3] and
-    von Mises stress [T] of all worlds, with ``model.node_start`` / ``model.tet_start`` offsets.
+    von Mises stress [T] of all worlds, with ``model.node_start`` / ``model.tet_start`` offsets (a
+    world's object rows: ``model.world_nodes(w)`` / ``world_tets(w)``; slotted worlds' spare rows follow).
     ``render_mode="human"``: the 3D browser view of one world (``viewer_world``, default 0) at every
     reset and step, served on ``viewer_host``/``viewer_port`` as for the single env.
     """
