@@ -17,8 +17,8 @@ import warp as wp
 import defgrasp_env  # noqa: F401
 from defgrasp_env.envs.config import PickupConfig
 from defgrasp_env.envs.scene_kernels import close_gate_if_limited
-from defgrasp_env.policies import ScriptedPickupExpert
 from defgrasp_env.wrist.force_limit import FORCE_TOLERANCE
+from contact_rollout import ExpertNoisyPress
 
 
 def _run(period_graphs: bool, substeps: int, steps: int, device: str = "cpu", modulus: float = 1e6):
@@ -32,17 +32,11 @@ def _run(period_graphs: bool, substeps: int, steps: int, device: str = "cpu", mo
     obs, _ = env.reset(seed=3)
     scene = env.unwrapped.scene
     scene.period_graphs = period_graphs
-    expert = ScriptedPickupExpert.from_env(env)
-    expert.reset()
-    rng = np.random.default_rng(0)
+    policy = ExpertNoisyPress(env)
     out, graphed = {}, []
     for k in range(steps):
-        action = expert(obs)
-        action[1] = np.clip(action[1] + rng.normal(0.0, 0.5, action[1].shape), -1.0, 1.0)
-        action[2, :3] = [0.0, -1.0, 0.0]
-        action[2, -1] = 1.0
         before = scene.device_substeps
-        obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
+        obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
         graphed.append(scene.device_substeps - before)
         out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
         out[f"{k}/reward"] = np.asarray(reward)

@@ -17,9 +17,9 @@ import defgrasp_env  # noqa: F401
 from defgrasp_env.envs.config import PickupConfig
 from defgrasp_env.envs.scene import PickupScene, WorldSetup
 from defgrasp_env.envs.world_models import assemble_model, slot_sizes
-from defgrasp_env.policies import ScriptedPickupExpert
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.model import SPARE_POSITION, Model
+from contact_rollout import ExpertNoisyPress
 
 OBJECTS = ("cuboid", "torus", "rope")
 
@@ -38,17 +38,11 @@ def _run(slotted: bool, steps: int, device: str = "cpu"):
     scene = venv.scene
     assert (scene.slots is not None) == slotted
     model = scene.model
-    expert = ScriptedPickupExpert.from_env(env)
-    expert.reset()
-    rng = np.random.default_rng(0)
+    policy = ExpertNoisyPress(env)
     out, names = {}, []
     for k in range(steps):
-        action = expert(obs)
-        action[1] = np.clip(action[1] + rng.normal(0.0, 0.5, action[1].shape), -1.0, 1.0)
-        action[2, :3] = [0.0, -1.0, 0.0]
-        action[2, -1] = 1.0
-        obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
-        expert.reset(np.asarray(terminated) | np.asarray(truncated))
+        obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
+        policy.episodes_ended(terminated, truncated)
         names.append(venv.scene.object_names)
         out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
         out[f"{k}/reward"] = np.asarray(reward)
