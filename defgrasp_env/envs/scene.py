@@ -274,6 +274,11 @@ class PickupScene:
         rewrite_worlds(self.model, worlds, meshes, [setups[w].material for w in worlds],
                        [(setups[w].position, setups[w].quat) for w in worlds], [half, half])
         self.solver.scratch.rewrite_worlds(self.model, worlds)
+        # the other state's rows of these worlds held the old objects' outputs, and the solver does
+        # not write spare rows: no row of a rewritten world keeps them
+        rewritten = np.zeros(self.num_worlds, bool)
+        rewritten[worlds] = True
+        self._zero_outputs(rewritten, self._next_state)
         wp.copy(self._control.prescribed_positions, self.model.rest_positions)  # Control.from_model's
         names = list(self._object_names)
         for w, mesh in zip(worlds, meshes):
@@ -283,10 +288,11 @@ class PickupScene:
         self._object_names = tuple(names)
         self._readouts.set_objects(self.model, [object_keypoints(n, config.object_resolution) for n in names])
 
-    def _zero_outputs(self, mask: np.ndarray) -> None:
+    def _zero_outputs(self, mask: np.ndarray, state: State | None = None) -> None:
         """Velocities, forces and stresses of freshly reset worlds (at rest shape, untouched): zeroed
-        by kernels on the device, row by row of the worlds in ``mask``."""
-        m, st, d = self.model, self.state, self.model.device
+        by kernels on the device, row by row of the worlds in ``mask`` (in ``state``, default the
+        current one)."""
+        m, st, d = self.model, state if state is not None else self.state, self.model.device
         world_mask = wp.array(mask.astype(np.int32), dtype=wp.int32, device=d)
         for array, row_world in ((st.velocities, m.node_world), (st.elastic_force, m.node_world),
                                  (st.contact_force, m.node_world), (st.pad_force, self._pad_world)):

@@ -322,7 +322,7 @@ def _outputs(c: _Context) -> list:
     return [c.rec(ksub.clear_outputs, m.num_worlds, s.solve_worlds, m.pads_per_world, work.pad_normal_force,
                   work.pad_force, s.res_norm),
             *_nodes(c, x, s.solve_worlds, 1), _tets(c, x, s.solve_worlds, outputs=1), _begin_solve(c, s.solve_worlds),
-            c.rec(ksub.mean_stress, m.num_worlds, work.von_mises, m.tet_rest_volume, s.tet_start, s.solve_worlds,
+            c.rec(ksub.mean_stress, m.num_worlds, work.von_mises, m.tet_rest_volume, s.tet_start, s.tet_end, s.solve_worlds,
                   m.world_volume, work.mean_von_mises)]
 
 

@@ -101,7 +101,8 @@ class SolverScratch:
     tet_rotation: wp.array      # [T] quat: polar rotation of each tet at the last evaluated positions (warm start)
     tet_r: wp.array             # [T] mat33: the rotation at the last Newton iterate as a matrix
     tet_twist: wp.array         # [T] float: twist factor of the fixed-corotated Hessian there
-    tet_start: wp.array         # [W+1] int: first tet of each world (a world's tets are contiguous)
+    tet_start: wp.array         # [W+1] int: first tet row of each world (a world's tets are contiguous)
+    tet_end: wp.array           # [W] int: one past the last tet of each world's object (``Model.tet_end``)
     # contact, lagged at the substep start
     lag_normal_force: wp.array  # [N*(P+1)] float, N: normal force per node and contact (0: ground, 1+k: pad k)
     lag_normal: wp.array        # [N*(P+1)] vec3: normal of that contact (pad frame for pads: the contact face)
@@ -189,6 +190,7 @@ class SolverScratch:
             coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
             coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
             coarse_guess=vec(), tet_start=wp.array(np.asarray(model.tet_start, dtype=np.int32), dtype=int, device=d),
+            tet_end=wp.array(np.asarray(model.tet_end, dtype=np.int32), dtype=int, device=d),
             edges=EdgeContactScratch.from_model(model),
         )
         scratch.solve_worlds.fill_(1)
@@ -197,7 +199,7 @@ class SolverScratch:
 
     def rewrite_worlds(self, model: Model, worlds) -> None:
         """The rows of ``worlds`` that this scratch copies from ``model`` (coarse aggregates, surface
-        triangles), written again after ``model``'s rows of them changed in place (a slotted
+        triangles, the objects' last tets), written again after ``model``'s rows of them changed in place (a slotted
         model's object change, ``envs.world_models.rewrite_worlds``)."""
         worlds = [int(w) for w in worlds]
         if not worlds:
@@ -206,6 +208,7 @@ class SolverScratch:
             raise ValueError(f"the model's worlds now name {int(model.node_aggregate.max()) + 1} coarse aggregates, "
                              f"more than the {self.coarse_size // 3} this scratch was made for")
         d = model.device
+        self.tet_end.assign(np.asarray(model.tet_end, dtype=np.int32))
         rows = np.concatenate([np.arange(model.node_start[w], model.node_start[w + 1]) for w in worlds])
         wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(model.node_aggregate[rows], dtype=int, device=d),
                                                     wp.array(rows.astype(np.int32), dtype=int, device=d)],

@@ -121,19 +121,21 @@ def mean_stress(
     von_mises: wp.array(dtype=float),
     rest_volume: wp.array(dtype=float),
     tet_start: wp.array(dtype=int),
+    tet_end: wp.array(dtype=int),
     solve: wp.array(dtype=int),
     world_volume: wp.array(dtype=float),
     mean: wp.array(dtype=float),
 ):
-    """One thread per solved world w: ``mean[w]`` = the volume-weighted mean of its tets' von Mises
-    stress, summed in tet order (the order of the CPU's atomic sum before; on a GPU deterministic
-    and without 4,096-way contention on per-world atomics)."""
+    """One thread per solved world w: ``mean[w]`` = the volume-weighted mean of its object's tets'
+    (``tet_start[w]:tet_end[w]``) von Mises stress, summed in tet order (the order of the CPU's
+    atomic sum before; on a GPU deterministic and without 4,096-way contention on per-world
+    atomics)."""
     w = wp.tid()
     if solve[w] == 0:
         return
     total = float(0.0)
     volume = world_volume[w]
-    for t in range(tet_start[w], tet_start[w + 1]):
+    for t in range(tet_start[w], tet_end[w]):
         total = total + von_mises[t] * rest_volume[t] / volume
     mean[w] = total
 
