@@ -97,11 +97,14 @@ class PickupScene:
     Public: ``config``, ``num_worlds``, ``gripper`` (the W grippers' state and kinematics),
     ``model`` / ``state`` (the FEM's static data and current full state, Newton style: read, do not
     write), ``solver`` (built with ``substeps=1``),
-    ``substeps``, ``period_graphs`` and ``device_substeps`` (a control period as one graph), and
-    the read-only accessors ``object_names``, ``setups``, ``materials``,
+    ``substeps``, ``period_graphs`` and ``device_substeps`` (a control period as one graph),
+    ``slots`` (each world's rows fit any of the config's objects, or None: packed), and the
+    read-only accessors ``object_names``, ``setups``, ``materials``,
     ``mesh(w)`` and the readouts below (``readout()``: reduced on the device once per state).
-    ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object: read
-    them from the scene after each reset rather than holding on to them. Between resets ``state``
+    ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object in a
+    packed scene (a slotted one keeps them): read them from the scene after each reset rather than
+    holding on to them. ``slotted`` (constructor): None = slotted where the config names several
+    objects and the device is CUDA (a rebuild recaptures every graph there). Between resets ``state``
     is the same object after every ``step`` (zero-copy views of its arrays see each step); within a
     step two states alternate (a substep's solves read the current one, untouched, and write the
     other, which becomes current when a solve is accepted), and a step of an odd number of
