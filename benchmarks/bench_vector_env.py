@@ -67,7 +67,8 @@ def run(worlds: int, obj: str, steps: int, device: str = "cpu", modulus=1e5) -> 
     for _ in range(steps):
         a = space.sample()
         times.append(_timed(lambda: env.step(a)))
-    nodes = int(scene.model.num_nodes)
+    m = scene.model  # the objects' nodes (a slotted model's spare rows excluded)
+    nodes = int(np.sum(getattr(m, "node_end", m.node_start[1:]) - m.node_start[:-1]))
     env.close()
     t = np.array(times)
     return {"W": worlds, "object": obj, "nodes": nodes, "build_ms": 1e3 * build, "full_ms": 1e3 * full,

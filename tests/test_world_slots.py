@@ -18,20 +18,20 @@ from defgrasp_env.envs.config import PickupConfig
 from defgrasp_env.envs.scene import PickupScene, WorldSetup
 from defgrasp_env.envs.world_models import assemble_model, slot_sizes
 from defgrasp_env.sim.materials import Material
-from defgrasp_env.sim.model import SPARE_POSITION, Model
+from defgrasp_env.sim.model import SPARE_POSITION
 from contact_rollout import ExpertNoisyPress
 
 OBJECTS = ("cuboid", "torus", "rope")
 
 
 def _run(slotted: bool, steps: int, device: str = "cpu"):
-    """W = 3 worlds drawing from three objects at E = 1e6 (episodes of 15 steps, so autoresets
-    redraw objects): the expert, the expert with noise, and a world closing over the object and
+    """W = 3 worlds drawing from three objects, two moduli and two densities (episodes of 15 steps,
+    so autoresets redraw objects and materials): the expert, the expert with noise, and a world closing over the object and
     pressing it into the ground. The scene is replaced after the first reset by a slotted or a
     packed one (``slotted``) of the same setups. Returns every output and the
     object names after each step."""
     env = gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point", object=OBJECTS,
-                       youngs_modulus=1e6, max_episode_steps=15, device=device)
+                       youngs_modulus=(1e5, 1e6), density=(500.0, 1200.0), max_episode_steps=15, device=device)
     obs, _ = env.reset(seed=11)
     venv = env.unwrapped
     venv.scene = PickupScene(venv.config, list(venv.scene.setups), slotted=slotted)
@@ -70,6 +70,9 @@ def test_slotted_episodes_give_the_bits_of_packed_ones_through_object_changes():
     packed, packed_names, _ = _run(False, steps)
     assert names == packed_names
     assert len({n for step in names for n in step}) == 3 and len(set(names)) >= 3  # objects changed
+    moduli = {float(packed[k][w]) for k in packed if k.endswith("/info/youngs_modulus") for w in range(3)
+              if packed[k.replace("youngs_modulus", "_youngs_modulus")][w]}
+    assert moduli == {1e5, 1e6}  # materials were drawn at the resets
     assert slotted.keys() == packed.keys()
     differ = [k for k in packed if not np.array_equal(slotted[k], packed[k], equal_nan=True)
               or slotted[k].dtype != packed[k].dtype]
@@ -138,15 +141,16 @@ def test_an_object_larger_than_the_slot_is_refused():
         PickupScene(config, [setup], slotted=True)
 
 
-def test_slots_are_the_default_on_cuda_for_several_objects_only():
-    """A CPU scene stays packed (spare rows would cost its solver time; a rebuild is cheap there);
-    one object never needs slots; fixed world objects (``world_objects``) never change."""
+def test_slots_are_asked_for_or_left_out():
+    """A CPU scene stays packed by default (spare rows would cost its solver time; a rebuild is
+    cheap there; the CUDA default is checked by the CUDA test below); one object needs no slots;
+    asked for, the slot fits every object of the config."""
     setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
     assert PickupScene(PickupConfig(object=OBJECTS), [setup]).slots is None
     sizes = slot_sizes([PickupScene(PickupConfig(object=o), [dataclasses.replace(setup, object_name=o)]).mesh(0)
                         for o in OBJECTS])
     assert PickupScene(PickupConfig(object=OBJECTS), [setup], slotted=True).slots == sizes
-    assert isinstance(PickupScene(PickupConfig(), [setup]).model, Model)
+    assert PickupScene(PickupConfig(), [setup]).slots is None
 
 
 @pytest.mark.cuda
@@ -191,3 +195,32 @@ def test_materials_set_in_place_equal_a_model_built_with_them():
         assert np.array_equal(getattr(model, name).numpy(), getattr(expected, name).numpy()), name
     with pytest.raises(ValueError, match=r"world must be in \[0, 2\], got 3"):
         set_world_materials(model, [3], [b[0]], [np.asarray(meshes[0].tets)], volumes[:1])
+
+
+def test_a_bad_rewrite_is_refused_before_anything_changes():
+    """Worlds out of range or repeated, missing meshes or poses, and an object whose coarse
+    aggregates exceed the slot's are refused, naming the problem, with the model untouched."""
+    from defgrasp_env.envs.scene import object_mesh
+    from defgrasp_env.envs.world_models import rewrite_worlds
+    from defgrasp_env.sim.model import set_world_materials
+
+    config = PickupConfig(object=("cuboid", "sphere"))
+    setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
+    scene = PickupScene(config, [setup, setup], slotted=True)
+    model = scene.model
+    before = {name: a.copy() for name, a in _arrays(model).items()}
+    ends = model.node_end.copy()
+    sphere, rope = object_mesh("sphere", None), object_mesh("rope", None)
+    pose = (np.zeros(3), np.array([0, 0, 0, 1.0]))
+    half = [scene.gripper.pad_half_extents] * 2
+    cases = [([0, 0], [sphere, sphere], r"worlds must be distinct"), ([2], [sphere], r"in \[0, 1\], got \[2\]"),
+             ([0, 1], [sphere], "need one mesh, material and pose per world"), ([0], [rope], "does not fit the slot")]
+    for worlds, meshes, message in cases:
+        with pytest.raises(ValueError, match=message):
+            rewrite_worlds(model, worlds, meshes, [setup.material] * len(meshes), [pose] * len(meshes), half)
+    with pytest.raises(ValueError, match="need one material, tets and volumes per world"):
+        set_world_materials(model, [0, 1], [setup.material], [np.zeros((0, 4))], [np.zeros(0)])
+    with pytest.raises(ValueError, match=r"world 0 has \d+ tets, got 3 tets"):
+        set_world_materials(model, [0], [setup.material], [np.zeros((3, 4), int)], [np.zeros(3)])
+    assert all(np.array_equal(getattr(model, name).numpy(), a) for name, a in before.items())
+    assert np.array_equal(model.node_end, ends)

@@ -23,6 +23,7 @@ import numpy as np
 import warp as wp
 
 from ..gripper import Gripper, pad_reach
+from ..gripper import gripper as gripper_module
 from ..layout import NUM_KEYPOINTS
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
@@ -104,7 +105,8 @@ class PickupScene:
     ``model``, ``state`` and ``solver`` are replaced when a reset changes a world's object in a
     packed scene (a slotted one keeps them): read them from the scene after each reset rather than
     holding on to them. ``slotted`` (constructor): None = slotted where the config names several
-    objects and the device is CUDA (a rebuild recaptures every graph there). Between resets ``state``
+    objects, there are several worlds and the device is CUDA (a rebuild recaptures every graph
+    there; a single env builds a new scene for another object anyway). Between resets ``state``
     is the same object after every ``step`` (zero-copy views of its arrays see each step); within a
     step two states alternate (a substep's solves read the current one, untouched, and write the
     other, which becomes current when a solve is accepted), and a step of an odd number of
@@ -115,7 +117,7 @@ class PickupScene:
         self.config = config
         self.num_worlds = len(setups)
         if slotted is None:  # a rebuild recaptures every graph: on a GPU it costs more than spare rows do
-            slotted = len(config.object_names) > 1 and wp.get_device(config.device).is_cuda
+            slotted = len(config.object_names) > 1 and self.num_worlds > 1 and wp.get_device(config.device).is_cuda
         #: the slot of every world (``world_models.SlotSizes``: each world's rows fit any of the
         #: config's objects, so that a reset changes a world's object in place), or None: packed
         #: rows, and a reset that changes an object rebuilds every array (``_rebuild``)
@@ -389,7 +391,8 @@ class PickupScene:
         if not (self.period_graphs and self.solver.graphs) or self._period_graph_failed:
             return 0, False
         gripper = self.gripper
-        key = (count, h, gripper.driver.config, gripper.wrist_force_limit)
+        # every scalar the graph's launches bake in (the gripper's plan reads the module's HOLD_COSINE)
+        key = (count, h, gripper.driver.config, gripper.wrist_force_limit, gripper_module.HOLD_COSINE)
         graph = self._period_graphs.get(key)
         if graph is None:
             if key not in self._periods_recorded:

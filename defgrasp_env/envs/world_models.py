@@ -6,8 +6,9 @@ world's data there depends on its own mesh, material and pose only).
 
 With ``slots`` (``slot_sizes`` of every object the worlds may hold) the model is slotted
 (``sim.model``): every world gets the same rows, its object the first ones, spare rows after, so
-``rewrite_worlds`` changes the objects of some worlds in place (their rows only, by device
-scatters) and every array, and so every recorded launch and captured graph, stays valid."""
+``rewrite_worlds`` changes the objects of some worlds in place (their rows of the model only, by
+device scatters; no array is reallocated). What else copies model rows must follow (the solver's
+scratch, a control's prescribed positions, readouts, states: ``PickupScene._rewrite``)."""
 
 from __future__ import annotations
 
@@ -103,9 +104,10 @@ def _rows(part: dict, pose: tuple, node_start: int, slots: SlotSizes | None) -> 
     if slots is None:
         return rows
     spare_nodes, spare_tets = slots.nodes - n, slots.tets - t
-    if spare_nodes < 1 or spare_tets < 0 or slots.triangles < len(part["surface"]):
-        raise ValueError(f"an object of {n} nodes, {t} tets and {len(part['surface'])} surface triangles does not "
-                         f"fit the slot {slots}")
+    aggregates = int(part["node_aggregate"].max()) + 1
+    if spare_nodes < 1 or spare_tets < 0 or slots.triangles < len(part["surface"]) or aggregates > slots.aggregates:
+        raise ValueError(f"an object of {n} nodes, {t} tets, {len(part['surface'])} surface triangles and {aggregates} "
+                         f"coarse aggregates does not fit the slot {slots}")
     spare = node_start + n  # the slot's first spare node: what its spare tets name
 
     def pad(a, count, value=0):
@@ -172,20 +174,28 @@ def rewrite_worlds(model: Model, worlds: Sequence[int], meshes: Sequence[TetMesh
     """Give the ``worlds`` of a slotted ``model`` the objects ``meshes`` (one per world listed) with
     ``materials`` at ``poses``, in place: their rows of every node and tet array, rest positions,
     volumes and aggregates, as ``assemble_model`` would build them (bit for bit), by one scatter
-    per array; the other worlds' rows are not touched."""
+    per array; the other worlds' rows are not touched. Everything is checked before anything is
+    written (distinct worlds in range, one mesh, material and pose each, each object fitting the
+    slot)."""
     slots = _slots_of(model)
+    worlds = [int(w) for w in worlds]
+    if not len(meshes) == len(materials) == len(poses) == len(worlds):
+        raise ValueError(f"need one mesh, material and pose per world: {len(worlds)} worlds, {len(meshes)} meshes, "
+                         f"{len(materials)} materials, {len(poses)} poses")
+    if len(set(worlds)) != len(worlds) or any(not 0 <= w < model.num_worlds for w in worlds):
+        raise ValueError(f"worlds must be distinct, in [0, {model.num_worlds - 1}], got {worlds}")
     half = tuple(tuple(float(v) for v in h) for h in pad_half_extents)
-    rows, node_index, tet_index = [], [], []
-    for w, mesh, mat, pose in zip(worlds, meshes, materials, poses):
-        part = _world_template(mesh, mat, half, model.contact)
+    parts = [_world_template(mesh, mat, half, model.contact) for mesh, mat in zip(meshes, materials)]
+    rows = [_rows(part, pose, int(model.node_start[w]), slots) for w, part, pose in zip(worlds, parts, poses)]
+    node_index, tet_index = [], []
+    for w, part, r in zip(worlds, parts, rows):  # all fit (``_rows`` raised otherwise): write
         start, tstart = int(model.node_start[w]), int(model.tet_start[w])
-        rows.append(_rows(part, pose, start, slots))
         node_index.append(np.arange(start, start + slots.nodes))
         tet_index.append(np.arange(tstart, tstart + slots.tets))
         model.node_end[w] = start + len(part["nodes"])
         model.tet_end[w] = tstart + len(part["tets"])
         model.surfaces[w] = part["surface"]
-        model.node_aggregate[start:start + slots.nodes] = rows[-1]["node_aggregate"]
+        model.node_aggregate[start:start + slots.nodes] = r["node_aggregate"]
     if not rows:
         return
     d = model.device

@@ -301,11 +301,17 @@ def set_world_materials(model: Model, worlds, materials, tets, volumes) -> None:
     ``volumes``: per world, its object's tets [T_w, 4] (world-local node ids) and rest volumes
     [T_w] (m^3, as the model stores them), host copies."""
     worlds = [int(w) for w in worlds]
-    if not worlds:
-        return
-    for w in worlds:
+    if not len(materials) == len(tets) == len(volumes) == len(worlds):
+        raise ValueError(f"need one material, tets and volumes per world: {len(worlds)} worlds, {len(materials)} "
+                         f"materials, {len(tets)} tets, {len(volumes)} volumes")
+    for w, t, v in zip(worlds, tets, volumes):
         if not 0 <= w < model.num_worlds:
             raise ValueError(f"world must be in [0, {model.num_worlds - 1}], got {w}")
+        sl = model.world_tets(w)
+        if len(t) != sl.stop - sl.start or len(v) != len(t):
+            raise ValueError(f"world {w} has {sl.stop - sl.start} tets, got {len(t)} tets and {len(v)} volumes")
+    if not worlds:
+        return
     fields, node_rows, tet_rows = [], [], []
     for w, material, t, v in zip(worlds, materials, tets, volumes):
         nl, tl = model.world_nodes(w), model.world_tets(w)
