@@ -6,8 +6,6 @@ and a model rewritten in place must equal one assembled afresh for the same worl
 
 from __future__ import annotations
 
-import dataclasses
-
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -15,7 +13,7 @@ import warp as wp
 
 import defgrasp_env  # noqa: F401
 from defgrasp_env.envs.config import PickupConfig
-from defgrasp_env.envs.scene import PickupScene, WorldSetup
+from defgrasp_env.envs.scene import PickupScene, WorldSetup, object_mesh
 from defgrasp_env.envs.world_models import assemble_model, slot_sizes
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.model import SPARE_POSITION
@@ -110,7 +108,7 @@ def test_a_model_rewritten_in_place_equals_one_assembled_afresh():
     for name in ("node_start", "tet_start", "node_end", "tet_end", "node_aggregate"):
         assert np.array_equal(getattr(model, name), getattr(fresh, name)), name
     assert all(np.array_equal(a, b) for a, b in zip(model.surfaces, fresh.surfaces))
-    fresh_solver = PickupScene(dataclasses.replace(config), list(setups), slotted=True).solver.scratch
+    fresh_solver = PickupScene(config, list(setups), slotted=True).solver.scratch
     assert np.array_equal(scratch.node_aggregate.numpy(), fresh_solver.node_aggregate.numpy())
     assert np.array_equal(scratch.tet_end.numpy(), fresh_solver.tet_end.numpy())
     assert np.array_equal(scratch.edges.triangles.numpy(), fresh_solver.edges.triangles.numpy())
@@ -147,8 +145,7 @@ def test_slots_are_asked_for_or_left_out():
     asked for, the slot fits every object of the config."""
     setup = WorldSetup("cuboid", Material(500.0, 1e5, 0.3), np.zeros(3), np.array([0, 0, 0, 1.0]))
     assert PickupScene(PickupConfig(object=OBJECTS), [setup]).slots is None
-    sizes = slot_sizes([PickupScene(PickupConfig(object=o), [dataclasses.replace(setup, object_name=o)]).mesh(0)
-                        for o in OBJECTS])
+    sizes = slot_sizes([object_mesh(o, None) for o in OBJECTS])
     assert PickupScene(PickupConfig(object=OBJECTS), [setup], slotted=True).slots == sizes
     assert PickupScene(PickupConfig(), [setup]).slots is None
 
@@ -180,7 +177,6 @@ def test_materials_set_in_place_equal_a_model_built_with_them():
     """``set_world_materials`` (one scatter per array for several worlds) and ``set_world_material``
     (one world, its tets and volumes read back) give the arrays ``build_model`` makes with the new
     materials, bit for bit; the other worlds' rows are untouched."""
-    from defgrasp_env.envs.scene import object_mesh
     from defgrasp_env.sim.model import build_model, set_world_material, set_world_materials
 
     meshes = [object_mesh(n, None) for n in ("cuboid", "torus", "sphere")]
@@ -200,7 +196,6 @@ def test_materials_set_in_place_equal_a_model_built_with_them():
 def test_a_bad_rewrite_is_refused_before_anything_changes():
     """Worlds out of range or repeated, missing meshes or poses, and an object whose coarse
     aggregates exceed the slot's are refused, naming the problem, with the model untouched."""
-    from defgrasp_env.envs.scene import object_mesh
     from defgrasp_env.envs.world_models import rewrite_worlds
     from defgrasp_env.sim.model import set_world_materials
 

@@ -43,6 +43,9 @@ class SlotSizes:
     aggregates: int
 
 
+_REFERENCE = Material(1000.0, 1e5, 0.3)  # the geometry's rows do not depend on it
+
+
 #: the material-independent rows of an object, cached per mesh (its tets, rest shape and volumes)
 _GEOMETRY_FIELDS = ("free_axes", "tet_rest_inv", "tet_rest_volume")
 
@@ -58,9 +61,6 @@ def _geometry(mesh: TetMesh, pad_half_extents: tuple, contact: ContactParams) ->
                gravity=m.gravity, surface=m.surfaces[0], nodes=np.asarray(mesh.nodes, dtype=np.float64),
                node_aggregate=m.node_aggregate)
     return out
-
-
-_REFERENCE = Material(1000.0, 1e5, 0.3)  # the geometry's rows do not depend on it
 
 
 @functools.lru_cache(maxsize=1024)
@@ -212,7 +212,6 @@ def rewrite_worlds(model: Model, worlds: Sequence[int], meshes: Sequence[TetMesh
         scatter(tets, name, dtype, getattr(model, name))
     scatter(nodes, "rest_positions", wp.vec3, model.rest_positions)
     scatter(tets, "tets", wp.vec4i, model.tets)
-    volumes = wp.array(np.concatenate([_world_template(m, mat, half, model.contact)["world_volume"]
-                                       for m, mat in zip(meshes, materials)]), dtype=wp.float32, device=d)
+    volumes = wp.array(np.concatenate([part["world_volume"] for part in parts]), dtype=wp.float32, device=d)
     index = wp.array(np.asarray(worlds, dtype=np.int32), dtype=wp.int32, device=d)
     wp.launch(scatter_rows, dim=len(index), inputs=[volumes, index, model.world_volume], device=d)

@@ -199,18 +199,17 @@ def build_model(
             raise ValueError(f"world {w}: tet {bad} is inverted or degenerate (6*volume = {det[bad]:.3e} m^3); "
                              "tets must be positively oriented with non-zero volume")
         vol = det / 6.0
-        mu, lam = material.lame
-        m = lumped_masses(t, vol, material.density, len(x))
+        fields = material_fields(t, vol, len(x), material, contact)
         positions.append(x)
         aggregates.append(bisect_nodes(nodes))
         tets.append(t + node_start[-1])
         rest_inv.append(np.linalg.inv(dm))
         volumes.append(vol)
-        mus.append(np.full(len(t), mu))
-        lams.append(np.full(len(t), lam))
+        mus.append(fields["tet_mu"])
+        lams.append(fields["tet_lambda"])
         tet_world.append(np.full(len(t), w))
-        masses.append(m)
-        node_stiffness.append(contact_stiffness(t, vol, material.youngs_modulus, len(x), contact))
+        masses.append(fields["node_mass"])
+        node_stiffness.append(fields["node_contact_stiffness"])
         node_world.append(np.full(len(x), w))
         fa = np.zeros((len(x), 3), bool) if fixed_axes is None else np.asarray(fixed_axes[w], bool)
         if fa.shape != (len(x), 3):

@@ -199,18 +199,19 @@ class SolverScratch:
 
     def rewrite_worlds(self, model: Model, worlds) -> None:
         """The rows of ``worlds`` that this scratch copies from ``model`` (coarse aggregates, surface
-        triangles, the objects' last tets), written again after ``model``'s rows of them changed in place (a slotted
-        model's object change, ``envs.world_models.rewrite_worlds``)."""
+        triangles, the objects' last tets), written again after ``model``'s rows of them changed in
+        place (a slotted model's object change, ``envs.world_models.rewrite_worlds``)."""
         worlds = [int(w) for w in worlds]
         if not worlds:
             return
-        if int(model.node_aggregate.max()) + 1 > self.coarse_size // 3:
-            raise ValueError(f"the model's worlds now name {int(model.node_aggregate.max()) + 1} coarse aggregates, "
-                             f"more than the {self.coarse_size // 3} this scratch was made for")
+        rows = np.concatenate([np.arange(model.node_start[w], model.node_start[w + 1]) for w in worlds])
+        aggregates = model.node_aggregate[rows]
+        if int(aggregates.max()) + 1 > self.coarse_size // 3:
+            raise ValueError(f"the rewritten worlds name {int(aggregates.max()) + 1} coarse aggregates, more than the "
+                             f"{self.coarse_size // 3} this scratch was made for")
         d = model.device
         self.tet_end.assign(np.asarray(model.tet_end, dtype=np.int32))
-        rows = np.concatenate([np.arange(model.node_start[w], model.node_start[w + 1]) for w in worlds])
-        wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(model.node_aggregate[rows], dtype=int, device=d),
+        wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(aggregates, dtype=int, device=d),
                                                     wp.array(rows.astype(np.int32), dtype=int, device=d)],
                   outputs=[self.node_aggregate], device=d)
         e = self.edges
