@@ -157,7 +157,7 @@ def held_rope_steps(mode: str, steps: int = 6, config: SolverConfig = SolverConf
     solver = ImplicitSolver(model, dataclasses.replace(config, graphs={"step": True, "fallback": None}.get(mode, False)))
     run, graphs = solver._substep_launches(DT / config.substeps, state, state, control)  # what ``step`` replays
     if mode == "launches":
-        for phase in (run.lag, run.evaluate, run.cg, run.coarse_post, run.energy0, run.trial, run.apply,
+        for phase in (run.lag, run.evaluate, run.cg, run.cg_world, run.coarse_post, run.energy0, run.trial, run.apply,
                       run.outputs, *run.pads):
             for seq in phase:
                 seq.graph = None
@@ -206,7 +206,8 @@ def test_device_loops_stop_early_and_take_the_extra_iterations():
     Newton before its cap (and CG before its last block); without them the regular loop runs all
     its passes; a patient world that cannot meet the tolerance gets exactly ``patient_iterations``
     extra Newton iterations per substep."""
-    cfg = SolverConfig(substeps=1, newton_iterations=6, cg_iterations=40, check_every=4)
+    # CG phase by phase (world_cg_threads=0): its loop counts CG blocks
+    cfg = SolverConfig(substeps=1, newton_iterations=6, cg_iterations=40, check_every=4, world_cg_threads=0)
     solver, reports, cg_blocks = _resting_rope(cfg, 12)
     assert int(reports[-1].newton_iterations[0]) < 6
     assert solver.loops.count["newton"].numpy()[0] < 6 and min(cg_blocks) < 10, cg_blocks

@@ -36,6 +36,11 @@ __all__ = ["ImplicitSolver", "SolveStats", "SolverConfig"]
 _LAUNCH_SETS = 8
 #: ``SolverConfig.listed_cg_worlds`` on CUDA when it is None.
 LISTED_CG_WORLDS_CUDA = 8
+#: ``SolverConfig.world_cg_threads`` when it is None, by device kind.
+WORLD_CG_THREADS = {"cuda": 256, "cpu": 1}
+#: The largest ``SolverConfig.world_cg_threads``: a block of 256 threads fits in an SM's 64 K
+#: registers at any register count (at most 255 a thread); 1024 failed to launch on an H200.
+MAX_WORLD_CG_THREADS = 256
 
 
 @dataclass(frozen=True)
@@ -89,6 +94,14 @@ class SolverConfig:
             few worlds' rows cost instead of a thread per row of every world. None (default):
             ``LISTED_CG_WORLDS_CUDA`` on CUDA, 0 on the CPU (where it measured slower: W = 48 on a
             2-core CPU, 4-19 % longer solves; benchmarks/RESULTS.md).
+        world_cg_threads: each world's CG of a Newton iteration in one launch
+            (``kernels/world_cg.py``): a block of this many threads per world runs its iterations to
+            its own stopping test, with block barriers between CG's phases, instead of five or six
+            launches per iteration over all rows (and ``listed_cg_worlds``, then unused). 0 = off.
+            On CUDA the block size (1 to 256, a multiple of 32 above 32); on the CPU, which runs a
+            launch's threads one after another, any positive value means one thread per world, and
+            the results are bit-identical to CG phase by phase. None (default):
+            ``WORLD_CG_THREADS`` of the device's kind.
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
@@ -108,6 +121,7 @@ class SolverConfig:
     penetration_iterations: int = 8
     patient_iterations: int = 60
     listed_cg_worlds: int | None = None
+    world_cg_threads: int | None = None
     graphs: bool | None = None
 
     def __post_init__(self) -> None:
@@ -115,10 +129,16 @@ class SolverConfig:
                   ("check_every", 0), ("penetration_iterations", 0), ("patient_iterations", 0)]
         if self.listed_cg_worlds is not None:  # None: the device's default
             counts.append(("listed_cg_worlds", 0))
+        if self.world_cg_threads is not None:
+            counts.append(("world_cg_threads", 0))
         for name, low in counts:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+        threads = self.world_cg_threads
+        if threads is not None and (threads > MAX_WORLD_CG_THREADS or (threads > 32 and threads % 32)):
+            raise ValueError(f"world_cg_threads must be 0 (off), 1 to 32, or a multiple of 32 up to "
+                             f"{MAX_WORLD_CG_THREADS} (a CUDA thread block per world), got {threads}")
         check_range("newton_tolerance", self.newton_tolerance, 0.0, math.inf, "m")
         check_range("cg_tolerance", self.cg_tolerance, 0.0, 1.0)
         check_range("cg_tolerance_far", self.cg_tolerance_far, 0.0, 1.0)
@@ -189,9 +209,15 @@ class ImplicitSolver:
         if capacity is None:
             capacity = 0 if is_cpu else LISTED_CG_WORLDS_CUDA
         self.compaction = WorldCompaction.from_model(model, capacity, self.scratch.edges.points_per_world)
+        threads = config.world_cg_threads
+        if threads is None:
+            threads = WORLD_CG_THREADS["cpu" if is_cpu else "cuda"]
+        #: threads per world of CG in one launch (``SolverConfig.world_cg_threads``; 1 on the CPU; 0: off)
+        self.world_cg_threads = min(threads, 1) if is_cpu else threads
         # outside a captured step, capture_if reads its condition on the host: free on the CPU, a
         # synchronisation per CG block on CUDA (where listing is then not used)
-        self._listed_cg = self.compaction.pays(model) and (self.graphs or is_cpu)
+        self._listed_cg = (not self.world_cg_threads and self.compaction.pays(model)
+                           and (self.graphs or is_cpu))
         self._report = SolveReport(model.num_worlds, model.device)
         self._solving_all = True  # scratch.solve_worlds holds all ones
         self._launches: dict[tuple, tuple] = {}
@@ -340,9 +366,15 @@ class ImplicitSolver:
             cmd.launch()
 
     def _run_cg(self, run: SubstepLaunches) -> None:
-        """CG in blocks of ``run.cg_block`` iterations (a world stops at its own test or at
-        ``cg_iterations``; later iterations of a block skip it) while a world iterates; a block
-        runs over the listed worlds' rows once few still iterate (``listed_cg_worlds``)."""
+        """Each world's CG in one launch (``world_cg_threads``), or CG in blocks of
+        ``run.cg_block`` iterations (a world stops at its own test or at ``cg_iterations``; later
+        iterations of a block skip it) while a world iterates; a block runs over the listed worlds'
+        rows once few still iterate (``listed_cg_worlds``)."""
+        if run.cg_world:
+            for cmd in run.cg_world:
+                cmd.launch()
+            return
+
         def over_all():
             for cmd in run.cg:
                 cmd.launch()
@@ -397,7 +429,8 @@ class ImplicitSolver:
                      record_substep_launches(self.model, self.config, self.scratch, state_out, control, h,
                                              start_pads=(state_in.pad_positions, state_in.pad_orientations),
                                              step_start=step_start, compaction=self.compaction,
-                                             listed_cg=self._listed_cg, phase_graphs=not self.graphs), {})
+                                             listed_cg=self._listed_cg, phase_graphs=not self.graphs,
+                                             world_cg_threads=self.world_cg_threads), {})
         self._launches[key] = entry  # most recently used last
         while len(self._launches) > _LAUNCH_SETS:
             self._launches.pop(next(iter(self._launches)))

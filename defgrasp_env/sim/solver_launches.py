@@ -32,6 +32,7 @@ from .kernels import energy as kenergy
 from .kernels import line_search as kls
 from .kernels import linear_solve as klin
 from .kernels import substep as ksub
+from .kernels import world_cg as kwcg
 from .model import Model
 from .solver_scratch import SolverScratch
 from .state import Control, State
@@ -73,6 +74,7 @@ class SubstepLaunches:
     evaluate: list
     evaluate_first: list  # the substep's first evaluation: also the tets' part of ``energy0``
     cg: list
+    cg_world: list      # each world's whole CG in one launch (``kernels/world_cg.py``; [] where not used)
     cg_listed: list     # the same CG iterations over the listed worlds' rows (WorldCompaction; [] if unused)
     list_cg_worlds: list  # list the worlds still iterating CG (WorldCompaction.record_list; [] if unused)
     coarse_post: list
@@ -293,6 +295,25 @@ def _cg(c: _Context, config, listed: bool = False) -> list:
               s.cg_beta, s.z, s.p, s.ap, nodes)]
 
 
+def _cg_world(c: _Context, config, threads: int) -> list:
+    """Each world's whole CG (``kernels/world_cg.py``) in one launch of ``threads`` threads per world
+    (CUDA thread blocks of that size)."""
+    m, s, e, wc = c.model, c.scratch, c.scratch.edges, c.compaction
+    return [wp.launch(kwcg.cg_world_blocks, dim=m.num_worlds * threads, block_dim=threads, device=m.device,
+                      record_cmd=True, inputs=[
+                          threads, config.cg_iterations, wc.nodes.start, wc.tets.start,
+                          e.points_per_world if e.active else 0,
+                          m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world,
+                          s.tet_r, s.tet_twist,
+                          e.triangles, e.point_tri, e.point_bary, e.point_block,
+                          m.node_mass, s.contact_hessian, m.free_axes, m.node_world, s.node_aggregate, s.precond,
+                          1.0 / (c.h * c.h),
+                          s.rz_stop, config.cg_update_fraction * config.newton_tolerance, s.coarse_size,
+                          s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it,
+                          s.cg_total, s.cg_active, s.cg_update,
+                          s.p, s.ap, s.dx, s.residual, s.z])]
+
+
 def _trial(c: _Context, config) -> list:
     m, s = c.model, c.scratch
     return [c.rec(kls.trial_positions, m.num_nodes, c.work.positions, s.dx, m.node_world, s.step_length, s.x_trial),
@@ -328,13 +349,16 @@ def _outputs(c: _Context) -> list:
 
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
                             h: float, start_pads: tuple, step_start: wp.array, compaction: WorldCompaction,
-                            listed_cg: bool = False, phase_graphs: bool = True) -> SubstepLaunches:
+                            listed_cg: bool = False, phase_graphs: bool = True,
+                            world_cg_threads: int = 0) -> SubstepLaunches:
     """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step,
     iterating in ``work`` (the output state: positions and velocities hold the step's start when
     it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
     ``step_start`` at the step's start, toward ``control``. ``phase_graphs``: capture each phase
     as a CPU graph (False where the caller captures the whole substep). ``compaction``: the row maps;
-    ``listed_cg``: also record the CG iterations over the listed worlds and the listing."""
+    ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
+    ``world_cg_threads`` > 0: also record each world's whole CG in one launch of that many threads
+    per world (``cg_world``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction)
     s, x = scratch, work.positions
     block = config.check_every or config.cg_iterations
@@ -346,6 +370,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c, config)),
         evaluate_first=seq(_evaluate(c, config, start_energy=config.line_search_steps > 0)),
         cg=seq(_cg(c, config) * block),
+        cg_world=seq(_cg_world(c, config, world_cg_threads)) if world_cg_threads else [],
         cg_listed=seq(_cg(c, config, listed=True) * block) if listed_cg else [],
         list_cg_worlds=seq(compaction.record_list(scratch.cg_active)) if listed_cg else [],
         coarse_post=seq(_coarse_after(c, s.newton_active)),

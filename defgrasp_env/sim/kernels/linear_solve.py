@@ -94,6 +94,21 @@ def start_cg_worlds(
     cg_active[w] = active
 
 
+@wp.func
+def node_product(i: int, p: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float),
+                 contact_hessian: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3),
+                 node_world: wp.array(dtype=int), cg_active: wp.array(dtype=int), inv_dt2: float,
+                 ap: wp.array(dtype=wp.vec3), p_ap: wp.array(dtype=float)):
+    """ap_i += (m/dt^2 I + contact Hessian) p_i, masked; p_ap[w] += p_i . ap_i (node ``i``)."""
+    w = node_world[i]
+    if cg_active[w] == 0:
+        return
+    pi = p[i]
+    api = wp.cw_mul(ap[i] + mass[i] * inv_dt2 * pi + contact_hessian[i] * pi, free[i])
+    ap[i] = api
+    wp.atomic_add(p_ap, w, wp.dot(pi, api))
+
+
 @wp.kernel
 def cg_node_product(
     p: wp.array(dtype=wp.vec3),
@@ -112,13 +127,34 @@ def cg_node_product(
     i = mapped_row(rows, wp.tid())
     if i < 0:
         return
+    node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, ap, p_ap)
+
+
+@wp.func
+def update_solution(i: int, p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.vec3),
+                    precond: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3),
+                    node_world: wp.array(dtype=int), node_aggregate: wp.array(dtype=int),
+                    cg_active: wp.array(dtype=int), rz: wp.array(dtype=float), p_ap: wp.array(dtype=float),
+                    dx: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.vec3), z: wp.array(dtype=wp.vec3),
+                    rz_new: wp.array(dtype=float), cg_update: wp.array(dtype=float),
+                    coarse_rhs: wp.array2d(dtype=float)):
+    """dx_i += alpha p_i, r_i -= alpha ap_i, z_i = P r_i; the world's r.z, largest |alpha p| and
+    T^T r gain node ``i``'s part."""
     w = node_world[i]
     if cg_active[w] == 0:
         return
-    pi = p[i]
-    api = wp.cw_mul(ap[i] + mass[i] * inv_dt2 * pi + contact_hessian[i] * pi, free[i])
-    ap[i] = api
-    wp.atomic_add(p_ap, w, wp.dot(pi, api))
+    alpha = 0.0
+    if p_ap[w] > 0.0:
+        alpha = rz[w] / p_ap[w]
+    step = alpha * p[i]
+    dx[i] = dx[i] + step
+    wp.atomic_max(cg_update, w, wp.max(wp.abs(step)))
+    ri = r[i] - alpha * ap[i]
+    r[i] = ri
+    zi = wp.cw_mul(precond[i] * ri, free[i])
+    z[i] = zi
+    wp.atomic_add(rz_new, w, wp.dot(ri, zi))
+    add_rhs(coarse_rhs, w, node_aggregate[i], ri)
 
 
 @wp.kernel
@@ -145,21 +181,37 @@ def cg_update_solution(
     i = mapped_row(rows, wp.tid())
     if i < 0:
         return
-    w = node_world[i]
+    update_solution(i, p, ap, precond, free, node_world, node_aggregate, cg_active, rz, p_ap, dx, r, z, rz_new,
+                    cg_update, coarse_rhs)
+
+
+@wp.func
+def end_iteration(w: int, rz_stop: wp.array(dtype=float), update_tol: float, max_iterations: int,
+                  coarse_size: int, coarse_inverse: wp.array3d(dtype=wp.float64),
+                  coarse_rhs: wp.array2d(dtype=float), coarse_coef: wp.array2d(dtype=float),
+                  rz: wp.array(dtype=float), rz_new: wp.array(dtype=float), p_ap: wp.array(dtype=float),
+                  beta: wp.array(dtype=float), cg_iterations: wp.array(dtype=int),
+                  cg_iterations_total: wp.array(dtype=int), cg_active: wp.array(dtype=int),
+                  cg_update: wp.array(dtype=float)):
+    """World ``w``'s coarse part of z (coef = E^-1 T^T r; r.z gains g . E^-1 g), beta, and its
+    stopping test (``cg_end_iteration``)."""
     if cg_active[w] == 0:
         return
-    alpha = 0.0
-    if p_ap[w] > 0.0:
-        alpha = rz[w] / p_ap[w]
-    step = alpha * p[i]
-    dx[i] = dx[i] + step
-    wp.atomic_max(cg_update, w, wp.max(wp.abs(step)))
-    ri = r[i] - alpha * ap[i]
-    r[i] = ri
-    zi = wp.cw_mul(precond[i] * ri, free[i])
-    z[i] = zi
-    wp.atomic_add(rz_new, w, wp.dot(ri, zi))
-    add_rhs(coarse_rhs, w, node_aggregate[i], ri)
+    rz_next = rz_new[w] + coarse_coefficients(w, coarse_size, coarse_inverse, coarse_rhs, coarse_coef)
+    it = cg_iterations[w] + 1
+    cg_iterations[w] = it
+    cg_iterations_total[w] = cg_iterations_total[w] + 1
+    stalled = cg_update[w] <= update_tol and it >= 8  # CG can creep for a few iterations first
+    if rz_next <= rz_stop[w] or stalled or it >= max_iterations or p_ap[w] <= 0.0:
+        cg_active[w] = 0
+    b = 0.0
+    if rz[w] > 0.0:
+        b = rz_next / rz[w]
+    beta[w] = b
+    cg_update[w] = 0.0
+    rz[w] = rz_next
+    rz_new[w] = 0.0
+    p_ap[w] = 0.0
 
 
 @wp.kernel
@@ -185,24 +237,23 @@ def cg_end_iteration(
     ``update_tol`` (m: the absolute test, as r.z cannot fall below float32 noise near a
     solution; applied from the 8th iteration on), on the iteration cap, or on a non-positive
     curvature."""
-    w = wp.tid()
+    end_iteration(wp.tid(), rz_stop, update_tol, max_iterations, coarse_size, coarse_inverse, coarse_rhs,
+                  coarse_coef, rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total, cg_active, cg_update)
+
+
+@wp.func
+def update_direction(i: int, free: wp.array(dtype=wp.vec3), node_world: wp.array(dtype=int),
+                     node_aggregate: wp.array(dtype=int), cg_active: wp.array(dtype=int),
+                     coarse_coef: wp.array2d(dtype=float), beta: wp.array(dtype=float),
+                     z: wp.array(dtype=wp.vec3), p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.vec3)):
+    """z_i += (T coef)_i, p_i = z_i + beta p_i, ap_i = 0 (node ``i``, if its world still iterates)."""
+    w = node_world[i]
     if cg_active[w] == 0:
         return
-    rz_next = rz_new[w] + coarse_coefficients(w, coarse_size, coarse_inverse, coarse_rhs, coarse_coef)
-    it = cg_iterations[w] + 1
-    cg_iterations[w] = it
-    cg_iterations_total[w] = cg_iterations_total[w] + 1
-    stalled = cg_update[w] <= update_tol and it >= 8  # CG can creep for a few iterations first
-    if rz_next <= rz_stop[w] or stalled or it >= max_iterations or p_ap[w] <= 0.0:
-        cg_active[w] = 0
-    b = 0.0
-    if rz[w] > 0.0:
-        b = rz_next / rz[w]
-    beta[w] = b
-    cg_update[w] = 0.0
-    rz[w] = rz_next
-    rz_new[w] = 0.0
-    p_ap[w] = 0.0
+    zi = z[i] + aggregate_part(coarse_coef, w, node_aggregate[i], free[i])
+    z[i] = zi
+    p[i] = zi + beta[w] * p[i]
+    ap[i] = wp.vec3(0.0)
 
 
 @wp.kernel
@@ -223,10 +274,4 @@ def cg_update_direction(
     i = mapped_row(rows, wp.tid())
     if i < 0:
         return
-    w = node_world[i]
-    if cg_active[w] == 0:
-        return
-    zi = z[i] + aggregate_part(coarse_coef, w, node_aggregate[i], free[i])
-    z[i] = zi
-    p[i] = zi + beta[w] * p[i]
-    ap[i] = wp.vec3(0.0)
+    update_direction(i, free, node_world, node_aggregate, cg_active, coarse_coef, beta, z, p, ap)

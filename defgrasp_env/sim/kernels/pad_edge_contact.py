@@ -450,6 +450,32 @@ def edge_point_energy(
         wp.atomic_add(energy, w, wp.float64(e))
 
 
+@wp.func
+def edge_point_slot_product(
+    slot: int,
+    p: wp.array(dtype=wp.vec3),
+    triangles: wp.array(dtype=wp.vec3i),
+    cg_active: wp.array(dtype=int),
+    points_per_world: int,
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_block: wp.array(dtype=wp.mat33),
+    ap: wp.array(dtype=wp.vec3),
+):
+    """ap += H p for the edge point in ``slot`` (``edge_point_product``)."""
+    t = point_tri[slot]
+    if t < 0 or cg_active[slot // points_per_world] == 0:
+        return
+    block = point_block[slot]
+    if wp.ddot(block, block) == 0.0:  # neither pressed nor rubbing
+        return
+    ids = triangles[t]
+    bary = point_bary[slot]
+    along = block * (bary[0] * p[ids[0]] + bary[1] * p[ids[1]] + bary[2] * p[ids[2]])
+    for j in range(3):
+        wp.atomic_add(ap, ids[j], bary[j] * along)
+
+
 @wp.kernel
 def edge_point_product(
     p: wp.array(dtype=wp.vec3),
@@ -469,17 +495,7 @@ def edge_point_product(
     slot = mapped_row(rows, wp.tid())
     if slot < 0:
         return
-    t = point_tri[slot]
-    if t < 0 or cg_active[slot // points_per_world] == 0:
-        return
-    block = point_block[slot]
-    if wp.ddot(block, block) == 0.0:  # neither pressed nor rubbing
-        return
-    ids = triangles[t]
-    bary = point_bary[slot]
-    along = block * (bary[0] * p[ids[0]] + bary[1] * p[ids[1]] + bary[2] * p[ids[2]])
-    for j in range(3):
-        wp.atomic_add(ap, ids[j], bary[j] * along)
+    edge_point_slot_product(slot, p, triangles, cg_active, points_per_world, point_tri, point_bary, point_block, ap)
 
 
 @wp.kernel

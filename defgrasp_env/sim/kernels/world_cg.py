@@ -1,0 +1,130 @@
+"""Each world's whole CG in one launch: a block of threads per world runs its CG iterations to the
+world's own stopping test, with a block barrier between the phases of an iteration.
+
+The phase-by-phase CG of ``linear_solve.py`` launches five or six kernels per iteration over the
+rows of every world (or of the listed worlds), and loops in blocks of ``check_every`` iterations
+while any world iterates. Where a launch costs more than its work (one world on a GPU: ~4.5 us per
+dependent launch; the slowest worlds of a batch, iterating alone), ``cg_world_blocks`` does a world's
+iterations in one launch: block ``w`` (``threads`` threads: a CUDA thread block, launched with
+``block_dim = threads``) strides over world ``w``'s tets, pad edge slots and nodes, calling the same
+row functions as the phase kernels (``elastic.hessian_product_tet``,
+``pad_edge_contact.edge_point_slot_product``, ``linear_solve.node_product``, ``update_solution``,
+``end_iteration``, ``update_direction``), with ``block_barrier`` between the phases (their sums and
+the world's alpha and beta are read after it). A world computes its rows in the same order either
+way, so with one thread per world (the CPU, which runs a launch's threads one after another) the
+results are bit-identical to the phase-by-phase CG's; on a GPU the float atomics' order differs, as
+it does between any two GPU runs.
+
+Rules that keep the barrier sound: every thread of a block reaches every barrier (the iteration
+loop's bound and its exit read the world's flag after a barrier, the same value for all of the
+block's threads; no barrier inside a row loop), and the launch has ``worlds x threads`` threads in
+blocks of ``threads``, so a block never holds two worlds (Warp's grid-stride loop, where the grid is
+smaller, gives all threads of a block the same worlds in turn).
+"""
+
+import warp as wp
+
+from .elastic import hessian_product_tet
+from .linear_solve import end_iteration, node_product, update_direction, update_solution
+from .pad_edge_contact import edge_point_slot_product
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+__syncthreads();
+#endif
+""")
+def block_barrier(): ...
+
+
+@wp.kernel
+def cg_world_blocks(
+    threads: int,
+    max_iterations: int,
+    node_start: wp.array(dtype=int),
+    tet_start: wp.array(dtype=int),
+    points_per_world: int,
+    # tets (elastic.hessian_product_tet)
+    tets: wp.array(dtype=wp.vec4i),
+    rest_inv: wp.array(dtype=wp.mat33),
+    rest_volume: wp.array(dtype=float),
+    tet_mu: wp.array(dtype=float),
+    tet_lambda: wp.array(dtype=float),
+    tet_cof: wp.array(dtype=wp.mat33),
+    tet_world: wp.array(dtype=int),
+    tet_r: wp.array(dtype=wp.mat33),
+    tet_twist: wp.array(dtype=float),
+    # pad edge points (pad_edge_contact.edge_point_slot_product; points_per_world 0: none)
+    triangles: wp.array(dtype=wp.vec3i),
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_block: wp.array(dtype=wp.mat33),
+    # nodes
+    mass: wp.array(dtype=float),
+    contact_hessian: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    precond: wp.array(dtype=wp.mat33),
+    inv_dt2: float,
+    # per world
+    rz_stop: wp.array(dtype=float),
+    update_tol: float,
+    coarse_size: int,
+    coarse_inverse: wp.array3d(dtype=wp.float64),
+    coarse_rhs: wp.array2d(dtype=float),
+    coarse_coef: wp.array2d(dtype=float),
+    rz: wp.array(dtype=float),
+    rz_new: wp.array(dtype=float),
+    p_ap: wp.array(dtype=float),
+    beta: wp.array(dtype=float),
+    cg_iterations: wp.array(dtype=int),
+    cg_iterations_total: wp.array(dtype=int),
+    cg_active: wp.array(dtype=int),
+    cg_update: wp.array(dtype=float),
+    # CG vectors
+    p: wp.array(dtype=wp.vec3),
+    ap: wp.array(dtype=wp.vec3),
+    dx: wp.array(dtype=wp.vec3),
+    r: wp.array(dtype=wp.vec3),
+    z: wp.array(dtype=wp.vec3),
+):
+    """CG iterations of world ``tid // threads`` (thread ``tid % threads`` of its block) until its
+    stopping test (``linear_solve.end_iteration``) or ``max_iterations``; a world not iterating CG
+    returns at once."""
+    tid = wp.tid()
+    w = tid // threads
+    lane = tid - w * threads
+    if cg_active[w] == 0:
+        return
+    n0 = node_start[w]
+    n1 = node_start[w + 1]
+    t0 = tet_start[w]
+    t1 = tet_start[w + 1]
+    e0 = w * points_per_world
+    e1 = e0 + points_per_world
+    for _it in range(max_iterations):
+        for t in range(t0 + lane, t1, threads):
+            hessian_product_tet(t, p, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_cof, tet_world, cg_active,
+                                ap, tet_r, tet_twist)
+        for e in range(e0 + lane, e1, threads):
+            edge_point_slot_product(e, p, triangles, cg_active, points_per_world, point_tri, point_bary, point_block,
+                                    ap)
+        block_barrier()
+        for i in range(n0 + lane, n1, threads):
+            node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, ap, p_ap)
+        block_barrier()
+        for i in range(n0 + lane, n1, threads):
+            update_solution(i, p, ap, precond, free, node_world, node_aggregate, cg_active, rz, p_ap, dx, r, z,
+                            rz_new, cg_update, coarse_rhs)
+        block_barrier()
+        if lane == 0:
+            end_iteration(w, rz_stop, update_tol, max_iterations, coarse_size, coarse_inverse, coarse_rhs,
+                          coarse_coef, rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total, cg_active,
+                          cg_update)
+        block_barrier()
+        if cg_active[w] == 0:
+            break
+        for i in range(n0 + lane, n1, threads):
+            update_direction(i, free, node_world, node_aggregate, cg_active, coarse_coef, beta, z, p, ap)
+        block_barrier()

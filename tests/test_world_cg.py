@@ -1,0 +1,136 @@
+"""Each world's CG in one launch (``SolverConfig.world_cg_threads``, ``kernels/world_cg.py``) against
+CG launched phase by phase over all rows (``world_cg_threads=0``): the same row functions in the
+same order per world, so on the CPU (one thread per world) every output must be equal bit for bit;
+on CUDA (blocks of threads with barriers between CG's phases; float atomics in another order)
+within the tolerances of the other CPU-vs-CUDA tests."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import defgrasp_env  # noqa: F401
+from defgrasp_env.envs.config import PickupConfig
+from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig, WORLD_CG_THREADS
+from contact_rollout import ExpertNoisyPress
+from test_fem_batch import REPORT_FIELDS, STATE_ROWS, build, pad_targets, run
+
+
+def _episode(world_cg_threads: int, steps: int, device: str = "cpu"):
+    """Three worlds, each with an object drawn per episode (different node and tet counts: the per
+    world row ranges), E = 1e5: the expert, the expert with noise and a gripper pressing its object
+    into the ground (force-limit retries and patient re-solves), edge contact on, autoresets;
+    every output array, the final state and the CG iterations of every step."""
+    solver = dataclasses.replace(PickupConfig().solver, world_cg_threads=world_cg_threads)
+    env = gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point", object="random",
+                       youngs_modulus=1e5, solver=solver, device=device, max_episode_steps=25)
+    obs, reset_info = env.reset(seed=11)
+    scene = env.unwrapped.scene
+    assert scene.solver.world_cg_threads == (min(world_cg_threads, 1) if device == "cpu" else world_cg_threads)
+    policy = ExpertNoisyPress(env, seed=5)
+    out = {"reset/object": np.asarray(reset_info["object"])}
+    for k in range(steps):
+        obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
+        policy.episodes_ended(terminated, truncated)
+        out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
+        out[f"{k}/reward"] = np.asarray(reward)
+        out.update({f"{k}/info/{name}": np.asarray(v) for name, v in info.items()
+                    if not isinstance(v, dict)})
+    for name in STATE_ROWS:
+        out[f"state/{name}"] = getattr(scene.state, name).numpy().copy()
+    out["world_solves"] = np.array(scene.world_solves)
+    env.close()
+    return out
+
+
+def test_world_cg_gives_the_bits_of_cg_phase_by_phase_on_the_cpu():
+    """40 steps of three worlds of different objects through an autoreset (episodes of 25 steps),
+    with contact from every side: every observation, reward, info and state array equal."""
+    steps = 40
+    phases = _episode(0, steps)
+    worlds = _episode(1, steps)
+    assert phases.keys() == worlds.keys()
+    differ = [k for k in phases if phases[k].dtype != worlds[k].dtype
+              or not np.array_equal(phases[k], worlds[k], equal_nan=phases[k].dtype != object)]
+    assert not differ, differ[:10]
+    cg = sum(int(phases[f"{k}/info/cg_iterations"].sum()) for k in range(steps))
+    assert cg > 1000  # CG ran (its iterations are counted by the world launch too: equal above)
+    assert len(set(phases["reset/object"])) > 1, phases["reset/object"]
+
+
+def test_world_cg_solver_steps_match_bitwise_and_report_the_same_iterations():
+    """The FEM batch of ``test_fem_batch`` (three objects, E 1e4-1e6, squeezed, resting, falling):
+    14 steps, the step as one graph and launched kernel by kernel, every state array and report
+    field bit-identical with and without the world launch."""
+    for graphs in (None, False):
+        reference = _solver_steps(0, graphs)
+        worlds = _solver_steps(1, graphs)
+        for (got, got_report), (want, want_report) in zip(worlds, reference):
+            for name in STATE_ROWS:
+                np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+            for field in REPORT_FIELDS:
+                np.testing.assert_array_equal(getattr(got_report, field), getattr(want_report, field), err_msg=field)
+        assert sum(int(r.cg_iterations.sum()) for _, r in reference) > 0
+
+
+def _solver_steps(threads: int, graphs):
+    model, state, control = build((0, 1, 2))
+    solver = ImplicitSolver(model, SolverConfig(world_cg_threads=threads, graphs=graphs))
+    history = []
+    for k in range(1, 15):
+        control.pad_target_positions.assign(np.concatenate([pad_targets(w, k) for w in (0, 1, 2)]))
+        report = solver.step(state, state, control, 0.05)
+        history.append(({name: getattr(state, name).numpy().copy() for name in STATE_ROWS}, report))
+    return history
+
+
+def test_world_cg_threads_is_checked_and_its_default_depends_on_the_device():
+    """Negative, non-integer, over 256 or (above 32) not a multiple of 32: refused, naming the
+    value. None: ``WORLD_CG_THREADS`` of the device kind (one thread per world on the CPU,
+    whatever a positive value asks for); 0 turns it off and lets CG list its worlds again."""
+    for bad in (-1, 1.5, True, 48, 288, 512, 1024):
+        with pytest.raises(ValueError, match=f"world_cg_threads.*{bad!r}"):
+            SolverConfig(world_cg_threads=bad)
+    for good in (0, 1, 7, 32, 64, 256):
+        SolverConfig(world_cg_threads=good)
+    model, _, _ = build((0, 1, 2))
+    assert WORLD_CG_THREADS["cpu"] == 1
+    assert ImplicitSolver(model, SolverConfig()).world_cg_threads == 1
+    assert ImplicitSolver(model, SolverConfig(world_cg_threads=256)).world_cg_threads == 1
+    off = ImplicitSolver(model, SolverConfig(world_cg_threads=0, listed_cg_worlds=2))
+    assert off.world_cg_threads == 0 and off._listed_cg
+
+
+@pytest.mark.cuda
+@pytest.mark.parametrize("threads", [32, 128])
+def test_world_cg_on_cuda_agrees_with_cg_phase_by_phase(threads):
+    """On CUDA, blocks of 32 and 128 threads per world against CG phase by phase, W = 3, 14 steps:
+    positions within 1e-5 m and the iteration counts within 10 % (as for the listed CG: float
+    atomics sum in a run-dependent order); the CPU's result too."""
+    _, reference, s0 = run((0, 1, 2), 14, SolverConfig(world_cg_threads=0), device="cuda:0")
+    _, worlds, s1 = run((0, 1, 2), 14, SolverConfig(world_cg_threads=threads), device="cuda:0")
+    _, cpu, _ = run((0, 1, 2), 14, SolverConfig(world_cg_threads=0), device="cpu")
+    assert not any(s.diverged.any() for s in s1)
+    np.testing.assert_allclose(worlds[-1][0], reference[-1][0], atol=1e-5)
+    for k in (0, 6):  # the first steps, before the falling cylinder's unconverged solves diverge
+        np.testing.assert_allclose(worlds[k][0], cpu[k][0], atol=1e-5)
+    it0 = sum(int(s.cg_iterations.sum()) for s in s0)
+    it1 = sum(int(s.cg_iterations.sum()) for s in s1)
+    assert abs(it1 - it0) <= 0.1 * it0, (it0, it1)
+
+
+@pytest.mark.cuda
+def test_world_cg_on_cuda_through_contact_and_resets():
+    """The three-world contact batch of the CPU test on CUDA with blocks of 64 threads: no NaN, no
+    diverged world, the same objects, and the gripper's observations within 1 mm of CG phase by
+    phase over the first 10 steps (before contact turns float rounding into other episodes)."""
+    phases = _episode(0, 30, device="cuda:0")
+    worlds = _episode(64, 30, device="cuda:0")
+    for k in range(30):
+        for key in (f"{k}/obs/agent_pos", f"{k}/reward"):
+            assert np.isfinite(worlds[key]).all(), key
+    for k in range(10):
+        np.testing.assert_allclose(worlds[f"{k}/obs/agent_pos"], phases[f"{k}/obs/agent_pos"], atol=1e-3)
