@@ -21,7 +21,7 @@ learner pressing the object into the ground, the wrist at its force limit from t
 ``--listed-cg-worlds N [N ...]``: ``SolverConfig.listed_cg_worlds`` (CG's launches over the rows of
 the worlds still iterating once at most N are left; 0 = over all rows; default: the solver's choice
 for the device, "auto" in the table), a row each side by side.
-``--world-cg-threads N [N ...]``: ``SolverConfig.world_cg_threads`` (each world's CG in one launch
+``--world-block-threads N [N ...]``: ``SolverConfig.world_block_threads`` (each world's CG in one launch
 with a block of N threads per world; 0 = CG phase by phase; default: the solver's choice for the
 device, "auto" in the table), a row each, side by side.
 ``--edge-contact on|off|both``: pad edge contact (``PickupConfig.edge_contact``, on by default;
@@ -73,11 +73,11 @@ from defgrasp_env.sim import ImplicitSolver, SolverConfig  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
 
 
-def solver_config(graphs: str, listed_cg_worlds: int | None, world_cg_threads: int | None = None) -> SolverConfig:
+def solver_config(graphs: str, listed_cg_worlds: int | None, world_block_threads: int | None = None) -> SolverConfig:
     """The env's default solver settings with ``graphs`` ("auto", "on", "off"), ``listed_cg_worlds``
-    and ``world_cg_threads``."""
+    and ``world_block_threads``."""
     return dataclasses.replace(PickupConfig().solver, graphs={"auto": None, "on": True, "off": False}[graphs],
-                               listed_cg_worlds=listed_cg_worlds, world_cg_threads=world_cg_threads)
+                               listed_cg_worlds=listed_cg_worlds, world_block_threads=world_block_threads)
 
 
 def press_actions(obs: dict, scene) -> np.ndarray:
@@ -123,19 +123,19 @@ class SolverClock:
 
 def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
              graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True, split: bool = False,
-             listed_cg_worlds: int | None = None, world_cg_threads: int | None = None) -> dict:
+             listed_cg_worlds: int | None = None, world_block_threads: int | None = None) -> dict:
     """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table (with
     ``split``, the solver's share of each step too: ``SolverClock``)."""
     with SolverClock(device) if split else contextlib.nullcontext() as clock:
         return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock,
-                         listed_cg_worlds, world_cg_threads)
+                         listed_cg_worlds, world_block_threads)
 
 
 def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock,
-              listed_cg_worlds, world_cg_threads) -> dict:
+              listed_cg_worlds, world_block_threads) -> dict:
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
                        device=device, object=obj, youngs_modulus=modulus,
-                       solver=solver_config(graphs, listed_cg_worlds, world_cg_threads),
+                       solver=solver_config(graphs, listed_cg_worlds, world_block_threads),
                        edge_contact=edge_contact)
     obs, _ = env.reset(seed=0)
     rng = np.random.default_rng(0)
@@ -180,7 +180,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
     t, solver_t, newton, cg = np.array(times), np.array(solver_times), np.array(newton), np.array(cg)
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
             "edges": "on" if edge_contact else "off", "listed": "auto" if listed_cg_worlds is None else listed_cg_worlds,
-            "world_cg": "auto" if world_cg_threads is None else world_cg_threads,
+            "world_cg": "auto" if world_block_threads is None else world_block_threads,
             "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)), "mean_ms": 1e3 * float(np.mean(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "solver_ms": 1e3 * float(np.median(solver_t)), "outside_ms": 1e3 * float(np.median(t - solver_t)),
@@ -228,8 +228,8 @@ def main(argv=None) -> int:
     ap.add_argument("--listed-cg-worlds", type=int, nargs="+", default=[None],
                     help="SolverConfig.listed_cg_worlds (0: CG always over all rows; default: the solver's choice "
                          "for the device); several: a row each, side by side")
-    ap.add_argument("--world-cg-threads", type=int, nargs="+", default=[None],
-                    help="SolverConfig.world_cg_threads (each world's CG in one launch, N threads per world; 0: CG "
+    ap.add_argument("--world-block-threads", type=int, nargs="+", default=[None],
+                    help="SolverConfig.world_block_threads (each world's CG in one launch, N threads per world; 0: CG "
                          "phase by phase; default: the solver's choice for the device); several: a row each, side "
                          "by side")
     ap.add_argument("--split", action="store_true",
@@ -245,7 +245,7 @@ def main(argv=None) -> int:
         for graphs in (["off", "on"] if args.graphs == "both" else [args.graphs]):
             for edges in (["off", "on"] if args.edge_contact == "both" else [args.edge_contact]):
                 for listed in args.listed_cg_worlds:
-                    for threads in args.world_cg_threads:
+                    for threads in args.world_block_threads:
                         rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus,
                                              args.warmup, args.steps, graphs, args.noise, edges == "on", args.split,
                                              listed, threads))

@@ -304,7 +304,7 @@ def _run_listing(capacity, steps, graphs):
     ``STATE_ROWS`` array and the report after each step, and per step the listing's (cond, count)
     at the end of the step's last CG block."""
     model, state, control = build((0, 1, 2))
-    solver = ImplicitSolver(model, SolverConfig(listed_cg_worlds=capacity, world_cg_threads=0, graphs=graphs))
+    solver = ImplicitSolver(model, SolverConfig(listed_cg_worlds=capacity, world_block_threads=0, graphs=graphs))
     history = []
     for k in range(1, steps + 1):
         control.pad_target_positions.assign(np.concatenate([pad_targets(w, k) for w in (0, 1, 2)]))
@@ -316,7 +316,7 @@ def _run_listing(capacity, steps, graphs):
 
 @pytest.mark.parametrize("graphs", [None, False], ids=["graphs", "launches"])
 def test_cg_over_the_listed_worlds_gives_the_bits_of_cg_over_all_rows(graphs, monkeypatch):
-    """``listed_cg_worlds`` (with CG launched phase by phase, ``world_cg_threads=0``): once at most
+    """``listed_cg_worlds`` (with CG launched phase by phase, ``world_block_threads=0``): once at most
     that many worlds still iterate CG, its launches run over
     those worlds' rows only. Three worlds whose CG stops at different iterations, stepped 14 times
     with the listing off (0), at capacity 1 and 2, the step captured as one graph and launched
@@ -357,8 +357,8 @@ def test_cg_over_the_listed_worlds_on_cuda_agrees_with_cg_over_all_rows():
     inside CG's loop node), capacity 1 against the listing off, W = 3, 14 steps: positions within
     1e-5 m and the same iteration counts within 10 % (float32 atomics sum in a run-dependent order,
     as in the graph test above)."""
-    _, reference, s0 = run((0, 1, 2), 14, SolverConfig(listed_cg_worlds=0, world_cg_threads=0), device="cuda:0")
-    _, listed, s1 = run((0, 1, 2), 14, SolverConfig(listed_cg_worlds=1, world_cg_threads=0), device="cuda:0")
+    _, reference, s0 = run((0, 1, 2), 14, SolverConfig(listed_cg_worlds=0, world_block_threads=0), device="cuda:0")
+    _, listed, s1 = run((0, 1, 2), 14, SolverConfig(listed_cg_worlds=1, world_block_threads=0), device="cuda:0")
     assert not any(s.diverged.any() for s in s1)
     np.testing.assert_allclose(listed[-1][0], reference[-1][0], atol=1e-5)
     it0 = sum(int(s.cg_iterations.sum()) for s in s0)

@@ -206,8 +206,8 @@ def test_device_loops_stop_early_and_take_the_extra_iterations():
     Newton before its cap (and CG before its last block); without them the regular loop runs all
     its passes; a patient world that cannot meet the tolerance gets exactly ``patient_iterations``
     extra Newton iterations per substep."""
-    # CG phase by phase (world_cg_threads=0): its loop counts CG blocks
-    cfg = SolverConfig(substeps=1, newton_iterations=6, cg_iterations=40, check_every=4, world_cg_threads=0)
+    # CG phase by phase (world_block_threads=0): its loop counts CG blocks
+    cfg = SolverConfig(substeps=1, newton_iterations=6, cg_iterations=40, check_every=4, world_block_threads=0)
     solver, reports, cg_blocks = _resting_rope(cfg, 12)
     assert int(reports[-1].newton_iterations[0]) < 6
     assert solver.loops.count["newton"].numpy()[0] < 6 and min(cg_blocks) < 10, cg_blocks

@@ -36,11 +36,11 @@ __all__ = ["ImplicitSolver", "SolveStats", "SolverConfig"]
 _LAUNCH_SETS = 8
 #: ``SolverConfig.listed_cg_worlds`` on CUDA when it is None.
 LISTED_CG_WORLDS_CUDA = 8
-#: ``SolverConfig.world_cg_threads`` when it is None, by device kind.
-WORLD_CG_THREADS = {"cuda": 256, "cpu": 1}
-#: The largest ``SolverConfig.world_cg_threads``: a block of 256 threads fits in an SM's 64 K
+#: ``SolverConfig.world_block_threads`` when it is None, by device kind.
+WORLD_BLOCK_THREADS = {"cuda": 256, "cpu": 1}
+#: The largest ``SolverConfig.world_block_threads``: a block of 256 threads fits in an SM's 64 K
 #: registers at any register count (at most 255 a thread); 1024 failed to launch on an H200.
-MAX_WORLD_CG_THREADS = 256
+MAX_WORLD_BLOCK_THREADS = 256
 
 
 @dataclass(frozen=True)
@@ -94,14 +94,15 @@ class SolverConfig:
             few worlds' rows cost instead of a thread per row of every world. None (default):
             ``LISTED_CG_WORLDS_CUDA`` on CUDA, 0 on the CPU (where it measured slower: W = 48 on a
             2-core CPU, 4-19 % longer solves; benchmarks/RESULTS.md).
-        world_cg_threads: each world's CG of a Newton iteration in one launch
-            (``kernels/world_cg.py``): a block of this many threads per world runs its iterations to
-            its own stopping test, with block barriers between CG's phases, instead of five or six
-            launches per iteration over all rows (and ``listed_cg_worlds``, then unused). 0 = off.
-            On CUDA the block size (1 to 256, a multiple of 32 above 32); on the CPU, which runs a
-            launch's threads one after another, any positive value means one thread per world, and
-            the results are bit-identical to CG phase by phase. None (default):
-            ``WORLD_CG_THREADS`` of the device's kind.
+        world_block_threads: each world's CG and line search of a Newton iteration in one launch
+            each (``kernels/world_cg.py``, ``kernels/world_line_search.py``): a block of this many
+            threads per world runs its CG iterations (its line-search trials) to its own stopping
+            test, with block barriers between the phases, instead of five to seven launches per
+            iteration (trial) over the rows of all worlds while any world iterates
+            (``listed_cg_worlds`` is then unused). 0 = off. On CUDA the block size (1 to 256, a
+            multiple of 32 above 32); on the CPU, which runs a launch's threads one after another,
+            any positive value means one thread per world, and the results are bit-identical to the
+            phase-by-phase launches. None (default): ``WORLD_BLOCK_THREADS`` of the device's kind.
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
@@ -121,7 +122,7 @@ class SolverConfig:
     penetration_iterations: int = 8
     patient_iterations: int = 60
     listed_cg_worlds: int | None = None
-    world_cg_threads: int | None = None
+    world_block_threads: int | None = None
     graphs: bool | None = None
 
     def __post_init__(self) -> None:
@@ -129,16 +130,16 @@ class SolverConfig:
                   ("check_every", 0), ("penetration_iterations", 0), ("patient_iterations", 0)]
         if self.listed_cg_worlds is not None:  # None: the device's default
             counts.append(("listed_cg_worlds", 0))
-        if self.world_cg_threads is not None:
-            counts.append(("world_cg_threads", 0))
+        if self.world_block_threads is not None:
+            counts.append(("world_block_threads", 0))
         for name, low in counts:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-        threads = self.world_cg_threads
-        if threads is not None and (threads > MAX_WORLD_CG_THREADS or (threads > 32 and threads % 32)):
-            raise ValueError(f"world_cg_threads must be 0 (off), 1 to 32, or a multiple of 32 up to "
-                             f"{MAX_WORLD_CG_THREADS} (a CUDA thread block per world), got {threads}")
+        threads = self.world_block_threads
+        if threads is not None and (threads > MAX_WORLD_BLOCK_THREADS or (threads > 32 and threads % 32)):
+            raise ValueError(f"world_block_threads must be 0 (off), 1 to 32, or a multiple of 32 up to "
+                             f"{MAX_WORLD_BLOCK_THREADS} (a CUDA thread block per world), got {threads}")
         check_range("newton_tolerance", self.newton_tolerance, 0.0, math.inf, "m")
         check_range("cg_tolerance", self.cg_tolerance, 0.0, 1.0)
         check_range("cg_tolerance_far", self.cg_tolerance_far, 0.0, 1.0)
@@ -202,21 +203,22 @@ class ImplicitSolver:
             raise ValueError(f"SolverConfig(graphs=True) but device {model.device} cannot capture a step as one graph: "
                              f"it needs {need}; use graphs=None (where the device can) or False")
         self.graphs = supported if config.graphs is None else config.graphs
-        self.scratch = SolverScratch.from_model(model)
-        self.loops = DeviceLoops(model, config, self.scratch)
         is_cpu = wp.get_device(model.device).is_cpu
+        threads = config.world_block_threads
+        if threads is None:
+            threads = WORLD_BLOCK_THREADS["cpu" if is_cpu else "cuda"]
+        #: threads per world of the per-world CG and line search (``SolverConfig.world_block_threads``;
+        #: 1 on the CPU; 0: off)
+        self.world_block_threads = min(threads, 1) if is_cpu else threads
+        self.scratch = SolverScratch.from_model(model, block_threads=self.world_block_threads)
+        self.loops = DeviceLoops(model, config, self.scratch)
         capacity = config.listed_cg_worlds
         if capacity is None:
             capacity = 0 if is_cpu else LISTED_CG_WORLDS_CUDA
         self.compaction = WorldCompaction.from_model(model, capacity, self.scratch.edges.points_per_world)
-        threads = config.world_cg_threads
-        if threads is None:
-            threads = WORLD_CG_THREADS["cpu" if is_cpu else "cuda"]
-        #: threads per world of CG in one launch (``SolverConfig.world_cg_threads``; 1 on the CPU; 0: off)
-        self.world_cg_threads = min(threads, 1) if is_cpu else threads
         # outside a captured step, capture_if reads its condition on the host: free on the CPU, a
         # synchronisation per CG block on CUDA (where listing is then not used)
-        self._listed_cg = (not self.world_cg_threads and self.compaction.pays(model)
+        self._listed_cg = (not self.world_block_threads and self.compaction.pays(model)
                            and (self.graphs or is_cpu))
         self._report = SolveReport(model.num_worlds, model.device)
         self._solving_all = True  # scratch.solve_worlds holds all ones
@@ -366,7 +368,7 @@ class ImplicitSolver:
             cmd.launch()
 
     def _run_cg(self, run: SubstepLaunches) -> None:
-        """Each world's CG in one launch (``world_cg_threads``), or CG in blocks of
+        """Each world's CG in one launch (``world_block_threads``), or CG in blocks of
         ``run.cg_block`` iterations (a world stops at its own test or at ``cg_iterations``; later
         iterations of a block skip it) while a world iterates; a block runs over the listed worlds'
         rows once few still iterate (``listed_cg_worlds``)."""
@@ -392,7 +394,8 @@ class ImplicitSolver:
         self.loops.do_while("cg", body, body)
 
     def _line_search(self, run: SubstepLaunches, first: bool) -> None:
-        """Per world, halve the Newton step until the incremental potential does not increase.
+        """Per world, halve the Newton step until the incremental potential does not increase
+        (each world's trials in one launch where ``world_block_threads``).
         The start energy is evaluated at the first Newton iteration of a substep (its tets' part by
         that iteration's evaluation, which computes their F and R anyway); later ones start from the
         energy of the step accepted last (kept by ``end_line_search_trial``)."""
@@ -403,6 +406,10 @@ class ImplicitSolver:
             for cmd in run.energy0:
                 cmd.launch()
         run.begin_search.launch()
+        if run.search_world:
+            for cmd in run.search_world:
+                cmd.launch()
+            return
 
         def trial():
             for cmd in run.trial:
@@ -430,7 +437,7 @@ class ImplicitSolver:
                                              start_pads=(state_in.pad_positions, state_in.pad_orientations),
                                              step_start=step_start, compaction=self.compaction,
                                              listed_cg=self._listed_cg, phase_graphs=not self.graphs,
-                                             world_cg_threads=self.world_cg_threads), {})
+                                             world_block_threads=self.world_block_threads), {})
         self._launches[key] = entry  # most recently used last
         while len(self._launches) > _LAUNCH_SETS:
             self._launches.pop(next(iter(self._launches)))

@@ -3,8 +3,10 @@
 A substep of length h: ``pads`` (pad poses at the substep's start and end), ``begin`` (save the start,
 initial guess), ``lag`` (contact faces, lagged friction, guess fixes, rotation seeds), then Newton
 iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coarse correction),
-``cg`` (a block of CG iterations, repeated), ``coarse_post``, the line search (``energy0`` once,
-``begin_search``, ``trial`` repeated) and ``apply``; ``depth`` (the iterate's deepest contact) decides
+``cg`` (a block of CG iterations, repeated; or ``cg_world``: each world's whole CG in one launch,
+``SolverConfig.world_block_threads``), ``coarse_post``, the line search (``energy0`` once,
+``begin_search``, ``trial`` repeated; or ``search_world``: each world's trials in one launch) and
+``apply``; ``depth`` (the iterate's deepest contact) decides
 the extra iterations (with the loop control of ``solver_loops``);
 ``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
 after the last substep, ``outputs`` (forces, stresses, residual).
@@ -33,6 +35,7 @@ from .kernels import line_search as kls
 from .kernels import linear_solve as klin
 from .kernels import substep as ksub
 from .kernels import world_cg as kwcg
+from .kernels import world_line_search as kwls
 from .model import Model
 from .solver_scratch import SolverScratch
 from .state import Control, State
@@ -81,6 +84,7 @@ class SubstepLaunches:
     energy0: list
     begin_search: object
     trial: list
+    search_world: list  # each world's whole line search in one launch (``kernels/world_line_search.py``; [] where not used)
     apply: list
     depth: list         # launches: the iterate's deepest contact per world (extra iterations)
     clamp: object
@@ -100,6 +104,7 @@ class _Context:
     start_pads: tuple   # (positions, orientations) [W*P] of the pads at the step's start
     step_start: object  # [N] vec3: node positions at the step's start (prescribed-axis lerp)
     compaction: WorldCompaction
+    block_threads: int  # threads of a world's block in the mean stress (``world_block_threads``, at least 1)
 
     def rec(self, kernel, dim, *inputs):
         return wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device, record_cmd=True)
@@ -314,6 +319,26 @@ def _cg_world(c: _Context, config, threads: int) -> list:
                           s.p, s.ap, s.dx, s.residual, s.z])]
 
 
+def _search_world(c: _Context, config, threads: int) -> list:
+    """Each world's line search (``kernels/world_line_search.py``) in one launch of ``threads``
+    threads per world, on the arrays of ``_trial``."""
+    m, s, e, wc, ctl = c.model, c.scratch, c.scratch.edges, c.compaction, c.control
+    return [wp.launch(kwls.line_search_world_blocks, dim=m.num_worlds * threads, block_dim=threads, device=m.device,
+                      record_cmd=True, inputs=[
+                          threads, config.line_search_steps + 1, wc.nodes.start, wc.tets.start, 1e-6,
+                          0.5 ** config.line_search_steps,
+                          c.work.positions, s.dx, s.step_length, s.x_trial, s.searching, s.energy0, s.energy_trial,
+                          s.x_start, c.work.velocities, m.node_mass, m.node_world, ctl.external_force, m.gravity, c.h,
+                          *s.pads, m.pad_half_extents, m.pads_per_world, s.lag_normal_force, s.lag_normal,
+                          m.node_contact_stiffness, m.contact.stiffening_depth, m.contact.ground_friction,
+                          m.contact.pad_friction, m.contact.stick_velocity,
+                          e.triangles, e.points, e.point_pad, e.points_per_world if e.active else 0, e.point_tri,
+                          e.point_bary, e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction,
+                          m.contact.stick_velocity * c.h,
+                          m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, m.tet_world,
+                          s.tet_rotation])]
+
+
 def _trial(c: _Context, config) -> list:
     m, s = c.model, c.scratch
     return [c.rec(kls.trial_positions, m.num_nodes, c.work.positions, s.dx, m.node_world, s.step_length, s.x_trial),
@@ -343,23 +368,26 @@ def _outputs(c: _Context) -> list:
     return [c.rec(ksub.clear_outputs, m.num_worlds, s.solve_worlds, m.pads_per_world, work.pad_normal_force,
                   work.pad_force, s.res_norm),
             *_nodes(c, x, s.solve_worlds, 1), _tets(c, x, s.solve_worlds, outputs=1), _begin_solve(c, s.solve_worlds),
-            c.rec(ksub.mean_stress, m.num_worlds, work.von_mises, m.tet_rest_volume, s.tet_start, s.tet_end, s.solve_worlds,
-                  m.world_volume, work.mean_von_mises)]
+            wp.launch(ksub.mean_stress, dim=m.num_worlds * c.block_threads, block_dim=c.block_threads,
+                      device=m.device, record_cmd=True,
+                      inputs=[c.block_threads, work.von_mises, m.tet_rest_volume, s.tet_start, s.tet_end,
+                              s.solve_worlds, m.world_volume, s.stress_partial, work.mean_von_mises])]
 
 
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
                             h: float, start_pads: tuple, step_start: wp.array, compaction: WorldCompaction,
                             listed_cg: bool = False, phase_graphs: bool = True,
-                            world_cg_threads: int = 0) -> SubstepLaunches:
+                            world_block_threads: int = 0) -> SubstepLaunches:
     """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step,
     iterating in ``work`` (the output state: positions and velocities hold the step's start when
     it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
     ``step_start`` at the step's start, toward ``control``. ``phase_graphs``: capture each phase
     as a CPU graph (False where the caller captures the whole substep). ``compaction``: the row maps;
     ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
-    ``world_cg_threads`` > 0: also record each world's whole CG in one launch of that many threads
-    per world (``cg_world``)."""
-    c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction)
+    ``world_block_threads`` > 0: also record each world's whole CG and line search in one launch
+    each of that many threads per world (``cg_world``, ``search_world``)."""
+    c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
+                 max(world_block_threads, 1))
     s, x = scratch, work.positions
     block = config.check_every or config.cg_iterations
 
@@ -370,14 +398,16 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c, config)),
         evaluate_first=seq(_evaluate(c, config, start_energy=config.line_search_steps > 0)),
         cg=seq(_cg(c, config) * block),
-        cg_world=seq(_cg_world(c, config, world_cg_threads)) if world_cg_threads else [],
+        cg_world=seq(_cg_world(c, config, world_block_threads)) if world_block_threads else [],
         cg_listed=seq(_cg(c, config, listed=True) * block) if listed_cg else [],
         list_cg_worlds=seq(compaction.record_list(scratch.cg_active)) if listed_cg else [],
         coarse_post=seq(_coarse_after(c, s.newton_active)),
         energy0=seq(_nodes(c, x, s.newton_active, 0, s.energy0)),  # the tets' part: ``evaluate_first``
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
-        trial=seq(_trial(c, config)), apply=seq(_apply(c, config)), depth=_depth(c),
+        trial=seq(_trial(c, config)),
+        search_world=seq(_search_world(c, config, world_block_threads)) if world_block_threads else [],
+        apply=seq(_apply(c, config)), depth=_depth(c),
         clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, s.solve_worlds, model.free_axes, s.pad_pos1,
                     s.pad_rot1, model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
                     0.9 * config.penetration_bound, x, s.clamped),

@@ -149,9 +149,12 @@ class SolverScratch:
     coarse_coef: wp.array       # [W, C] float: (T^T A T)^-1 T^T r
     coarse_guess: wp.array      # [N] vec3, m: T coef of the coarse initial guess
     edges: EdgeContactScratch   # pad edge contact (empty unless ContactParams.edge_contact)
+    stress_partial: wp.array    # [W*B] float, Pa: a world block's per-thread partial mean stresses (B threads)
 
     @classmethod
-    def from_model(cls, model: Model) -> "SolverScratch":
+    def from_model(cls, model: Model, block_threads: int = 1) -> "SolverScratch":
+        """Zeroed scratch for ``model``; ``block_threads``: threads of a world's block in the kernels
+        that give each world one (``ImplicitSolver.world_block_threads``, at least 1)."""
         d, n, t, w = model.device, model.num_nodes, model.num_tets, model.num_worlds
         pads = max(w * model.pads_per_world, 1)
         slots = n * (model.pads_per_world + 1)
@@ -192,6 +195,7 @@ class SolverScratch:
             coarse_guess=vec(), tet_start=wp.array(np.asarray(model.tet_start, dtype=np.int32), dtype=int, device=d),
             tet_end=wp.array(np.asarray(model.tet_end, dtype=np.int32), dtype=int, device=d),
             edges=EdgeContactScratch.from_model(model),
+            stress_partial=wp.zeros(w * max(int(block_threads), 1), dtype=float, device=d),
         )
         scratch.solve_worlds.fill_(1)
         scratch.step_length.fill_(1.0)  # begin_line_search resets it; with no line search it stays 1

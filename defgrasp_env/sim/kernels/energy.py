@@ -29,8 +29,9 @@ def strain_energy_density(f: wp.mat33, rotation_guess: wp.quat, mu: float, lam: 
     return mu * wp.ddot(d, d) + 0.5 * lam * (j - 1.0) * (j - 1.0)
 
 
-@wp.kernel
-def node_energy(
+@wp.func
+def node_energy_row(
+    i: int,
     x: wp.array(dtype=wp.vec3),
     x_start: wp.array(dtype=wp.vec3),
     v_start: wp.array(dtype=wp.vec3),
@@ -55,7 +56,8 @@ def node_energy(
     stick_velocity: float,
     energy: wp.array(dtype=wp.float64),
 ):
-    i = wp.tid()
+    """energy[w] += node ``i``'s terms of the incremental potential (inertia, gravity and external
+    force, ground and pad penalties, lagged friction), if its world is active."""
     w = node_world[i]
     if world_active[w] == 0:
         return
@@ -88,6 +90,64 @@ def node_energy(
 
 
 @wp.kernel
+def node_energy(
+    x: wp.array(dtype=wp.vec3),
+    x_start: wp.array(dtype=wp.vec3),
+    v_start: wp.array(dtype=wp.vec3),
+    mass: wp.array(dtype=float),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    external_force: wp.array(dtype=wp.vec3),
+    gravity: wp.vec3,
+    dt: float,
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+    stiffness: wp.array(dtype=float),
+    knee: float,
+    ground_mu: float,
+    pad_mu: float,
+    stick_velocity: float,
+    energy: wp.array(dtype=wp.float64),
+):
+    node_energy_row(wp.tid(), x, x_start, v_start, mass, node_world, world_active, external_force, gravity, dt, pad_pos0,
+                    pad_rot0, pad_pos1, pad_rot1, pad_half, pads_per_world, lag_normal_force, lag_normal, stiffness, knee,
+                    ground_mu, pad_mu, stick_velocity, energy)
+
+
+@wp.func
+def tet_energy_row(
+    t: int,
+    x: wp.array(dtype=wp.vec3),
+    tets: wp.array(dtype=wp.vec4i),
+    rest_inv: wp.array(dtype=wp.mat33),
+    rest_volume: wp.array(dtype=float),
+    tet_mu: wp.array(dtype=float),
+    tet_lambda: wp.array(dtype=float),
+    tet_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    tet_rotation: wp.array(dtype=wp.quat),
+    energy: wp.array(dtype=wp.float64),
+):
+    """energy += V0 psi(F) per world; ``tet_rotation`` (the rotations at the last evaluated
+    positions) warm-starts the polar rotation of F."""
+    w = tet_world[t]
+    if world_active[w] == 0:
+        return
+    idx = tets[t]
+    if spare_tet(idx):
+        return
+    f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t])
+    e = rest_volume[t] * strain_energy_density(f, tet_rotation[t], tet_mu[t], tet_lambda[t])
+    wp.atomic_add(energy, w, wp.float64(e))
+
+
+@wp.kernel
 def tet_energy(
     x: wp.array(dtype=wp.vec3),
     tets: wp.array(dtype=wp.vec4i),
@@ -102,13 +162,5 @@ def tet_energy(
 ):
     """energy += V0 psi(F) per world; ``tet_rotation`` (the rotations at the last evaluated
     positions) warm-starts the polar rotation of F."""
-    t = wp.tid()
-    w = tet_world[t]
-    if world_active[w] == 0:
-        return
-    idx = tets[t]
-    if spare_tet(idx):
-        return
-    f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t])
-    e = rest_volume[t] * strain_energy_density(f, tet_rotation[t], tet_mu[t], tet_lambda[t])
-    wp.atomic_add(energy, w, wp.float64(e))
+    tet_energy_row(wp.tid(), x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, world_active, tet_rotation,
+                   energy)

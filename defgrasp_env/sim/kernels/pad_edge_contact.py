@@ -404,6 +404,51 @@ def evaluate_edge_points(
         wp.atomic_add(pad_force, pad, -force)
 
 
+@wp.func
+def edge_point_energy_slot(
+    slot: int,
+    x: wp.array(dtype=wp.vec3),
+    x_start: wp.array(dtype=wp.vec3),
+    triangles: wp.array(dtype=wp.vec3i),
+    world_active: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    points: wp.array(dtype=wp.vec3),
+    point_pad: wp.array(dtype=int),
+    points_per_world: int,
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_normal: wp.array(dtype=wp.vec3),
+    point_stiffness: wp.array(dtype=float),
+    point_allowed: wp.array(dtype=float),
+    point_friction: wp.array(dtype=float),
+    knee: float,
+    mu: float,
+    eps: float,
+    energy: wp.array(dtype=wp.float64),
+):
+    """energy[w] += the penalty and friction potentials (J) of the edge point in ``slot``."""
+    w = slot // points_per_world
+    t = point_tri[slot]
+    if t < 0 or world_active[w] == 0:
+        return
+    g, depth, slip = edge_point_terms(slot, w, t, x, x_start, triangles, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
+                                      pad_half, pads_per_world, points, point_pad, points_per_world, point_bary,
+                                      point_normal, point_allowed)
+    e = float(0.0)
+    if g > 0.0:
+        e = penalty_energy(point_stiffness[slot], g, knee)
+    lag_fn = point_friction[slot]
+    if lag_fn > 0.0:
+        e += friction_potential(mu, lag_fn, slip, point_normal[slot], eps)
+    if e != 0.0:
+        wp.atomic_add(energy, w, wp.float64(e))
+
+
 @wp.kernel
 def edge_point_energy(
     x: wp.array(dtype=wp.vec3),
@@ -432,22 +477,9 @@ def edge_point_energy(
 ):
     """energy += the edge points' penalty and friction potentials (J) per world
     (``evaluate_edge_points``' potential)."""
-    slot = wp.tid()
-    w = slot // points_per_world
-    t = point_tri[slot]
-    if t < 0 or world_active[w] == 0:
-        return
-    g, depth, slip = edge_point_terms(slot, w, t, x, x_start, triangles, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
-                                      pad_half, pads_per_world, points, point_pad, points_per_world, point_bary,
-                                      point_normal, point_allowed)
-    e = float(0.0)
-    if g > 0.0:
-        e = penalty_energy(point_stiffness[slot], g, knee)
-    lag_fn = point_friction[slot]
-    if lag_fn > 0.0:
-        e += friction_potential(mu, lag_fn, slip, point_normal[slot], eps)
-    if e != 0.0:
-        wp.atomic_add(energy, w, wp.float64(e))
+    edge_point_energy_slot(wp.tid(), x, x_start, triangles, world_active, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
+                           pad_half, pads_per_world, points, point_pad, points_per_world, point_tri, point_bary,
+                           point_normal, point_stiffness, point_allowed, point_friction, knee, mu, eps, energy)
 
 
 @wp.func

@@ -5,6 +5,8 @@ a world this solve computes; the others' rows are not written)."""
 
 import warp as wp
 
+from .block_sync import block_barrier
+
 
 @wp.kernel
 def begin_substep(
@@ -118,26 +120,37 @@ def end_substep(
 
 @wp.kernel
 def mean_stress(
+    threads: int,
     von_mises: wp.array(dtype=float),
     rest_volume: wp.array(dtype=float),
     tet_start: wp.array(dtype=int),
     tet_end: wp.array(dtype=int),
     solve: wp.array(dtype=int),
     world_volume: wp.array(dtype=float),
+    partial: wp.array(dtype=float),
     mean: wp.array(dtype=float),
 ):
-    """One thread per solved world w: ``mean[w]`` = the volume-weighted mean of its object's tets'
-    (``tet_start[w]:tet_end[w]``) von Mises stress, summed in tet order (the order of the CPU's
-    atomic sum before; on a GPU deterministic and without 4,096-way contention on per-world
-    atomics)."""
-    w = wp.tid()
+    """A block of ``threads`` threads per solved world w (``block_sync.py``): ``mean[w]`` = the
+    volume-weighted mean of its object's tets' (``tet_start[w]:tet_end[w]``) von Mises stress. Each
+    thread sums every ``threads``-th tet in tet order into ``partial`` [W*threads], then thread 0
+    adds the partial sums in thread order: deterministic on a GPU (no float atomics), and with one
+    thread (the CPU) the sum in tet order of the CPU's atomic sum before."""
+    tid = wp.tid()
+    w = tid // threads
+    lane = tid - w * threads
     if solve[w] == 0:
         return
     total = float(0.0)
     volume = world_volume[w]
-    for t in range(tet_start[w], tet_end[w]):
+    for t in range(tet_start[w] + lane, tet_end[w], threads):
         total = total + von_mises[t] * rest_volume[t] / volume
-    mean[w] = total
+    partial[tid] = total
+    block_barrier()
+    if lane == 0:
+        mean_w = float(0.0)
+        for k in range(threads):
+            mean_w = mean_w + partial[w * threads + k]
+        mean[w] = mean_w
 
 
 @wp.kernel

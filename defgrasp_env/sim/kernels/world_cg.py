@@ -15,26 +15,19 @@ way, so with one thread per world (the CPU, which runs a launch's threads one af
 results are bit-identical to the phase-by-phase CG's; on a GPU the float atomics' order differs, as
 it does between any two GPU runs.
 
-Rules that keep the barrier sound: every thread of a block reaches every barrier (the iteration
-loop's bound and its exit read the world's flag after a barrier, the same value for all of the
-block's threads; no barrier inside a row loop), and the launch has ``worlds x threads`` threads in
-blocks of ``threads``, so a block never holds two worlds (Warp's grid-stride loop, where the grid is
-smaller, gives all threads of a block the same worlds in turn).
+The barrier (``block_sync.py``) is reached by every thread of a block: the iteration loop's bound
+and its exit read the world's flag after a barrier, the same value for all of the block's threads,
+and no barrier is inside a row loop; the launch has ``worlds x threads`` threads in blocks of
+``threads``, so a block never holds two worlds (Warp's grid-stride loop, where the grid is smaller,
+gives all threads of a block the same worlds in turn).
 """
 
 import warp as wp
 
+from .block_sync import block_barrier
 from .elastic import hessian_product_tet
 from .linear_solve import end_iteration, node_product, update_direction, update_solution
 from .pad_edge_contact import edge_point_slot_product
-
-
-@wp.func_native("""
-#if defined(__CUDA_ARCH__)
-__syncthreads();
-#endif
-""")
-def block_barrier(): ...
 
 
 @wp.kernel

@@ -1,5 +1,5 @@
-"""Each world's CG in one launch (``SolverConfig.world_cg_threads``, ``kernels/world_cg.py``) against
-CG launched phase by phase over all rows (``world_cg_threads=0``): the same row functions in the
+"""Each world's CG in one launch (``SolverConfig.world_block_threads``, ``kernels/world_cg.py``) against
+CG launched phase by phase over all rows (``world_block_threads=0``): the same row functions in the
 same order per world, so on the CPU (one thread per world) every output must be equal bit for bit;
 on CUDA (blocks of threads with barriers between CG's phases; float atomics in another order)
 within the tolerances of the other CPU-vs-CUDA tests."""
@@ -14,22 +14,22 @@ import pytest
 
 import defgrasp_env  # noqa: F401
 from defgrasp_env.envs.config import PickupConfig
-from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig, WORLD_CG_THREADS
+from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig, WORLD_BLOCK_THREADS
 from contact_rollout import ExpertNoisyPress
 from test_fem_batch import REPORT_FIELDS, STATE_ROWS, build, pad_targets, run
 
 
-def _episode(world_cg_threads: int, steps: int, device: str = "cpu"):
+def _episode(world_block_threads: int, steps: int, device: str = "cpu"):
     """Three worlds, each with an object drawn per episode (different node and tet counts: the per
     world row ranges), E = 1e5: the expert, the expert with noise and a gripper pressing its object
     into the ground (force-limit retries and patient re-solves), edge contact on, autoresets;
     every output array, the final state and the CG iterations of every step."""
-    solver = dataclasses.replace(PickupConfig().solver, world_cg_threads=world_cg_threads)
+    solver = dataclasses.replace(PickupConfig().solver, world_block_threads=world_block_threads)
     env = gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point", object="random",
                        youngs_modulus=1e5, solver=solver, device=device, max_episode_steps=25)
     obs, reset_info = env.reset(seed=11)
     scene = env.unwrapped.scene
-    assert scene.solver.world_cg_threads == (min(world_cg_threads, 1) if device == "cpu" else world_cg_threads)
+    assert scene.solver.world_block_threads == (min(world_block_threads, 1) if device == "cpu" else world_block_threads)
     policy = ExpertNoisyPress(env, seed=5)
     out = {"reset/object": np.asarray(reset_info["object"])}
     for k in range(steps):
@@ -78,7 +78,7 @@ def test_world_cg_solver_steps_match_bitwise_and_report_the_same_iterations():
 
 def _solver_steps(threads: int, graphs):
     model, state, control = build((0, 1, 2))
-    solver = ImplicitSolver(model, SolverConfig(world_cg_threads=threads, graphs=graphs))
+    solver = ImplicitSolver(model, SolverConfig(world_block_threads=threads, graphs=graphs))
     history = []
     for k in range(1, 15):
         control.pad_target_positions.assign(np.concatenate([pad_targets(w, k) for w in (0, 1, 2)]))
@@ -87,21 +87,21 @@ def _solver_steps(threads: int, graphs):
     return history
 
 
-def test_world_cg_threads_is_checked_and_its_default_depends_on_the_device():
+def test_world_block_threads_is_checked_and_its_default_depends_on_the_device():
     """Negative, non-integer, over 256 or (above 32) not a multiple of 32: refused, naming the
-    value. None: ``WORLD_CG_THREADS`` of the device kind (one thread per world on the CPU,
+    value. None: ``WORLD_BLOCK_THREADS`` of the device kind (one thread per world on the CPU,
     whatever a positive value asks for); 0 turns it off and lets CG list its worlds again."""
     for bad in (-1, 1.5, True, 48, 288, 512, 1024):
-        with pytest.raises(ValueError, match=f"world_cg_threads.*{bad!r}"):
-            SolverConfig(world_cg_threads=bad)
+        with pytest.raises(ValueError, match=f"world_block_threads.*{bad!r}"):
+            SolverConfig(world_block_threads=bad)
     for good in (0, 1, 7, 32, 64, 256):
-        SolverConfig(world_cg_threads=good)
+        SolverConfig(world_block_threads=good)
     model, _, _ = build((0, 1, 2))
-    assert WORLD_CG_THREADS["cpu"] == 1
-    assert ImplicitSolver(model, SolverConfig()).world_cg_threads == 1
-    assert ImplicitSolver(model, SolverConfig(world_cg_threads=256)).world_cg_threads == 1
-    off = ImplicitSolver(model, SolverConfig(world_cg_threads=0, listed_cg_worlds=2))
-    assert off.world_cg_threads == 0 and off._listed_cg
+    assert WORLD_BLOCK_THREADS["cpu"] == 1
+    assert ImplicitSolver(model, SolverConfig()).world_block_threads == 1
+    assert ImplicitSolver(model, SolverConfig(world_block_threads=256)).world_block_threads == 1
+    off = ImplicitSolver(model, SolverConfig(world_block_threads=0, listed_cg_worlds=2))
+    assert off.world_block_threads == 0 and off._listed_cg
 
 
 @pytest.mark.cuda
@@ -110,9 +110,9 @@ def test_world_cg_on_cuda_agrees_with_cg_phase_by_phase(threads):
     """On CUDA, blocks of 32 and 128 threads per world against CG phase by phase, W = 3, 14 steps:
     positions within 1e-5 m and the iteration counts within 10 % (as for the listed CG: float
     atomics sum in a run-dependent order); the CPU's result too."""
-    _, reference, s0 = run((0, 1, 2), 14, SolverConfig(world_cg_threads=0), device="cuda:0")
-    _, worlds, s1 = run((0, 1, 2), 14, SolverConfig(world_cg_threads=threads), device="cuda:0")
-    _, cpu, _ = run((0, 1, 2), 14, SolverConfig(world_cg_threads=0), device="cpu")
+    _, reference, s0 = run((0, 1, 2), 14, SolverConfig(world_block_threads=0), device="cuda:0")
+    _, worlds, s1 = run((0, 1, 2), 14, SolverConfig(world_block_threads=threads), device="cuda:0")
+    _, cpu, _ = run((0, 1, 2), 14, SolverConfig(world_block_threads=0), device="cpu")
     assert not any(s.diverged.any() for s in s1)
     np.testing.assert_allclose(worlds[-1][0], reference[-1][0], atol=1e-5)
     for k in (0, 6):  # the first steps, before the falling cylinder's unconverged solves diverge
