@@ -14,7 +14,8 @@ import pytest
 
 import defgrasp_env  # noqa: F401
 from defgrasp_env.envs.config import PickupConfig
-from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig, WORLD_BLOCK_THREADS
+from defgrasp_env.sim.solver import (MANY_WORLDS, WORLD_BLOCK_THREADS, WORLD_BLOCK_THREADS_MANY, ImplicitSolver,
+                                     SolverConfig, default_world_block_threads)
 from contact_rollout import ExpertNoisyPress
 from test_fem_batch import REPORT_FIELDS, STATE_ROWS, build, pad_targets, run
 
@@ -90,7 +91,8 @@ def _solver_steps(threads: int, graphs):
 def test_world_block_threads_is_checked_and_its_default_depends_on_the_device():
     """Negative, non-integer, over 256 or (above 32) not a multiple of 32: refused, naming the
     value. None: ``WORLD_BLOCK_THREADS`` of the device kind (one thread per world on the CPU,
-    whatever a positive value asks for); 0 turns it off and lets CG list its worlds again."""
+    whatever a positive value asks for; on CUDA fewer beyond ``MANY_WORLDS``); 0 turns it off and
+    lets CG list its worlds again."""
     for bad in (-1, 1.5, True, 48, 288, 512, 1024):
         with pytest.raises(ValueError, match=f"world_block_threads.*{bad!r}"):
             SolverConfig(world_block_threads=bad)
@@ -98,6 +100,8 @@ def test_world_block_threads_is_checked_and_its_default_depends_on_the_device():
         SolverConfig(world_block_threads=good)
     model, _, _ = build((0, 1, 2))
     assert WORLD_BLOCK_THREADS["cpu"] == 1
+    assert default_world_block_threads("cpu", 4096) == 1
+    assert WORLD_BLOCK_THREADS["cuda"] == 256 and WORLD_BLOCK_THREADS_MANY == 128 and MANY_WORLDS == 2048
     assert ImplicitSolver(model, SolverConfig()).world_block_threads == 1
     assert ImplicitSolver(model, SolverConfig(world_block_threads=256)).world_block_threads == 1
     off = ImplicitSolver(model, SolverConfig(world_block_threads=0, listed_cg_worlds=2))

@@ -36,8 +36,13 @@ __all__ = ["ImplicitSolver", "SolveStats", "SolverConfig"]
 _LAUNCH_SETS = 8
 #: ``SolverConfig.listed_cg_worlds`` on CUDA when it is None.
 LISTED_CG_WORLDS_CUDA = 8
-#: ``SolverConfig.world_block_threads`` when it is None, by device kind.
+#: ``SolverConfig.world_block_threads`` when it is None, by device kind; on CUDA 256 up to
+#: ``MANY_WORLDS`` worlds and 128 beyond (fewer threads per world, more worlds resident at once).
+#: Measured on an H200 (benchmarks/RESULTS.md): 256 against 128 threads, W = 1 random actions
+#: 1.8 / 2.0 ms a step, W = 2048 contact-heavy 119 / 137 ms (mean), W = 4096 random 58.3 / 54.4 ms.
 WORLD_BLOCK_THREADS = {"cuda": 256, "cpu": 1}
+WORLD_BLOCK_THREADS_MANY = 128
+MANY_WORLDS = 2048
 #: The largest ``SolverConfig.world_block_threads``: a block of 256 threads fits in an SM's 64 K
 #: registers at any register count (at most 255 a thread); 1024 failed to launch on an H200.
 MAX_WORLD_BLOCK_THREADS = 256
@@ -102,7 +107,8 @@ class SolverConfig:
             (``listed_cg_worlds`` is then unused). 0 = off. On CUDA the block size (1 to 256, a
             multiple of 32 above 32); on the CPU, which runs a launch's threads one after another,
             any positive value means one thread per world, and the results are bit-identical to the
-            phase-by-phase launches. None (default): ``WORLD_BLOCK_THREADS`` of the device's kind.
+            phase-by-phase launches. None (default): ``WORLD_BLOCK_THREADS`` of the device's kind
+            (on CUDA ``WORLD_BLOCK_THREADS_MANY`` beyond ``MANY_WORLDS`` worlds).
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
@@ -174,6 +180,13 @@ def graphs_supported(device) -> bool:
 _CPU_GRAPHS: bool | None = None
 
 
+def default_world_block_threads(device, worlds: int) -> int:
+    """``SolverConfig.world_block_threads`` where it is None, for ``worlds`` worlds on ``device``."""
+    if wp.get_device(device).is_cpu:
+        return WORLD_BLOCK_THREADS["cpu"]
+    return WORLD_BLOCK_THREADS["cuda"] if worlds <= MANY_WORLDS else WORLD_BLOCK_THREADS_MANY
+
+
 class ImplicitSolver:
     """Advances a ``State`` of a ``Model`` by ``dt`` under a ``Control``.
 
@@ -206,7 +219,7 @@ class ImplicitSolver:
         is_cpu = wp.get_device(model.device).is_cpu
         threads = config.world_block_threads
         if threads is None:
-            threads = WORLD_BLOCK_THREADS["cpu" if is_cpu else "cuda"]
+            threads = default_world_block_threads(model.device, model.num_worlds)
         #: threads per world of the per-world CG and line search (``SolverConfig.world_block_threads``;
         #: 1 on the CPU; 0: off)
         self.world_block_threads = min(threads, 1) if is_cpu else threads
