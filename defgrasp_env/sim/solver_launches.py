@@ -35,6 +35,7 @@ from .kernels import line_search as kls
 from .kernels import linear_solve as klin
 from .kernels import substep as ksub
 from .kernels import world_cg as kwcg
+from .kernels import world_evaluate as kwev
 from .kernels import world_line_search as kwls
 from .model import Model
 from .solver_scratch import SolverScratch
@@ -74,7 +75,7 @@ class SubstepLaunches:
     pads: list          # [substeps] lists: pad poses at fractions k/K and (k+1)/K of the step
     begin: list         # [substeps] launches: substep start, initial guess (prescribed axes at (k+1)/K)
     lag: list
-    evaluate: list
+    evaluate: list      # a Newton iteration's evaluation (one launch of world blocks where ``world_block_threads``)
     evaluate_first: list  # the substep's first evaluation: also the tets' part of ``energy0``
     cg: list
     cg_world: list      # each world's whole CG in one launch (``kernels/world_cg.py``; [] where not used)
@@ -277,6 +278,32 @@ def _evaluate(c: _Context, config, start_energy: bool = False) -> list:
                   s.cg_active)]
 
 
+def _evaluate_world(c: _Context, config, threads: int, start_energy: bool = False) -> list:
+    """``_evaluate``'s launches as one: each world's evaluation in a block of ``threads`` threads
+    (``kernels/world_evaluate.py``)."""
+    m, s, e, wc, ctl, work = c.model, c.scratch, c.scratch.edges, c.compaction, c.control, c.work
+    return [wp.launch(kwev.evaluate_world_blocks, dim=m.num_worlds * threads, block_dim=threads, device=m.device,
+                      record_cmd=True, inputs=[
+                          threads, wc.nodes.start, wc.tets.start, int(start_energy), s.energy0, s.newton_active,
+                          work.positions,
+                          s.x_start, work.velocities, m.node_mass, m.node_world, ctl.external_force, m.gravity, c.h,
+                          *s.pads, m.pad_half_extents, m.pads_per_world, s.lag_normal_force, s.lag_normal,
+                          m.node_contact_stiffness, m.contact.stiffening_depth, m.contact.ground_friction,
+                          m.contact.pad_friction, m.contact.stick_velocity,
+                          s.residual, s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force,
+                          work.pad_normal_force, work.pad_force, s.penetration,
+                          e.triangles, e.points, e.point_pad, e.points_per_world if e.active else 0, e.point_tri,
+                          e.point_bary, e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction,
+                          m.contact.stick_velocity * c.h, e.triangle_first, e.point_block,
+                          m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, m.tet_world,
+                          s.tet_rotation, s.cofactor, work.von_mises, s.tet_r, s.tet_twist,
+                          m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm, s.node_aggregate,
+                          1.0 / (c.h * c.h), s.coarse_size, s.coarse_matrix, s.coarse_rhs, s.coarse_lower_inv,
+                          s.coarse_inverse, s.coarse_coef, s.coarse_guess, s.coarse_scratch,
+                          s.substep_newton_it, s.patient, s.last_dx, config.newton_tolerance, config.cg_tolerance,
+                          config.cg_tolerance_far, s.rz_stop, s.cg_active])]
+
+
 def _cg(c: _Context, config, listed: bool = False) -> list:
     """One CG iteration over every row, or (``listed``) over the rows of the listed worlds."""
     m, s, wc = c.model, c.scratch, c.compaction
@@ -384,8 +411,9 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     ``step_start`` at the step's start, toward ``control``. ``phase_graphs``: capture each phase
     as a CPU graph (False where the caller captures the whole substep). ``compaction``: the row maps;
     ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
-    ``world_block_threads`` > 0: also record each world's whole CG and line search in one launch
-    each of that many threads per world (``cg_world``, ``search_world``)."""
+    ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world
+    (``evaluate``, ``evaluate_first``), and also its whole CG and line search (``cg_world``,
+    ``search_world``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
                  max(world_block_threads, 1))
     s, x = scratch, work.positions
@@ -394,9 +422,15 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     def seq(commands: list) -> list:
         return [LaunchSequence(commands, model.device, phase_graphs)]
 
+    def evaluate(c: _Context, config, start_energy: bool = False) -> list:
+        if world_block_threads:
+            return _evaluate_world(c, config, world_block_threads, start_energy)
+        return _evaluate(c, config, start_energy)
+
     return SubstepLaunches(
-        pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)), evaluate=seq(_evaluate(c, config)),
-        evaluate_first=seq(_evaluate(c, config, start_energy=config.line_search_steps > 0)),
+        pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)),
+        evaluate=seq(evaluate(c, config)),
+        evaluate_first=seq(evaluate(c, config, start_energy=config.line_search_steps > 0)),
         cg=seq(_cg(c, config) * block),
         cg_world=seq(_cg_world(c, config, world_block_threads)) if world_block_threads else [],
         cg_listed=seq(_cg(c, config, listed=True) * block) if listed_cg else [],

@@ -50,6 +50,33 @@ def coarse_coefficients(w: int, size: int, inverse: wp.array3d(dtype=wp.float64)
     return float(g_c)
 
 
+@wp.func
+def coarse_assemble_node(
+    i: int,
+    mass: wp.array(dtype=float),
+    contact_hessian: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    inv_dt2: float,
+    r: wp.array(dtype=wp.vec3),
+    matrix: wp.array3d(dtype=wp.float64),
+    rhs: wp.array2d(dtype=float),
+):
+    """Row ``i`` of ``coarse_assemble_nodes``."""
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    a = node_aggregate[i]
+    fr = wp.diag(free[i])
+    block = fr * (mass[i] * inv_dt2 * wp.identity(n=3, dtype=float) + contact_hessian[i]) * fr
+    for j in range(3):
+        for k in range(3):
+            wp.atomic_add(matrix, w, 3 * a + j, 3 * a + k, wp.float64(block[j, k]))
+    add_rhs(rhs, w, a, r[i])
+
+
 @wp.kernel
 def coarse_assemble_nodes(
     mass: wp.array(dtype=float),
@@ -64,21 +91,13 @@ def coarse_assemble_nodes(
     rhs: wp.array2d(dtype=float),
 ):
     """E += T^T (M/h^2 + contact blocks) T and rhs += T^T r (r already masked)."""
-    i = wp.tid()
-    w = node_world[i]
-    if world_active[w] == 0:
-        return
-    a = node_aggregate[i]
-    fr = wp.diag(free[i])
-    block = fr * (mass[i] * inv_dt2 * wp.identity(n=3, dtype=float) + contact_hessian[i]) * fr
-    for j in range(3):
-        for k in range(3):
-            wp.atomic_add(matrix, w, 3 * a + j, 3 * a + k, wp.float64(block[j, k]))
-    add_rhs(rhs, w, a, r[i])
+    coarse_assemble_node(wp.tid(), mass, contact_hessian, free, node_world, node_aggregate, world_active, inv_dt2, r,
+                         matrix, rhs)
 
 
-@wp.kernel
-def coarse_assemble_tets(
+@wp.func
+def coarse_assemble_tet(
+    t: int,
     tets: wp.array(dtype=wp.vec4i),
     rest_inv: wp.array(dtype=wp.mat33),
     rest_volume: wp.array(dtype=float),
@@ -93,10 +112,7 @@ def coarse_assemble_tets(
     node_aggregate: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
 ):
-    """E += T^T K_t T for the tets t with nodes in two or more aggregates (or a prescribed axis):
-    the tet's 12 unit-vector Hessian products (``stress_differential``), summed into the blocks of
-    the aggregates of their nodes."""
-    t = wp.tid()
+    """Row ``t`` of ``coarse_assemble_tets``."""
     w = tet_world[t]
     if world_active[w] == 0:
         return
@@ -137,7 +153,31 @@ def coarse_assemble_tets(
 
 
 @wp.kernel
-def coarse_factor(
+def coarse_assemble_tets(
+    tets: wp.array(dtype=wp.vec4i),
+    rest_inv: wp.array(dtype=wp.mat33),
+    rest_volume: wp.array(dtype=float),
+    tet_mu: wp.array(dtype=float),
+    tet_lambda: wp.array(dtype=float),
+    tet_cof: wp.array(dtype=wp.mat33),
+    tet_r: wp.array(dtype=wp.mat33),
+    tet_twist: wp.array(dtype=float),
+    tet_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    free: wp.array(dtype=wp.vec3),
+    node_aggregate: wp.array(dtype=int),
+    matrix: wp.array3d(dtype=wp.float64),
+):
+    """E += T^T K_t T for the tets t with nodes in two or more aggregates (or a prescribed axis):
+    the tet's 12 unit-vector Hessian products (``stress_differential``), summed into the blocks of
+    the aggregates of their nodes."""
+    coarse_assemble_tet(wp.tid(), tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_cof, tet_r, tet_twist,
+                        tet_world, world_active, free, node_aggregate, matrix)
+
+
+@wp.func
+def coarse_factor_world(
+    w: int,
     world_active: wp.array(dtype=int),
     size: int,
     matrix: wp.array3d(dtype=wp.float64),
@@ -147,10 +187,7 @@ def coarse_factor(
     coef: wp.array2d(dtype=float),
     rz: wp.array(dtype=float),
 ):
-    """Per world: E^-1 by Cholesky (E = L L^T, E^-1 = L^-T L^-1; unknowns with a zero diagonal, i.e.
-    empty aggregates or axes prescribed on all of an aggregate's nodes, get 1), coef = E^-1 rhs;
-    clears E, rhs and rz (recomputed by ``coarse_start_cg``)."""
-    w = wp.tid()
+    """Row ``w`` of ``coarse_factor``."""
     if world_active[w] == 0:
         return
     ok = int(1)
@@ -197,6 +234,43 @@ def coarse_factor(
 
 
 @wp.kernel
+def coarse_factor(
+    world_active: wp.array(dtype=int),
+    size: int,
+    matrix: wp.array3d(dtype=wp.float64),
+    lower_inv: wp.array3d(dtype=wp.float64),
+    inverse: wp.array3d(dtype=wp.float64),
+    rhs: wp.array2d(dtype=float),
+    coef: wp.array2d(dtype=float),
+    rz: wp.array(dtype=float),
+):
+    """Per world: E^-1 by Cholesky (E = L L^T, E^-1 = L^-T L^-1; unknowns with a zero diagonal, i.e.
+    empty aggregates or axes prescribed on all of an aggregate's nodes, get 1), coef = E^-1 rhs;
+    clears E, rhs and rz (recomputed by ``coarse_start_cg``)."""
+    coarse_factor_world(wp.tid(), world_active, size, matrix, lower_inv, inverse, rhs, coef, rz)
+
+
+@wp.func
+def coarse_guess_node(
+    i: int,
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    coef: wp.array2d(dtype=float),
+    dx: wp.array(dtype=wp.vec3),
+    guess: wp.array(dtype=wp.vec3),
+):
+    """Row ``i`` of ``coarse_guess``."""
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    d = aggregate_part(coef, w, node_aggregate[i], free[i])
+    dx[i] = dx[i] + d
+    guess[i] = d
+
+
+@wp.kernel
 def coarse_guess(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
@@ -207,13 +281,34 @@ def coarse_guess(
     guess: wp.array(dtype=wp.vec3),
 ):
     """dx += T coef; guess = T coef (the direction whose A-product ``coarse_start_cg`` subtracts)."""
-    i = wp.tid()
+    coarse_guess_node(wp.tid(), free, node_world, node_aggregate, world_active, coef, dx, guess)
+
+
+@wp.func
+def coarse_start_cg_node(
+    i: int,
+    precond: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    r: wp.array(dtype=wp.vec3),
+    ap: wp.array(dtype=wp.vec3),
+    z: wp.array(dtype=wp.vec3),
+    p: wp.array(dtype=wp.vec3),
+    rz: wp.array(dtype=float),
+):
+    """Row ``i`` of ``coarse_start_cg``."""
     w = node_world[i]
     if world_active[w] == 0:
         return
-    d = aggregate_part(coef, w, node_aggregate[i], free[i])
-    dx[i] = dx[i] + d
-    guess[i] = d
+    fr = free[i]
+    ri = wp.cw_mul(r[i] - ap[i], fr)
+    r[i] = ri
+    zi = wp.cw_mul(precond[i] * ri, fr)
+    z[i] = zi
+    p[i] = zi
+    ap[i] = wp.vec3(0.0)
+    wp.atomic_add(rz, w, wp.dot(ri, zi))
 
 
 @wp.kernel
@@ -230,18 +325,7 @@ def coarse_start_cg(
 ):
     """r -= A T coef (in ``ap``), then CG's z = p = P r, rz = r . z and ap = 0. T^T r = 0 after the
     coarse solve, so the coarse part of the first z vanishes (up to rounding) and is left out."""
-    i = wp.tid()
-    w = node_world[i]
-    if world_active[w] == 0:
-        return
-    fr = free[i]
-    ri = wp.cw_mul(r[i] - ap[i], fr)
-    r[i] = ri
-    zi = wp.cw_mul(precond[i] * ri, fr)
-    z[i] = zi
-    p[i] = zi
-    ap[i] = wp.vec3(0.0)
-    wp.atomic_add(rz, w, wp.dot(ri, zi))
+    coarse_start_cg_node(wp.tid(), precond, free, node_world, world_active, r, ap, z, p, rz)
 
 
 @wp.kernel

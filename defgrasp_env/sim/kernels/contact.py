@@ -219,8 +219,9 @@ def friction_force(mu: float, normal_force: float, slip: wp.vec3, n: wp.vec3, ep
     return -c * slip_t, c * tangent_projector(n)
 
 
-@wp.kernel
-def evaluate_nodes(
+@wp.func
+def evaluate_node(
+    i: int,
     x: wp.array(dtype=wp.vec3),
     x_start: wp.array(dtype=wp.vec3),
     v_start: wp.array(dtype=wp.vec3),
@@ -254,12 +255,7 @@ def evaluate_nodes(
     pad_force: wp.array(dtype=wp.vec3),
     penetration: wp.array(dtype=float),
 ):
-    """Inertia, gravity, external and contact terms of the backward-Euler residual of each node.
-
-    residual = m/dt^2 (x_hat - x) + m g + f_ext + f_contact, x_hat = x_start + dt v_start;
-    diag_block = m/dt^2 I + contact Hessian. The elastic terms are added afterwards by the tets.
-    """
-    i = wp.tid()
+    """Row ``i`` of ``evaluate_nodes``."""
     w = node_world[i]
     if world_active[w] == 0:
         return
@@ -315,6 +311,52 @@ def evaluate_nodes(
     contact_hessian[i] = hess
     contact_force[i] = force
     elastic_force[i] = wp.vec3(0.0)
+
+
+@wp.kernel
+def evaluate_nodes(
+    x: wp.array(dtype=wp.vec3),
+    x_start: wp.array(dtype=wp.vec3),
+    v_start: wp.array(dtype=wp.vec3),
+    mass: wp.array(dtype=float),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    external_force: wp.array(dtype=wp.vec3),
+    gravity: wp.vec3,
+    dt: float,
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+    stiffness: wp.array(dtype=float),
+    knee: float,
+    ground_mu: float,
+    pad_mu: float,
+    stick_velocity: float,
+    record_pads: int,
+    # outputs (written, not accumulated, except the pad totals)
+    residual: wp.array(dtype=wp.vec3),
+    diag_block: wp.array(dtype=wp.mat33),
+    contact_hessian: wp.array(dtype=wp.mat33),
+    contact_force: wp.array(dtype=wp.vec3),
+    elastic_force: wp.array(dtype=wp.vec3),
+    pad_normal_force: wp.array(dtype=float),
+    pad_force: wp.array(dtype=wp.vec3),
+    penetration: wp.array(dtype=float),
+):
+    """Inertia, gravity, external and contact terms of the backward-Euler residual of each node.
+
+    residual = m/dt^2 (x_hat - x) + m g + f_ext + f_contact, x_hat = x_start + dt v_start;
+    diag_block = m/dt^2 I + contact Hessian. The elastic terms are added afterwards by the tets.
+    """
+    evaluate_node(wp.tid(), x, x_start, v_start, mass, node_world, world_active, external_force, gravity, dt,
+                  pad_pos0, pad_rot0, pad_pos1, pad_rot1, pad_half, pads_per_world, lag_normal_force, lag_normal,
+                  stiffness, knee, ground_mu, pad_mu, stick_velocity, record_pads, residual, diag_block,
+                  contact_hessian, contact_force, elastic_force, pad_normal_force, pad_force, penetration)
 
 
 @wp.kernel

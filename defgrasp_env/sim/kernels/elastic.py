@@ -145,8 +145,9 @@ def von_mises_of(f: wp.mat33, piola: wp.mat33):
     return wp.sqrt(1.5 * wp.ddot(s, s))
 
 
-@wp.kernel
-def evaluate_tets(
+@wp.func
+def evaluate_tet(
+    t: int,
     x: wp.array(dtype=wp.vec3),
     tets: wp.array(dtype=wp.vec4i),
     rest_inv: wp.array(dtype=wp.mat33),
@@ -169,15 +170,7 @@ def evaluate_tets(
     add_energy: int,
     energy: wp.array(dtype=wp.float64),
 ):
-    """Add each tet's elastic force to ``residual`` and store the polar rotation of F (the next warm
-    start); then, in a Newton iteration (``outputs`` = 0), add its Hessian diagonal blocks to
-    ``diag_block`` and store cof(F), R as a matrix and the twist factor for the Hessian products,
-    or, in the outputs pass after a solve (``outputs`` = 1), add the force to ``elastic_force`` and
-    store the von Mises stress: each pass writes only what is read after it (the same values as
-    both passes writing everything). ``add_energy`` = 1: also add V0 psi(F) (``energy.tet_energy``'s
-    term, with the rotation just found) to ``energy[world]`` (the line search's start energy, from
-    the F and R this pass computes anyway)."""
-    t = wp.tid()
+    """Row ``t`` of ``evaluate_tets``."""
     if world_active[tet_world[t]] == 0:
         return
     idx = tets[t]
@@ -217,6 +210,43 @@ def evaluate_tets(
             wp.atomic_add(diag_block, idx[a], block)
         else:
             wp.atomic_add(elastic_force, idx[a], force)
+
+
+@wp.kernel
+def evaluate_tets(
+    x: wp.array(dtype=wp.vec3),
+    tets: wp.array(dtype=wp.vec4i),
+    rest_inv: wp.array(dtype=wp.mat33),
+    rest_volume: wp.array(dtype=float),
+    tet_mu: wp.array(dtype=float),
+    tet_lambda: wp.array(dtype=float),
+    tet_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    # in: warm start; out: the rotation at x
+    tet_rotation: wp.array(dtype=wp.quat),
+    # outputs
+    residual: wp.array(dtype=wp.vec3),
+    diag_block: wp.array(dtype=wp.mat33),
+    elastic_force: wp.array(dtype=wp.vec3),
+    tet_cof: wp.array(dtype=wp.mat33),
+    von_mises: wp.array(dtype=float),
+    tet_r: wp.array(dtype=wp.mat33),
+    tet_twist: wp.array(dtype=float),
+    outputs: int,
+    add_energy: int,
+    energy: wp.array(dtype=wp.float64),
+):
+    """Add each tet's elastic force to ``residual`` and store the polar rotation of F (the next warm
+    start); then, in a Newton iteration (``outputs`` = 0), add its Hessian diagonal blocks to
+    ``diag_block`` and store cof(F), R as a matrix and the twist factor for the Hessian products,
+    or, in the outputs pass after a solve (``outputs`` = 1), add the force to ``elastic_force`` and
+    store the von Mises stress: each pass writes only what is read after it (the same values as
+    both passes writing everything). ``add_energy`` = 1: also add V0 psi(F) (``energy.tet_energy``'s
+    term, with the rotation just found) to ``energy[world]`` (the line search's start energy, from
+    the F and R this pass computes anyway)."""
+    evaluate_tet(wp.tid(), x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, world_active, tet_rotation,
+                 residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, outputs, add_energy,
+                 energy)
 
 
 @wp.func

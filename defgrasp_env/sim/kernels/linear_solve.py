@@ -22,8 +22,9 @@ def masked_block(block: wp.mat33, free: wp.vec3):
     return m * block * m + wp.diag(wp.vec3(1.0) - free)
 
 
-@wp.kernel
-def begin_linear_solve(
+@wp.func
+def begin_node_solve(
+    i: int,
     residual: wp.array(dtype=wp.vec3),
     diag_block: wp.array(dtype=wp.mat33),
     free: wp.array(dtype=wp.vec3),
@@ -37,8 +38,7 @@ def begin_linear_solve(
     rz: wp.array(dtype=float),
     residual_norm: wp.array(dtype=float),
 ):
-    """Mask the residual, build the block-Jacobi preconditioner, start CG from dx = 0."""
-    i = wp.tid()
+    """Row ``i`` of ``begin_linear_solve``."""
     w = node_world[i]
     dx[i] = wp.vec3(0.0)
     ap[i] = wp.vec3(0.0)
@@ -55,6 +55,53 @@ def begin_linear_solve(
     p[i] = zi
     wp.atomic_add(rz, w, wp.dot(r, zi))
     wp.atomic_max(residual_norm, w, wp.max(wp.abs(r)))
+
+
+@wp.kernel
+def begin_linear_solve(
+    residual: wp.array(dtype=wp.vec3),
+    diag_block: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    precond: wp.array(dtype=wp.mat33),
+    z: wp.array(dtype=wp.vec3),
+    p: wp.array(dtype=wp.vec3),
+    dx: wp.array(dtype=wp.vec3),
+    ap: wp.array(dtype=wp.vec3),
+    rz: wp.array(dtype=float),
+    residual_norm: wp.array(dtype=float),
+):
+    """Mask the residual, build the block-Jacobi preconditioner, start CG from dx = 0."""
+    begin_node_solve(wp.tid(), residual, diag_block, free, node_world, world_active, precond, z, p, dx, ap, rz,
+                     residual_norm)
+
+
+@wp.func
+def start_cg_world(
+    w: int,
+    newton_active: wp.array(dtype=int),
+    newton_iterations: wp.array(dtype=int),
+    patient: wp.array(dtype=int),
+    last_update: wp.array(dtype=float),
+    newton_tolerance: float,
+    tolerance_near: float,
+    tolerance_far: float,
+    rz: wp.array(dtype=float),
+    rz_stop: wp.array(dtype=float),
+    cg_active: wp.array(dtype=int),
+):
+    """Row ``w`` of ``start_cg_worlds``."""
+    update = float(0.0)
+    if newton_iterations[w] > 0 and patient[w] == 0:
+        update = last_update[w]
+    eta = wp.clamp(tolerance_near * update / newton_tolerance, tolerance_near,
+                   wp.max(tolerance_near, tolerance_far))
+    rz_stop[w] = eta * eta * rz[w]
+    active = 0
+    if newton_active[w] != 0 and rz[w] > 0.0:
+        active = 1
+    cg_active[w] = active
 
 
 @wp.kernel
@@ -81,17 +128,8 @@ def start_cg_worlds(
     of K substeps is bit-identical to K steps of one). A ``patient`` world (iterated to
     convergence because its contact forces decide the actuator force limit) solves every
     iteration to tolerance_near."""
-    w = wp.tid()
-    update = float(0.0)
-    if newton_iterations[w] > 0 and patient[w] == 0:
-        update = last_update[w]
-    eta = wp.clamp(tolerance_near * update / newton_tolerance, tolerance_near,
-                   wp.max(tolerance_near, tolerance_far))
-    rz_stop[w] = eta * eta * rz[w]
-    active = 0
-    if newton_active[w] != 0 and rz[w] > 0.0:
-        active = 1
-    cg_active[w] = active
+    start_cg_world(wp.tid(), newton_active, newton_iterations, patient, last_update, newton_tolerance, tolerance_near,
+                   tolerance_far, rz, rz_stop, cg_active)
 
 
 @wp.func

@@ -309,6 +309,86 @@ def edge_point_terms(slot: int, w: int, t: int, x: wp.array(dtype=wp.vec3), x_st
     return depth - point_allowed[slot], depth, slip
 
 
+@wp.func
+def evaluate_edge_point(
+    slot: int,
+    x: wp.array(dtype=wp.vec3),
+    x_start: wp.array(dtype=wp.vec3),
+    triangles: wp.array(dtype=wp.vec3i),
+    world_active: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    points: wp.array(dtype=wp.vec3),
+    point_pad: wp.array(dtype=int),
+    points_per_world: int,
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_normal: wp.array(dtype=wp.vec3),
+    point_stiffness: wp.array(dtype=float),
+    point_allowed: wp.array(dtype=float),
+    point_friction: wp.array(dtype=float),
+    knee: float,
+    mu: float,
+    eps: float,
+    triangle_first: wp.array(dtype=int),
+    record_pads: int,
+    # outputs, accumulated onto those of ``contact.evaluate_nodes`` (``point_block``: set)
+    residual: wp.array(dtype=wp.vec3),
+    diag_block: wp.array(dtype=wp.mat33),
+    point_block: wp.array(dtype=wp.mat33),
+    contact_force: wp.array(dtype=wp.vec3),
+    pad_normal_force: wp.array(dtype=float),
+    pad_force: wp.array(dtype=wp.vec3),
+    penetration: wp.array(dtype=float),
+):
+    """Row ``slot`` of ``evaluate_edge_points``."""
+    w = slot // points_per_world
+    t = point_tri[slot]
+    if t < 0 or world_active[w] == 0:
+        return
+    g, depth, slip = edge_point_terms(slot, w, t, x, x_start, triangles, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
+                                      pad_half, pads_per_world, points, point_pad, points_per_world, point_bary,
+                                      point_normal, point_allowed)
+    n = point_normal[slot]
+    block = wp.mat33(0.0)
+    force = wp.vec3(0.0)
+    f = float(0.0)
+    if g > 0.0:
+        k = point_stiffness[slot]
+        f = penalty_force(k, g, knee)
+        force = -f * n
+        block = penalty_stiffness(k, g, knee) * wp.outer(n, n)
+    lag_fn = point_friction[slot]
+    if lag_fn > 0.0:
+        f_fric, h_fric = friction_force(mu, lag_fn, slip, n, eps)
+        force += f_fric
+        block += h_fric
+    point_block[slot] = block
+    if f == 0.0 and lag_fn <= 0.0:
+        return
+    ids = triangles[t]
+    bary = point_bary[slot]
+    for j in range(3):
+        wp.atomic_add(residual, ids[j], bary[j] * force)
+        wp.atomic_add(contact_force, ids[j], bary[j] * force)
+        wp.atomic_add(diag_block, ids[j], (bary[j] * bary[j]) * block)
+    if record_pads != 0:
+        pad = w * pads_per_world + point_pad[slot % points_per_world]
+        if f > 0.0:
+            skin = SKIN_KNEES * knee
+            if depth - skin > penetration[w]:
+                q1 = edge_point_end(slot % points_per_world, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1,
+                                    pad_half)
+                inside = depth_inside_surface(x, triangles, triangle_first[w], triangle_first[w + 1], q1)
+                wp.atomic_max(penetration, w, wp.min(depth, inside) - skin)
+            wp.atomic_add(pad_normal_force, pad, f)
+        wp.atomic_add(pad_force, pad, -force)
+
+
 @wp.kernel
 def evaluate_edge_points(
     x: wp.array(dtype=wp.vec3),
@@ -360,48 +440,11 @@ def evaluate_edge_points(
     searched against. Only a point whose plane depth could raise the world's reading so far is
     tested (one pass over its world's triangles, a second for one inside), so the maximum is the
     same whatever the order the points run in."""
-    slot = wp.tid()
-    w = slot // points_per_world
-    t = point_tri[slot]
-    if t < 0 or world_active[w] == 0:
-        return
-    g, depth, slip = edge_point_terms(slot, w, t, x, x_start, triangles, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
-                                      pad_half, pads_per_world, points, point_pad, points_per_world, point_bary,
-                                      point_normal, point_allowed)
-    n = point_normal[slot]
-    block = wp.mat33(0.0)
-    force = wp.vec3(0.0)
-    f = float(0.0)
-    if g > 0.0:
-        k = point_stiffness[slot]
-        f = penalty_force(k, g, knee)
-        force = -f * n
-        block = penalty_stiffness(k, g, knee) * wp.outer(n, n)
-    lag_fn = point_friction[slot]
-    if lag_fn > 0.0:
-        f_fric, h_fric = friction_force(mu, lag_fn, slip, n, eps)
-        force += f_fric
-        block += h_fric
-    point_block[slot] = block
-    if f == 0.0 and lag_fn <= 0.0:
-        return
-    ids = triangles[t]
-    bary = point_bary[slot]
-    for j in range(3):
-        wp.atomic_add(residual, ids[j], bary[j] * force)
-        wp.atomic_add(contact_force, ids[j], bary[j] * force)
-        wp.atomic_add(diag_block, ids[j], (bary[j] * bary[j]) * block)
-    if record_pads != 0:
-        pad = w * pads_per_world + point_pad[slot % points_per_world]
-        if f > 0.0:
-            skin = SKIN_KNEES * knee
-            if depth - skin > penetration[w]:
-                q1 = edge_point_end(slot % points_per_world, w, pads_per_world, points, point_pad, pad_pos1, pad_rot1,
-                                    pad_half)
-                inside = depth_inside_surface(x, triangles, triangle_first[w], triangle_first[w + 1], q1)
-                wp.atomic_max(penetration, w, wp.min(depth, inside) - skin)
-            wp.atomic_add(pad_normal_force, pad, f)
-        wp.atomic_add(pad_force, pad, -force)
+    evaluate_edge_point(wp.tid(), x, x_start, triangles, world_active, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
+                        pad_half, pads_per_world, points, point_pad, points_per_world, point_tri, point_bary,
+                        point_normal, point_stiffness, point_allowed, point_friction, knee, mu, eps, triangle_first,
+                        record_pads, residual, diag_block, point_block, contact_force, pad_normal_force, pad_force,
+                        penetration)
 
 
 @wp.func
@@ -530,8 +573,9 @@ def edge_point_product(
     edge_point_slot_product(slot, p, triangles, cg_active, points_per_world, point_tri, point_bary, point_block, ap)
 
 
-@wp.kernel
-def coarse_assemble_edge_points(
+@wp.func
+def coarse_assemble_edge_point(
+    slot: int,
     triangles: wp.array(dtype=wp.vec3i),
     world_active: wp.array(dtype=int),
     points_per_world: int,
@@ -542,9 +586,7 @@ def coarse_assemble_edge_points(
     node_aggregate: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
 ):
-    """E += T^T H T for the edge points' Hessians (``edge_point_product``): block
-    w_j w_k F_j B F_k between the aggregates of nodes j and k (F: diagonal of free axes)."""
-    slot = wp.tid()
+    """Row ``slot`` of ``coarse_assemble_edge_points``."""
     w = slot // points_per_world
     t = point_tri[slot]
     if t < 0 or world_active[w] == 0:
@@ -562,3 +604,21 @@ def coarse_assemble_edge_points(
             for r in range(3):
                 for c in range(3):
                     wp.atomic_add(matrix, w, 3 * aj + r, 3 * ak + c, wp.float64(part[r, c]))
+
+
+@wp.kernel
+def coarse_assemble_edge_points(
+    triangles: wp.array(dtype=wp.vec3i),
+    world_active: wp.array(dtype=int),
+    points_per_world: int,
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_block: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.vec3),
+    node_aggregate: wp.array(dtype=int),
+    matrix: wp.array3d(dtype=wp.float64),
+):
+    """E += T^T H T for the edge points' Hessians (``edge_point_product``): block
+    w_j w_k F_j B F_k between the aggregates of nodes j and k (F: diagonal of free axes)."""
+    coarse_assemble_edge_point(wp.tid(), triangles, world_active, points_per_world, point_tri, point_bary,
+                               point_block, free, node_aggregate, matrix)
