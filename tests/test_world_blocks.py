@@ -1,8 +1,10 @@
-"""Each world's CG in one launch (``SolverConfig.world_block_threads``, ``kernels/world_cg.py``) against
-CG launched phase by phase over all rows (``world_block_threads=0``): the same row functions in the
-same order per world, so on the CPU (one thread per world) every output must be equal bit for bit;
-on CUDA (blocks of threads with barriers between CG's phases; float atomics in another order)
-within the tolerances of the other CPU-vs-CUDA tests."""
+"""Each world's Newton iteration in three launches of a block per world
+(``SolverConfig.world_block_threads``: ``kernels/world_evaluate.py``, ``world_cg.py``,
+``world_newton_step.py``) against the phase-by-phase launches over all rows
+(``world_block_threads=0``): the same row functions in the same order per world, so on the CPU
+(one thread per world) every output must be equal bit for bit; on CUDA (blocks of threads with
+barriers between the phases; float atomics in another order) within the tolerances of the other
+CPU-vs-CUDA tests."""
 
 from __future__ import annotations
 
@@ -47,7 +49,7 @@ def _episode(world_block_threads: int, steps: int, device: str = "cpu"):
     return out
 
 
-def test_world_cg_gives_the_bits_of_cg_phase_by_phase_on_the_cpu():
+def test_world_blocks_give_the_bits_of_the_phase_launches_on_the_cpu():
     """40 steps of three worlds of different objects through an autoreset (episodes of 25 steps),
     with contact from every side: every observation, reward, info and state array equal."""
     steps = 40
@@ -62,13 +64,17 @@ def test_world_cg_gives_the_bits_of_cg_phase_by_phase_on_the_cpu():
     assert len(set(phases["reset/object"])) > 1, phases["reset/object"]
 
 
-def test_world_cg_solver_steps_match_bitwise_and_report_the_same_iterations():
+@pytest.mark.parametrize("config", [SolverConfig(), SolverConfig(substeps=3, line_search_steps=0, check_every=0),
+                                    SolverConfig(newton_iterations=2, cg_iterations=5, patient_iterations=0)],
+                         ids=["default", "no_line_search", "short"])
+def test_world_block_solver_steps_match_bitwise_and_report_the_same_iterations(config):
     """The FEM batch of ``test_fem_batch`` (three objects, E 1e4-1e6, squeezed, resting, falling):
     14 steps, the step as one graph and launched kernel by kernel, every state array and report
-    field bit-identical with and without the world launch."""
+    field bit-identical with and without the world blocks; also without a line search and with
+    iteration caps that stop Newton and CG unconverged."""
     for graphs in (None, False):
-        reference = _solver_steps(0, graphs)
-        worlds = _solver_steps(1, graphs)
+        reference = _solver_steps(dataclasses.replace(config, world_block_threads=0), graphs)
+        worlds = _solver_steps(dataclasses.replace(config, world_block_threads=1), graphs)
         for (got, got_report), (want, want_report) in zip(worlds, reference):
             for name in STATE_ROWS:
                 np.testing.assert_array_equal(got[name], want[name], err_msg=name)
@@ -77,9 +83,9 @@ def test_world_cg_solver_steps_match_bitwise_and_report_the_same_iterations():
         assert sum(int(r.cg_iterations.sum()) for _, r in reference) > 0
 
 
-def _solver_steps(threads: int, graphs):
+def _solver_steps(config: SolverConfig, graphs):
     model, state, control = build((0, 1, 2))
-    solver = ImplicitSolver(model, SolverConfig(world_block_threads=threads, graphs=graphs))
+    solver = ImplicitSolver(model, dataclasses.replace(config, graphs=graphs))
     history = []
     for k in range(1, 15):
         control.pad_target_positions.assign(np.concatenate([pad_targets(w, k) for w in (0, 1, 2)]))
@@ -110,8 +116,8 @@ def test_world_block_threads_is_checked_and_its_default_depends_on_the_device():
 
 @pytest.mark.cuda
 @pytest.mark.parametrize("threads", [32, 128])
-def test_world_cg_on_cuda_agrees_with_cg_phase_by_phase(threads):
-    """On CUDA, blocks of 32 and 128 threads per world against CG phase by phase, W = 3, 14 steps:
+def test_world_blocks_on_cuda_agree_with_the_phase_launches(threads):
+    """On CUDA, blocks of 32 and 128 threads per world against the phase launches, W = 3, 14 steps:
     positions within 1e-5 m and the iteration counts within 10 % (as for the listed CG: float
     atomics sum in a run-dependent order); the CPU's result too."""
     _, reference, s0 = run((0, 1, 2), 14, SolverConfig(world_block_threads=0), device="cuda:0")
@@ -127,14 +133,16 @@ def test_world_cg_on_cuda_agrees_with_cg_phase_by_phase(threads):
 
 
 @pytest.mark.cuda
-def test_world_cg_on_cuda_through_contact_and_resets():
+def test_world_blocks_on_cuda_through_contact_and_resets():
     """The three-world contact batch of the CPU test on CUDA with blocks of 64 threads: no NaN, no
-    diverged world, the same objects, and the gripper's observations within 1 mm of CG phase by
-    phase over the first 10 steps (before contact turns float rounding into other episodes)."""
+    diverged world, the same objects, and the gripper's observations within 1 mm of the phase
+    launches over the first 10 steps (before contact turns float rounding into other episodes)."""
     phases = _episode(0, 30, device="cuda:0")
     worlds = _episode(64, 30, device="cuda:0")
+    assert list(worlds["reset/object"]) == list(phases["reset/object"])
     for k in range(30):
         for key in (f"{k}/obs/agent_pos", f"{k}/reward"):
             assert np.isfinite(worlds[key]).all(), key
+        assert not worlds[f"{k}/info/sim_diverged"].any(), k
     for k in range(10):
         np.testing.assert_allclose(worlds[f"{k}/obs/agent_pos"], phases[f"{k}/obs/agent_pos"], atol=1e-3)

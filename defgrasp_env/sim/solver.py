@@ -99,12 +99,13 @@ class SolverConfig:
             few worlds' rows cost instead of a thread per row of every world. None (default):
             ``LISTED_CG_WORLDS_CUDA`` on CUDA, 0 on the CPU (where it measured slower: W = 48 on a
             2-core CPU, 4-19 % longer solves; benchmarks/RESULTS.md).
-        world_block_threads: each world's CG and line search of a Newton iteration in one launch
-            each (``kernels/world_cg.py``, ``kernels/world_line_search.py``): a block of this many
-            threads per world runs its CG iterations (its line-search trials) to its own stopping
-            test, with block barriers between the phases, instead of five to seven launches per
-            iteration (trial) over the rows of all worlds while any world iterates
-            (``listed_cg_worlds`` is then unused). 0 = off. On CUDA the block size (1 to 256, a
+        world_block_threads: each world's Newton iteration in three launches
+            (``kernels/world_evaluate.py``, ``world_cg.py``, ``world_newton_step.py``): a block of
+            this many threads per world evaluates, runs its CG iterations, and its coarse correction,
+            line-search trials and update, each to its own stopping test, with block barriers
+            between the phases, instead of eleven to fourteen launches for the evaluation, five or
+            six per CG iteration and seven per line-search trial over the rows of all worlds while
+            any world iterates (``listed_cg_worlds`` is then unused). 0 = off. On CUDA the block size (1 to 256, a
             multiple of 32 above 32); on the CPU, which runs a launch's threads one after another,
             any positive value means one thread per world, and the results are bit-identical to the
             phase-by-phase launches. None (default): ``WORLD_BLOCK_THREADS`` of the device's kind
@@ -374,6 +375,10 @@ class ImplicitSolver:
         for cmd in run.evaluate_first if first else run.evaluate:
             cmd.launch()
         self._run_cg(run)
+        if run.step_world:  # coarse correction, line search and update: one launch (world_block_threads)
+            for cmd in run.step_world_first if first else run.step_world:
+                cmd.launch()
+            return
         for cmd in run.coarse_post:
             cmd.launch()
         self._line_search(run, first)
@@ -407,8 +412,7 @@ class ImplicitSolver:
         self.loops.do_while("cg", body, body)
 
     def _line_search(self, run: SubstepLaunches, first: bool) -> None:
-        """Per world, halve the Newton step until the incremental potential does not increase
-        (each world's trials in one launch where ``world_block_threads``).
+        """Per world, halve the Newton step until the incremental potential does not increase.
         The start energy is evaluated at the first Newton iteration of a substep (its tets' part by
         that iteration's evaluation, which computes their F and R anyway); later ones start from the
         energy of the step accepted last (kept by ``end_line_search_trial``)."""
@@ -419,10 +423,6 @@ class ImplicitSolver:
             for cmd in run.energy0:
                 cmd.launch()
         run.begin_search.launch()
-        if run.search_world:
-            for cmd in run.search_world:
-                cmd.launch()
-            return
 
         def trial():
             for cmd in run.trial:

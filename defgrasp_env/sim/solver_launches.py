@@ -5,8 +5,8 @@ initial guess), ``lag`` (contact faces, lagged friction, guess fixes, rotation s
 iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coarse correction),
 ``cg`` (a block of CG iterations, repeated; or ``cg_world``: each world's whole CG in one launch,
 ``SolverConfig.world_block_threads``), ``coarse_post``, the line search (``energy0`` once,
-``begin_search``, ``trial`` repeated; or ``search_world``: each world's trials in one launch) and
-``apply``; ``depth`` (the iterate's deepest contact) decides
+``begin_search``, ``trial`` repeated) and ``apply`` (or ``step_world``: each world's coarse correction,
+line search and update in one launch); ``depth`` (the iterate's deepest contact) decides
 the extra iterations (with the loop control of ``solver_loops``);
 ``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
 after the last substep, ``outputs`` (forces, stresses, residual).
@@ -36,7 +36,7 @@ from .kernels import linear_solve as klin
 from .kernels import substep as ksub
 from .kernels import world_cg as kwcg
 from .kernels import world_evaluate as kwev
-from .kernels import world_line_search as kwls
+from .kernels import world_newton_step as kwns
 from .model import Model
 from .solver_scratch import SolverScratch
 from .state import Control, State
@@ -85,7 +85,8 @@ class SubstepLaunches:
     energy0: list
     begin_search: object
     trial: list
-    search_world: list  # each world's whole line search in one launch (``kernels/world_line_search.py``; [] where not used)
+    step_world: list    # coarse_post, line search and apply in one launch (``kernels/world_newton_step.py``; [] where not used)
+    step_world_first: list  # the same in a substep's first Newton iteration (with the nodes' part of ``energy0``)
     apply: list
     depth: list         # launches: the iterate's deepest contact per world (extra iterations)
     clamp: object
@@ -346,13 +347,17 @@ def _cg_world(c: _Context, config, threads: int) -> list:
                           s.p, s.ap, s.dx, s.residual, s.z])]
 
 
-def _search_world(c: _Context, config, threads: int) -> list:
-    """Each world's line search (``kernels/world_line_search.py``) in one launch of ``threads``
-    threads per world, on the arrays of ``_trial``."""
+def _newton_step_world(c: _Context, config, threads: int, first: bool) -> list:
+    """``coarse_post``, the line search (``first``: with the nodes' part of ``energy0``) and
+    ``apply`` as one launch: each world's in a block of ``threads`` threads
+    (``kernels/world_newton_step.py``)."""
     m, s, e, wc, ctl = c.model, c.scratch, c.scratch.edges, c.compaction, c.control
-    return [wp.launch(kwls.line_search_world_blocks, dim=m.num_worlds * threads, block_dim=threads, device=m.device,
+    return [wp.launch(kwns.newton_step_world_blocks, dim=m.num_worlds * threads, block_dim=threads, device=m.device,
                       record_cmd=True, inputs=[
-                          threads, config.line_search_steps + 1, wc.nodes.start, wc.tets.start, 1e-6,
+                          threads, wc.nodes.start, wc.tets.start, s.newton_active,
+                          s.residual, m.free_axes, s.node_aggregate, s.coarse_size, s.coarse_inverse, s.coarse_rhs,
+                          s.coarse_coef,
+                          config.line_search_steps + 1 if config.line_search_steps > 0 else 0, int(first), 1e-6,
                           0.5 ** config.line_search_steps,
                           c.work.positions, s.dx, s.step_length, s.x_trial, s.searching, s.energy0, s.energy_trial,
                           s.x_start, c.work.velocities, m.node_mass, m.node_world, ctl.external_force, m.gravity, c.h,
@@ -363,7 +368,10 @@ def _search_world(c: _Context, config, threads: int) -> list:
                           e.point_bary, e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction,
                           m.contact.stick_velocity * c.h,
                           m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, m.tet_world,
-                          s.tet_rotation])]
+                          s.tet_rotation,
+                          config.max_node_step, s.dx_norm, s.diverged, config.newton_tolerance,
+                          config.newton_iterations, s.substep_newton_it, s.newton_it, s.rz, s.res_norm, s.cg_it,
+                          s.last_dx, s.unconverged])]
 
 
 def _trial(c: _Context, config) -> list:
@@ -412,8 +420,8 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     as a CPU graph (False where the caller captures the whole substep). ``compaction``: the row maps;
     ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
     ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world
-    (``evaluate``, ``evaluate_first``), and also its whole CG and line search (``cg_world``,
-    ``search_world``)."""
+    (``evaluate``, ``evaluate_first``), and also its whole CG (``cg_world``) and the rest of its
+    Newton iteration (``step_world``, ``step_world_first``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
                  max(world_block_threads, 1))
     s, x = scratch, work.positions
@@ -440,7 +448,8 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         begin_search=c.rec(kls.begin_line_search, model.num_worlds, s.newton_active, s.step_length, s.searching,
                            s.energy_trial),
         trial=seq(_trial(c, config)),
-        search_world=seq(_search_world(c, config, world_block_threads)) if world_block_threads else [],
+        step_world=seq(_newton_step_world(c, config, world_block_threads, False)) if world_block_threads else [],
+        step_world_first=seq(_newton_step_world(c, config, world_block_threads, True)) if world_block_threads else [],
         apply=seq(_apply(c, config)), depth=_depth(c),
         clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, s.solve_worlds, model.free_axes, s.pad_pos1,
                     s.pad_rot1, model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,

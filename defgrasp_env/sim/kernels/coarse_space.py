@@ -328,6 +328,22 @@ def coarse_start_cg(
     coarse_start_cg_node(wp.tid(), precond, free, node_world, world_active, r, ap, z, p, rz)
 
 
+@wp.func
+def coarse_reduce_node(
+    i: int,
+    r: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    rhs: wp.array2d(dtype=float),
+):
+    """Row ``i`` of ``coarse_reduce``."""
+    w = node_world[i]
+    if world_active[w] == 0:
+        return
+    add_rhs(rhs, w, node_aggregate[i], r[i])
+
+
 @wp.kernel
 def coarse_reduce(
     r: wp.array(dtype=wp.vec3),
@@ -337,11 +353,22 @@ def coarse_reduce(
     rhs: wp.array2d(dtype=float),
 ):
     """rhs += T^T r (r masked)."""
-    i = wp.tid()
-    w = node_world[i]
+    coarse_reduce_node(wp.tid(), r, node_world, node_aggregate, world_active, rhs)
+
+
+@wp.func
+def coarse_solve_world(
+    w: int,
+    world_active: wp.array(dtype=int),
+    size: int,
+    inverse: wp.array3d(dtype=wp.float64),
+    rhs: wp.array2d(dtype=float),
+    coef: wp.array2d(dtype=float),
+):
+    """Row ``w`` of ``coarse_solve``."""
     if world_active[w] == 0:
         return
-    add_rhs(rhs, w, node_aggregate[i], r[i])
+    coarse_coefficients(w, size, inverse, rhs, coef)
 
 
 @wp.kernel
@@ -353,10 +380,24 @@ def coarse_solve(
     coef: wp.array2d(dtype=float),
 ):
     """coef = E^-1 rhs with the E^-1 of this Newton iteration; clears rhs."""
-    w = wp.tid()
+    coarse_solve_world(wp.tid(), world_active, size, inverse, rhs, coef)
+
+
+@wp.func
+def coarse_correct_node(
+    i: int,
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    node_aggregate: wp.array(dtype=int),
+    world_active: wp.array(dtype=int),
+    coef: wp.array2d(dtype=float),
+    dx: wp.array(dtype=wp.vec3),
+):
+    """Row ``i`` of ``coarse_correct``."""
+    w = node_world[i]
     if world_active[w] == 0:
         return
-    coarse_coefficients(w, size, inverse, rhs, coef)
+    dx[i] = dx[i] + aggregate_part(coef, w, node_aggregate[i], free[i])
 
 
 @wp.kernel
@@ -369,8 +410,4 @@ def coarse_correct(
     dx: wp.array(dtype=wp.vec3),
 ):
     """dx += T coef."""
-    i = wp.tid()
-    w = node_world[i]
-    if world_active[w] == 0:
-        return
-    dx[i] = dx[i] + aggregate_part(coef, w, node_aggregate[i], free[i])
+    coarse_correct_node(wp.tid(), free, node_world, node_aggregate, world_active, coef, dx)

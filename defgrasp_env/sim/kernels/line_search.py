@@ -28,6 +28,20 @@ def clear_world_energy(energy: wp.array(dtype=wp.float64)):
     energy[wp.tid()] = wp.float64(0.0)
 
 
+@wp.func
+def begin_search_world(
+    w: int,
+    newton_active: wp.array(dtype=int),
+    step_length: wp.array(dtype=float),
+    searching: wp.array(dtype=int),
+    trial_energy: wp.array(dtype=wp.float64),
+):
+    """Row ``w`` of ``begin_line_search``."""
+    step_length[w] = 1.0
+    searching[w] = newton_active[w]
+    trial_energy[w] = wp.float64(0.0)
+
+
 @wp.kernel
 def begin_line_search(
     newton_active: wp.array(dtype=int),
@@ -35,10 +49,7 @@ def begin_line_search(
     searching: wp.array(dtype=int),
     trial_energy: wp.array(dtype=wp.float64),
 ):
-    w = wp.tid()
-    step_length[w] = 1.0
-    searching[w] = newton_active[w]
-    trial_energy[w] = wp.float64(0.0)
+    begin_search_world(wp.tid(), newton_active, step_length, searching, trial_energy)
 
 
 @wp.func

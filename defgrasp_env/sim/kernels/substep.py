@@ -34,6 +34,33 @@ def begin_substep(
     x[i] = wp.cw_mul(fr, guess) + wp.cw_mul(wp.vec3(1.0) - fr, target)
 
 
+@wp.func
+def apply_node_step(
+    i: int,
+    dx: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    newton_active: wp.array(dtype=int),
+    step_length: wp.array(dtype=float),
+    max_step: float,
+    x: wp.array(dtype=wp.vec3),
+    dx_norm: wp.array(dtype=float),
+    diverged: wp.array(dtype=int),
+):
+    """Row ``i`` of ``apply_newton_step``."""
+    w = node_world[i]
+    if newton_active[w] == 0:
+        return
+    d = step_length[w] * dx[i]
+    size = wp.max(wp.abs(d))
+    if not wp.isfinite(size) or size > max_step:
+        diverged[w] = 1
+        return
+    x[i] = x[i] + d
+    # convergence is judged on the full Newton direction: a step cut short by the line search
+    # (e.g. a contact that the linearisation missed) must not pass for a converged one
+    wp.atomic_max(dx_norm, w, wp.max(wp.abs(dx[i])))
+
+
 @wp.kernel
 def apply_newton_step(
     dx: wp.array(dtype=wp.vec3),
@@ -47,19 +74,41 @@ def apply_newton_step(
 ):
     """x += step_length * dx; record the largest update per world; flag NaN/inf or an update longer
     than ``max_step`` (m)."""
-    i = wp.tid()
-    w = node_world[i]
+    apply_node_step(wp.tid(), dx, node_world, newton_active, step_length, max_step, x, dx_norm, diverged)
+
+
+@wp.func
+def end_newton_world(
+    w: int,
+    dx_norm: wp.array(dtype=float),
+    tol: float,
+    max_iterations: int,
+    diverged: wp.array(dtype=int),
+    substep_iterations: wp.array(dtype=int),
+    newton_iterations: wp.array(dtype=int),
+    newton_active: wp.array(dtype=int),
+    rz: wp.array(dtype=float),
+    residual_norm: wp.array(dtype=float),
+    cg_iterations: wp.array(dtype=int),
+    last_dx_norm: wp.array(dtype=float),
+    unconverged: wp.array(dtype=int),
+):
+    """Row ``w`` of ``end_newton_iteration``."""
     if newton_active[w] == 0:
         return
-    d = step_length[w] * dx[i]
-    size = wp.max(wp.abs(d))
-    if not wp.isfinite(size) or size > max_step:
-        diverged[w] = 1
-        return
-    x[i] = x[i] + d
-    # convergence is judged on the full Newton direction: a step cut short by the line search
-    # (e.g. a contact that the linearisation missed) must not pass for a converged one
-    wp.atomic_max(dx_norm, w, wp.max(wp.abs(dx[i])))
+    it = substep_iterations[w] + 1
+    substep_iterations[w] = it
+    newton_iterations[w] = newton_iterations[w] + 1
+    last_dx_norm[w] = dx_norm[w]
+    if dx_norm[w] <= tol or diverged[w] != 0:
+        newton_active[w] = 0
+    elif it >= max_iterations:
+        newton_active[w] = 0
+        unconverged[w] = 1
+    dx_norm[w] = 0.0
+    rz[w] = 0.0
+    residual_norm[w] = 0.0
+    cg_iterations[w] = 0
 
 
 @wp.kernel
@@ -79,22 +128,8 @@ def end_newton_iteration(
 ):
     """Count the iteration (this substep's, for the limit, and the step's total) and stop a world
     on the update tolerance, at the per-substep limit (flagged ``unconverged``) or on divergence."""
-    w = wp.tid()
-    if newton_active[w] == 0:
-        return
-    it = substep_iterations[w] + 1
-    substep_iterations[w] = it
-    newton_iterations[w] = newton_iterations[w] + 1
-    last_dx_norm[w] = dx_norm[w]
-    if dx_norm[w] <= tol or diverged[w] != 0:
-        newton_active[w] = 0
-    elif it >= max_iterations:
-        newton_active[w] = 0
-        unconverged[w] = 1
-    dx_norm[w] = 0.0
-    rz[w] = 0.0
-    residual_norm[w] = 0.0
-    cg_iterations[w] = 0
+    end_newton_world(wp.tid(), dx_norm, tol, max_iterations, diverged, substep_iterations, newton_iterations,
+                     newton_active, rz, residual_norm, cg_iterations, last_dx_norm, unconverged)
 
 
 @wp.kernel
