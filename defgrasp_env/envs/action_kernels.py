@@ -19,6 +19,9 @@ import warp as wp
 from ..gripper import kernels as gk
 from ..layout import JAW_GAP_MAX, JAW_GAP_MIN
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 _F = wp.float64
 _PI = wp.constant(_F(math.pi))
 _GAP_MAX = wp.constant(_F(JAW_GAP_MAX))

@@ -16,6 +16,9 @@ from ..sim.kernels.contact import box_penetration
 from ..sim.kernels.elastic import spare_tet
 from ..sim.kernels.world_rows import scatter_rows  # noqa: F401  (the scene's row writes)
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def gather_rows(src: wp.array(dtype=Any), index: wp.array(dtype=wp.int32), dst: wp.array(dtype=Any)):

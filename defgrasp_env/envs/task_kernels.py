@@ -23,6 +23,9 @@ from ..gripper import kernels as gk
 from ..layout import AGENT_POS, ENV_STATE, NUM_KEYPOINTS
 from ..sim.kernels.report import SolveRecord
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 _F = wp.float64
 
 #: Columns of the step result that follow the observation columns in each world's output row, in order.

@@ -23,6 +23,9 @@ from .driver import CONTACT_FORCE, MAX_GRIP_STIFFNESS
 from .linkage import (ARC_PHASE, ARC_RADIUS, FINGER_APPROACH, FINGER_LATERAL, GAP_MAX, GAP_MIN, GAP_OFFSET,
                       KNUCKLE_APPROACH, KNUCKLE_LATERAL, PAD_APPROACH, PAD_LATERAL, THETA_MAX, THETA_MIN)
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 vec6d = wp.types.vector(length=6, dtype=wp.float64)
 
 _F = wp.float64

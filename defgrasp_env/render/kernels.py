@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import warp as wp
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 HIT_NONE = wp.constant(0)
 HIT_GROUND = wp.constant(1)
 HIT_BOX = wp.constant(2)

@@ -20,6 +20,9 @@ import warp as wp
 
 from .elastic import pick_vertex, row, spare_tet, stress_differential
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def aggregate_part(coef: wp.array2d(dtype=float), w: int, a: int, free: wp.vec3):

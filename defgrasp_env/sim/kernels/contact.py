@@ -15,6 +15,9 @@ eps = stick_velocity * dt. Its Hessian is approximated by mu f_n f1(s)/s times t
 
 import warp as wp
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def friction_coefficient(s: float, eps: float):

@@ -26,6 +26,9 @@ import warp as wp
 
 from .world_rows import RowMap, mapped_row
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def column(m: wp.mat33, j: int):

@@ -11,6 +11,9 @@ import warp as wp
 from .contact import face_penetration, pad_slip, penalty_energy
 from .elastic import deformation_gradient, polar_rotation, spare_tet
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def friction_potential(mu: float, normal_force: float, slip: wp.vec3, n: wp.vec3, eps: float):

@@ -3,6 +3,9 @@ positions, and the accept-or-halve test of each trial."""
 
 import warp as wp
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def trial_position(i: int, x: wp.array(dtype=wp.vec3), dx: wp.array(dtype=wp.vec3), node_world: wp.array(dtype=int),

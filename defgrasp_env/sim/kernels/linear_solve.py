@@ -14,6 +14,9 @@ import warp as wp
 from .coarse_space import add_rhs, aggregate_part, coarse_coefficients
 from .world_rows import RowMap, mapped_row
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def masked_block(block: wp.mat33, free: wp.vec3):

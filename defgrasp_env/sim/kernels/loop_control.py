@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import warp as wp
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def flag_any(flags: wp.array(dtype=int), hit: wp.array(dtype=wp.int32)):

@@ -72,6 +72,10 @@ from .pad_edge_search import NO_TRIANGLE, closest_point_barycentric
 from .surface_query import depth_inside_surface, winding_number
 from .world_rows import RowMap, mapped_row
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
+
 #: Free depth of a pad edge point behind the surface, in penalty knees (2 x 0.25 mm = 0.5 mm).
 SKIN_KNEES = 2.0
 #: How much shallower (in penalty knees) than at the substep start a point deeper than the skin must end it.

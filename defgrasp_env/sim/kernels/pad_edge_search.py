@@ -6,6 +6,9 @@ distance), so the choice is deterministic on every device.
 
 import warp as wp
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 #: Search radius (m) beyond the motion of the point and the triangle over a substep.
 SEARCH_MARGIN = 2.0e-3
 #: "No triangle found" for the search's atomic minimum of the triangle id.

@@ -4,6 +4,9 @@ packed array per control step instead of one array per field per solve."""
 
 import warp as wp
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.struct
 class SolveRecord:

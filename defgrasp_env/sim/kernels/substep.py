@@ -7,6 +7,9 @@ import warp as wp
 
 from .block_sync import block_barrier
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def begin_substep(

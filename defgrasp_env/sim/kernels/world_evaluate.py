@@ -15,6 +15,10 @@ reads before its next solve starts them again).
 
 import warp as wp
 
+# forward only: these kernels are never differentiated, and the adjoint of their loops multiplies the
+# CUDA compile time (world_evaluate: 205 s with it, on a 2-core Xeon)
+wp.set_module_options({"enable_backward": False})
+
 from .block_sync import block_barrier
 from .coarse_space import (coarse_assemble_node, coarse_assemble_tet, coarse_factor_world, coarse_guess_node,
                            coarse_start_cg_node)

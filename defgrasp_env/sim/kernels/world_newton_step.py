@@ -16,6 +16,10 @@ iterating Newton returns at once (the phase kernels skip its rows).
 
 import warp as wp
 
+# forward only: these kernels are never differentiated, and the adjoint of their loops multiplies the
+# CUDA compile time (world_evaluate: 205 s with it, on a 2-core Xeon)
+wp.set_module_options({"enable_backward": False})
+
 from .block_sync import block_barrier
 from .coarse_space import coarse_correct_node, coarse_reduce_node, coarse_solve_world
 from .energy import node_energy_row, tet_energy_row

@@ -29,6 +29,9 @@ from typing import Any
 
 import warp as wp
 
+# forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
+wp.set_module_options({"enable_backward": False})
+
 
 #: ``RowMap.per_world`` of a map over every row (thread = row).
 EVERY_ROW = -1
