@@ -21,9 +21,9 @@ learner pressing the object into the ground, the wrist at its force limit from t
 ``--listed-cg-worlds N [N ...]``: ``SolverConfig.listed_cg_worlds`` (CG's launches over the rows of
 the worlds still iterating once at most N are left; 0 = over all rows; default: the solver's choice
 for the device, "auto" in the table), a row each side by side.
-``--world-block-threads N [N ...]``: ``SolverConfig.world_block_threads`` (each world's CG in one launch
-with a block of N threads per world; 0 = CG phase by phase; default: the solver's choice for the
-device, "auto" in the table), a row each, side by side.
+``--world-block-threads N [N ...]``: ``SolverConfig.world_block_threads`` (each world's Newton
+iteration in three launches with a block of N threads per world; 0 = the phase launches over all
+rows; default: the solver's choice for the device, "auto" in the table), a row each, side by side.
 ``--edge-contact on|off|both``: pad edge contact (``PickupConfig.edge_contact``, on by default;
 both: a row each, side by side). ``--split``: also time the solver's share of each step: every
 ``ImplicitSolver.advance`` is bracketed by ``wp.synchronize_device`` (one more synchronisation per
@@ -180,7 +180,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
     t, solver_t, newton, cg = np.array(times), np.array(solver_times), np.array(newton), np.array(cg)
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
             "edges": "on" if edge_contact else "off", "listed": "auto" if listed_cg_worlds is None else listed_cg_worlds,
-            "world_cg": "auto" if world_block_threads is None else world_block_threads,
+            "world_blocks": "auto" if world_block_threads is None else world_block_threads,
             "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)), "mean_ms": 1e3 * float(np.mean(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "solver_ms": 1e3 * float(np.median(solver_t)), "outside_ms": 1e3 * float(np.median(t - solver_t)),
@@ -194,14 +194,14 @@ def _ms(value: float) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| W | actions | step graphs | edge contact | CG listed at <= worlds | CG per world, threads | object | E (Pa) | substeps | median ms | mean ms | p95 ms | "
+    lines = ["| W | actions | step graphs | edge contact | CG listed at <= worlds | threads per world block | object | E (Pa) | substeps | median ms | mean ms | p95 ms | "
              "world-steps/s | deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / "
              "mean | CG / step, slowest / mean | episodes won | solver ms (median) | outside the solver ms (median) | "
              "substeps in period graphs |",
              "|---" * 22 + "|"]
     for r in rows:
         won = r["successes"] if r["policy"].startswith("expert") else "-"
-        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['listed']} | {r['world_cg']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
+        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['listed']} | {r['world_blocks']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
                      f"{r['median_ms']:.1f} | {r['mean_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
                      f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['solves']:.3f} | {r['newton'][0]:.0f} / "
                      f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} | {_ms(r['solver_ms'])} | "
@@ -229,9 +229,9 @@ def main(argv=None) -> int:
                     help="SolverConfig.listed_cg_worlds (0: CG always over all rows; default: the solver's choice "
                          "for the device); several: a row each, side by side")
     ap.add_argument("--world-block-threads", type=int, nargs="+", default=[None],
-                    help="SolverConfig.world_block_threads (each world's CG in one launch, N threads per world; 0: CG "
-                         "phase by phase; default: the solver's choice for the device); several: a row each, side "
-                         "by side")
+                    help="SolverConfig.world_block_threads (each world's Newton iteration in three launches, N "
+                         "threads per world; 0: the phase launches; default: the solver's choice for the device); "
+                         "several: a row each, side by side")
     ap.add_argument("--split", action="store_true",
                     help="also time the solver's share of each step (a synchronisation around every solve)")
     ap.add_argument("--no-append", action="store_true")

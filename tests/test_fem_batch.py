@@ -11,7 +11,7 @@ import pytest
 
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.meshing import make_object_mesh
-from defgrasp_env.sim.model import build_model, set_world_material
+from defgrasp_env.sim.model import ContactParams, build_model, set_world_material
 from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig
 from defgrasp_env.sim.state import Control, State
 
@@ -36,11 +36,12 @@ def pad_targets(world, step):
     return np.array([[-x, 0.02 + lift, 0.0], [x, 0.02 + lift, 0.0]], np.float32)
 
 
-def build(worlds, device="cpu"):
+def build(worlds, device="cpu", contact: ContactParams = ContactParams()):
     meshes = [make_object_mesh(WORLDS[w][0]) for w in worlds]
     materials = [Material(youngs_modulus=WORLDS[w][1]) for w in worlds]
     poses = [((0.0, WORLDS[w][2], 0.0), (0, 0, 0, 1)) for w in worlds]
-    model = build_model(meshes, materials, poses=poses, pad_half_extents=[PAD_HALF, PAD_HALF], device=device)
+    model = build_model(meshes, materials, poses=poses, pad_half_extents=[PAD_HALF, PAD_HALF], contact=contact,
+                        device=device)
     state, control = State.from_model(model), Control.from_model(model)
     state.pad_positions.assign(np.concatenate([pad_targets(w, 0) for w in worlds]))
     return model, state, control

@@ -157,8 +157,8 @@ def held_rope_steps(mode: str, steps: int = 6, config: SolverConfig = SolverConf
     solver = ImplicitSolver(model, dataclasses.replace(config, graphs={"step": True, "fallback": None}.get(mode, False)))
     run, graphs = solver._substep_launches(DT / config.substeps, state, state, control)  # what ``step`` replays
     if mode == "launches":
-        for phase in (run.lag, run.evaluate, run.cg, run.cg_world, run.step_world, run.step_world_first,
-                      run.coarse_post, run.energy0, run.trial, run.apply,
+        for phase in (run.lag, run.evaluate, run.evaluate_first, run.cg, run.cg_world, run.step_world,
+                      run.step_world_first, run.coarse_post, run.energy0, run.trial, run.apply,
                       run.outputs, *run.pads):
             for seq in phase:
                 seq.graph = None
@@ -178,7 +178,7 @@ def test_cpu_graphs_are_bit_identical_to_single_launches(config):
     cuboid = build_model([make_object_mesh("cuboid")], [Material()], device="cpu")
     state, control = State.from_model(cuboid), Control.from_model(cuboid)
     run, _ = ImplicitSolver(cuboid, SolverConfig(graphs=False))._substep_launches(DT, state, state, control)
-    assert any(seq.graph is not None for seq in run.cg)
+    assert any(seq.graph is not None for seq in run.cg_world)  # the default: each world's CG in one launch
     s1, r1 = results["step"]
     for mode in ("phases", "launches"):
         s0, r0 = results[mode]

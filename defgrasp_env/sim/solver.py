@@ -103,13 +103,16 @@ class SolverConfig:
             (``kernels/world_evaluate.py``, ``world_cg.py``, ``world_newton_step.py``): a block of
             this many threads per world evaluates, runs its CG iterations, and its coarse correction,
             line-search trials and update, each to its own stopping test, with block barriers
-            between the phases, instead of eleven to fourteen launches for the evaluation, five or
+            between the phases, instead of eleven to fifteen launches for the evaluation, five or
             six per CG iteration and seven per line-search trial over the rows of all worlds while
-            any world iterates (``listed_cg_worlds`` is then unused). 0 = off. On CUDA the block size (1 to 256, a
+            any world iterates (``listed_cg_worlds`` and, inside a Newton iteration,
+            ``check_every`` are then unused). 0 = off. On CUDA the block size (1 to 256, a
             multiple of 32 above 32); on the CPU, which runs a launch's threads one after another,
-            any positive value means one thread per world, and the results are bit-identical to the
-            phase-by-phase launches. None (default): ``WORLD_BLOCK_THREADS`` of the device's kind
-            (on CUDA ``WORLD_BLOCK_THREADS_MANY`` beyond ``MANY_WORLDS`` worlds).
+            any positive value means one thread per world (as configured only where
+            ``wp.config.enable_cpu_blocks`` runs several threads per block), and the results are
+            bit-identical to the phase-by-phase launches. None (default): ``WORLD_BLOCK_THREADS``
+            of the device's kind (on CUDA ``WORLD_BLOCK_THREADS_MANY`` beyond ``MANY_WORLDS``
+            worlds).
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
@@ -221,9 +224,9 @@ class ImplicitSolver:
         threads = config.world_block_threads
         if threads is None:
             threads = default_world_block_threads(model.device, model.num_worlds)
-        #: threads per world of the per-world CG and line search (``SolverConfig.world_block_threads``;
-        #: 1 on the CPU; 0: off)
-        self.world_block_threads = min(threads, 1) if is_cpu else threads
+        #: threads per world of the world blocks (``SolverConfig.world_block_threads``; 0: off; on the
+        #: CPU 1, or as configured where ``wp.config.enable_cpu_blocks`` runs several per block)
+        self.world_block_threads = min(threads, 1) if is_cpu and not wp.config.enable_cpu_blocks else threads
         self.scratch = SolverScratch.from_model(model, block_threads=self.world_block_threads)
         self.loops = DeviceLoops(model, config, self.scratch)
         capacity = config.listed_cg_worlds

@@ -424,6 +424,10 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     Newton iteration (``step_world``, ``step_world_first``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
                  max(world_block_threads, 1))
+    if scratch.stress_partial.shape[0] < model.num_worlds * c.block_threads:
+        raise ValueError(f"world_block_threads={world_block_threads} needs a scratch made with block_threads >= it "
+                         f"(SolverScratch.from_model); its stress_partial holds {scratch.stress_partial.shape[0]} "
+                         f"values for {model.num_worlds} worlds")
     s, x = scratch, work.positions
     block = config.check_every or config.cg_iterations
 

@@ -1,7 +1,9 @@
-"""A barrier for the threads of one CUDA thread block, for kernels that give each world a block
+"""A barrier for the threads of one thread block, for kernels that give each world a block
 (``world_evaluate.py``, ``world_cg.py``, ``world_newton_step.py``, ``substep.mean_stress``): all
-the block's global-memory writes before it are seen by all its threads after it. A no-op on the CPU, where such a kernel runs one thread per
-world (a launch's threads run one after another there).
+the block's global-memory writes before it are seen by all its threads after it. Warp's
+``WP_TILE_SYNC``: ``__syncthreads()`` on CUDA; on the CPU nothing with one thread per block (a
+launch's threads run one after another there), and the fibers' sync where
+``wp.config.enable_cpu_blocks`` runs several threads per block (how the tests exercise it there).
 
 Every thread of the block must reach every barrier: a kernel calls it outside row loops, and its
 loops' bounds and exits read per-world values written before a barrier (the same for the whole
@@ -11,8 +13,6 @@ import warp as wp
 
 
 @wp.func_native("""
-#if defined(__CUDA_ARCH__)
-__syncthreads();
-#endif
+WP_TILE_SYNC();
 """)
 def block_barrier(): ...

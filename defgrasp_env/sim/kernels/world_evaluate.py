@@ -3,14 +3,15 @@ pad edge point and tet terms at the iterate, starts its linear solve and its coa
 sets its CG's stopping value, with a block barrier (``block_sync.py``) wherever a phase reads
 what other threads wrote.
 
-Phase by phase this is eleven to fourteen launches over the rows of every world
+Phase by phase this is eleven to fifteen launches over the rows of every world
 (``contact.evaluate_nodes``, ``pad_edge_contact.evaluate_edge_points``, ``elastic.evaluate_tets``,
 ``linear_solve.begin_linear_solve``, the coarse space's assembly, factor and initial guess with
 its Hessian product, ``coarse_space.coarse_start_cg``, ``linear_solve.start_cg_worlds``); one
 world on a GPU pays a launch's latency for each. ``evaluate_world_blocks`` calls the same row
 functions in the same order per world: bit-identical on the CPU (one thread per world). A world
-not iterating Newton returns at once (the phase kernels only cleared its CG vectors, which nothing
-reads before its next solve starts them again).
+not iterating Newton only has its CG flag cleared (the phase kernels also cleared its CG vectors,
+its CG stopping value and its line-search start energy, which nothing reads before its next solve
+sets them again).
 """
 
 import warp as wp
@@ -128,6 +129,8 @@ def evaluate_world_blocks(
     w = tid // threads
     lane = tid - w * threads
     if active[w] == 0:
+        if lane == 0:
+            cg_active[w] = 0  # as start_cg_worlds: its CG does not run
         return
     n0 = node_start[w]
     n1 = node_start[w + 1]

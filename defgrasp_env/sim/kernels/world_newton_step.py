@@ -11,7 +11,8 @@ loop-control launches while any world still halves (a contact-heavy GPU batch: ~
 Newton iteration, a full-width ``tet_energy`` each), then ``substep.apply_newton_step`` and
 ``end_newton_iteration``. Here each world tries only as often as it needs, calling the same row
 functions in the same order per world: bit-identical on the CPU (one thread per world). A world not
-iterating Newton returns at once (the phase kernels skip its rows).
+iterating Newton returns at once (the phase kernels also reset its line-search state and trial
+positions, which nothing reads while it does not iterate).
 """
 
 import warp as wp
