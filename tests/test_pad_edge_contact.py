@@ -11,6 +11,7 @@ import pytest
 import warp as wp
 
 from defgrasp_env.sim.kernels import pad_edge_contact as kpe
+from defgrasp_env.sim.kernels import pad_edge_hessian as kph
 from defgrasp_env.sim.kernels import pad_edge_search as kps
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.meshing import make_object_mesh
@@ -325,7 +326,7 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
 
     def product(direction):
         out = wp.zeros(n, dtype=wp.vec3, device="cpu")
-        wp.launch(kpe.edge_point_product, slots,
+        wp.launch(kph.edge_point_product, slots,
                   [wp.array(direction.astype(np.float32), dtype=wp.vec3, device="cpu"), edges.triangles, active,
                    edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_block, out,
                    every_row("cpu")], device="cpu")
@@ -354,7 +355,7 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
     size = 3 * 3
     matrix = wp.zeros((model.num_worlds, size, size), dtype=wp.float64, device="cpu")
     world = model.node_world.numpy()
-    wp.launch(kpe.coarse_assemble_edge_points, slots,
+    wp.launch(kph.coarse_assemble_edge_points, slots,
               [edges.triangles, active, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_block,
                wp.array(free, dtype=wp.vec3, device="cpu"),
                wp.array(aggregate.astype(np.int32), dtype=int, device="cpu"), matrix], device="cpu")

@@ -28,6 +28,7 @@ import warp as wp
 from .kernels import coarse_space as kcs
 from .kernels import contact as kc
 from .kernels import pad_edge_contact as kpe
+from .kernels import pad_edge_hessian as kph
 from .kernels import pad_edge_search as kps
 from .kernels import elastic as ke
 from .kernels import energy as kenergy
@@ -145,7 +146,7 @@ def _edge_product(c: _Context, p, active, listed: bool = False) -> list:
         return []
     rows = wc.edge_slots if listed else wc.every_row
     dim = wc.dim(rows) if listed else m.num_worlds * e.points_per_world
-    return [c.rec(kpe.edge_point_product, dim, p, e.triangles, active, e.points_per_world, e.point_tri, e.point_bary,
+    return [c.rec(kph.edge_point_product, dim, p, e.triangles, active, e.points_per_world, e.point_tri, e.point_bary,
                   e.point_block, s.ap, rows)]
 
 
@@ -210,7 +211,7 @@ def _coarse_before(c: _Context, active) -> list:
         c.rec(kcs.coarse_assemble_tets, m.num_tets, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
               m.tet_lambda, s.cofactor, s.tet_r, s.tet_twist, m.tet_world, active, m.free_axes, s.node_aggregate,
               s.coarse_matrix),
-        *([c.rec(kpe.coarse_assemble_edge_points, m.num_worlds * e.points_per_world, e.triangles, active,
+        *([c.rec(kph.coarse_assemble_edge_points, m.num_worlds * e.points_per_world, e.triangles, active,
                  e.points_per_world, e.point_tri, e.point_bary, e.point_block, m.free_axes,
                  s.node_aggregate, s.coarse_matrix)] if e.active else []),
         c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_size, s.coarse_matrix, s.coarse_lower_inv,

@@ -40,8 +40,8 @@ meets the object's surface through one triangle per substep, lagged like a node'
   expert's E = 1e7 torus episode took 244 steps instead of 79).
 - Hessian: the point's 3x3 block B (s n n^T of the penalty, c (I - n n^T) of the friction) on the
   node pairs of its triangle, w_j w_k B: exact for the penalty, as the surface point is affine in
-  the nodes (``edge_point_product`` in CG, ``coarse_assemble_edge_points`` in the coarse matrix;
-  the diagonal blocks w_j^2 B in the block-Jacobi preconditioner). The per-node majorant
+  the nodes (``pad_edge_hessian.py``: ``edge_point_product`` in CG, ``coarse_assemble_edge_points``
+  in the coarse matrix; the diagonal blocks w_j^2 B in the block-Jacobi preconditioner). The per-node majorant
   w_j B used before made Newton converge linearly: a held soft grasp ran 4 iterations per substep.
 - stiffness: the triangle's nodes' penalty stiffness (barycentric mean) times the point's share
   of its edge over the triangle's mean edge length, so a pad edge pressed along a face is about as
@@ -70,7 +70,6 @@ from .contact import friction_force, pad_slip, penalty_energy, penalty_force, pe
 from .energy import friction_potential
 from .pad_edge_search import NO_TRIANGLE, closest_point_barycentric
 from .surface_query import depth_inside_surface, winding_number
-from .world_rows import RowMap, mapped_row
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
 wp.set_module_options({"enable_backward": False})
@@ -434,7 +433,7 @@ def evaluate_edge_points(
     3x3 Hessian B (N/m: s n n^T of the penalty where pressed, c (I - n n^T) of the smoothed Coulomb
     law with the lagged normal force ``point_friction``, ``mu`` the pads' friction coefficient,
     ``eps`` its stick slip (m)) for the whole Hessian's products (node blocks w_j w_k B:
-    ``edge_point_product``, ``coarse_assemble_edge_points``); at the returned state (``record_pads``)
+    ``pad_edge_hessian.py``); at the returned state (``record_pads``)
     also the pad's normal force (N), the force on the pad (N) and, into the world's ``penetration``
     (m, an atomic maximum), how far a pressed point lies inside the object beyond the skin: its
     distance to the nearest surface triangle of its world (``triangle_first`` [W+1]: the world's
@@ -527,102 +526,3 @@ def edge_point_energy(
     edge_point_energy_slot(wp.tid(), x, x_start, triangles, world_active, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
                            pad_half, pads_per_world, points, point_pad, points_per_world, point_tri, point_bary,
                            point_normal, point_stiffness, point_allowed, point_friction, knee, mu, eps, energy)
-
-
-@wp.func
-def edge_point_slot_product(
-    slot: int,
-    p: wp.array(dtype=wp.vec3),
-    triangles: wp.array(dtype=wp.vec3i),
-    cg_active: wp.array(dtype=int),
-    points_per_world: int,
-    point_tri: wp.array(dtype=int),
-    point_bary: wp.array(dtype=wp.vec3),
-    point_block: wp.array(dtype=wp.mat33),
-    ap: wp.array(dtype=wp.vec3),
-):
-    """ap += H p for the edge point in ``slot`` (``edge_point_product``)."""
-    t = point_tri[slot]
-    if t < 0 or cg_active[slot // points_per_world] == 0:
-        return
-    block = point_block[slot]
-    if wp.ddot(block, block) == 0.0:  # neither pressed nor rubbing
-        return
-    ids = triangles[t]
-    bary = point_bary[slot]
-    along = block * (bary[0] * p[ids[0]] + bary[1] * p[ids[1]] + bary[2] * p[ids[2]])
-    for j in range(3):
-        wp.atomic_add(ap, ids[j], bary[j] * along)
-
-
-@wp.kernel
-def edge_point_product(
-    p: wp.array(dtype=wp.vec3),
-    triangles: wp.array(dtype=wp.vec3i),
-    cg_active: wp.array(dtype=int),
-    points_per_world: int,
-    point_tri: wp.array(dtype=int),
-    point_bary: wp.array(dtype=wp.vec3),
-    point_block: wp.array(dtype=wp.mat33),
-    ap: wp.array(dtype=wp.vec3),
-    rows: RowMap,
-):
-    """ap += H p for the edge points' Hessians H = (w w^T) x B (node j, k: w_j w_k B; B from
-    ``evaluate_edge_points``: the surface point is affine in the triangle's nodes, so this is the
-    whole Hessian of its terms), before ``linear_solve.cg_node_product`` masks ap and adds the
-    node terms; for the slots of ``rows`` (``world_rows.py``)."""
-    slot = mapped_row(rows, wp.tid())
-    if slot < 0:
-        return
-    edge_point_slot_product(slot, p, triangles, cg_active, points_per_world, point_tri, point_bary, point_block, ap)
-
-
-@wp.func
-def coarse_assemble_edge_point(
-    slot: int,
-    triangles: wp.array(dtype=wp.vec3i),
-    world_active: wp.array(dtype=int),
-    points_per_world: int,
-    point_tri: wp.array(dtype=int),
-    point_bary: wp.array(dtype=wp.vec3),
-    point_block: wp.array(dtype=wp.mat33),
-    free: wp.array(dtype=wp.vec3),
-    node_aggregate: wp.array(dtype=int),
-    matrix: wp.array3d(dtype=wp.float64),
-):
-    """Row ``slot`` of ``coarse_assemble_edge_points``."""
-    w = slot // points_per_world
-    t = point_tri[slot]
-    if t < 0 or world_active[w] == 0:
-        return
-    block = point_block[slot]
-    if wp.ddot(block, block) == 0.0:  # neither pressed nor rubbing
-        return
-    ids = triangles[t]
-    bary = point_bary[slot]
-    for j in range(3):
-        aj = node_aggregate[ids[j]]
-        for k in range(3):
-            part = (bary[j] * bary[k]) * (wp.diag(free[ids[j]]) * block * wp.diag(free[ids[k]]))
-            ak = node_aggregate[ids[k]]
-            for r in range(3):
-                for c in range(3):
-                    wp.atomic_add(matrix, w, 3 * aj + r, 3 * ak + c, wp.float64(part[r, c]))
-
-
-@wp.kernel
-def coarse_assemble_edge_points(
-    triangles: wp.array(dtype=wp.vec3i),
-    world_active: wp.array(dtype=int),
-    points_per_world: int,
-    point_tri: wp.array(dtype=int),
-    point_bary: wp.array(dtype=wp.vec3),
-    point_block: wp.array(dtype=wp.mat33),
-    free: wp.array(dtype=wp.vec3),
-    node_aggregate: wp.array(dtype=int),
-    matrix: wp.array3d(dtype=wp.float64),
-):
-    """E += T^T H T for the edge points' Hessians (``edge_point_product``): block
-    w_j w_k F_j B F_k between the aggregates of nodes j and k (F: diagonal of free axes)."""
-    coarse_assemble_edge_point(wp.tid(), triangles, world_active, points_per_world, point_tri, point_bary,
-                               point_block, free, node_aggregate, matrix)

@@ -8,7 +8,7 @@ dependent launch; the slowest worlds of a batch, iterating alone), ``cg_world_bl
 iterations in one launch: block ``w`` (``threads`` threads: a CUDA thread block, launched with
 ``block_dim = threads``) strides over world ``w``'s tets, pad edge slots and nodes, calling the same
 row functions as the phase kernels (``elastic.hessian_product_tet``,
-``pad_edge_contact.edge_point_slot_product``, ``linear_solve.node_product``, ``update_solution``,
+``pad_edge_hessian.edge_point_slot_product``, ``linear_solve.node_product``, ``update_solution``,
 ``end_iteration``, ``update_direction``), with ``block_barrier`` between the phases (their sums and
 the world's alpha and beta are read after it). A world computes its rows in the same order either
 way, so with one thread per world (the CPU, which runs a launch's threads one after another) the
@@ -31,7 +31,7 @@ wp.set_module_options({"enable_backward": False})
 from .block_sync import block_barrier
 from .elastic import hessian_product_tet
 from .linear_solve import end_iteration, node_product, update_direction, update_solution
-from .pad_edge_contact import edge_point_slot_product
+from .pad_edge_hessian import edge_point_slot_product
 
 
 @wp.kernel
@@ -51,7 +51,7 @@ def cg_world_blocks(
     tet_world: wp.array(dtype=int),
     tet_r: wp.array(dtype=wp.mat33),
     tet_twist: wp.array(dtype=float),
-    # pad edge points (pad_edge_contact.edge_point_slot_product; points_per_world 0: none)
+    # pad edge points (pad_edge_hessian.edge_point_slot_product; points_per_world 0: none)
     triangles: wp.array(dtype=wp.vec3i),
     point_tri: wp.array(dtype=int),
     point_bary: wp.array(dtype=wp.vec3),

@@ -26,7 +26,8 @@ from .coarse_space import (coarse_assemble_node, coarse_assemble_tet, coarse_fac
 from .contact import evaluate_node
 from .elastic import evaluate_tet, hessian_product_tet
 from .linear_solve import begin_node_solve, node_product, start_cg_world
-from .pad_edge_contact import coarse_assemble_edge_point, edge_point_slot_product, evaluate_edge_point
+from .pad_edge_contact import evaluate_edge_point
+from .pad_edge_hessian import coarse_assemble_edge_point, edge_point_slot_product
 
 
 @wp.kernel
