@@ -112,6 +112,11 @@ class _Context:
     def rec(self, kernel, dim, *inputs):
         return wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device, record_cmd=True)
 
+    def blocks(self, kernel, threads: int, *inputs):
+        """A recorded launch of a kernel that gives each world a block of ``threads`` threads."""
+        return wp.launch(kernel, dim=self.model.num_worlds * threads, block_dim=threads, inputs=list(inputs),
+                         device=self.model.device, record_cmd=True)
+
 
 def _nodes(c: _Context, x, active, record_pads, energy=None) -> list:
     """Inertia, gravity and contact terms of every node at ``x`` (or their energy): the node
@@ -280,30 +285,44 @@ def _evaluate(c: _Context, config, start_energy: bool = False) -> list:
                   s.cg_active)]
 
 
+def _world_node_terms(c: _Context) -> tuple:
+    """The node terms' inputs of the world-block kernels (``contact.evaluate_node`` and
+    ``energy.node_energy_row`` after their iterate and active flags)."""
+    m, s, ctl = c.model, c.scratch, c.control
+    return (s.x_start, c.work.velocities, m.node_mass, m.node_world, ctl.external_force, m.gravity, c.h, *s.pads,
+            m.pad_half_extents, m.pads_per_world, s.lag_normal_force, s.lag_normal, m.node_contact_stiffness,
+            m.contact.stiffening_depth, m.contact.ground_friction, m.contact.pad_friction, m.contact.stick_velocity)
+
+
+def _world_edge_terms(c: _Context) -> tuple:
+    """The pad edge points' inputs of the world-block kernels (points per world 0 without edge contact)."""
+    m, e = c.model, c.scratch.edges
+    return (e.triangles, e.points, e.point_pad, e.points_per_world if e.active else 0, e.point_tri, e.point_bary,
+            e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction, m.contact.stick_velocity * c.h)
+
+
+def _world_tet_terms(c: _Context) -> tuple:
+    """The tets' inputs of the world-block kernels up to their rotation seeds."""
+    m = c.model
+    return (m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, m.tet_world, c.scratch.tet_rotation)
+
+
 def _evaluate_world(c: _Context, config, threads: int, start_energy: bool = False) -> list:
     """``_evaluate``'s launches as one: each world's evaluation in a block of ``threads`` threads
     (``kernels/world_evaluate.py``)."""
-    m, s, e, wc, ctl, work = c.model, c.scratch, c.scratch.edges, c.compaction, c.control, c.work
-    return [wp.launch(kwev.evaluate_world_blocks, dim=m.num_worlds * threads, block_dim=threads, device=m.device,
-                      record_cmd=True, inputs=[
-                          threads, wc.nodes.start, wc.tets.start, int(start_energy), s.energy0, s.newton_active,
-                          work.positions,
-                          s.x_start, work.velocities, m.node_mass, m.node_world, ctl.external_force, m.gravity, c.h,
-                          *s.pads, m.pad_half_extents, m.pads_per_world, s.lag_normal_force, s.lag_normal,
-                          m.node_contact_stiffness, m.contact.stiffening_depth, m.contact.ground_friction,
-                          m.contact.pad_friction, m.contact.stick_velocity,
-                          s.residual, s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force,
-                          work.pad_normal_force, work.pad_force, s.penetration,
-                          e.triangles, e.points, e.point_pad, e.points_per_world if e.active else 0, e.point_tri,
-                          e.point_bary, e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction,
-                          m.contact.stick_velocity * c.h, e.triangle_first, e.point_block,
-                          m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, m.tet_world,
-                          s.tet_rotation, s.cofactor, work.von_mises, s.tet_r, s.tet_twist,
-                          m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm, s.node_aggregate,
-                          1.0 / (c.h * c.h), s.coarse_size, s.coarse_matrix, s.coarse_rhs, s.coarse_lower_inv,
-                          s.coarse_inverse, s.coarse_coef, s.coarse_guess, s.coarse_scratch,
-                          s.substep_newton_it, s.patient, s.last_dx, config.newton_tolerance, config.cg_tolerance,
-                          config.cg_tolerance_far, s.rz_stop, s.cg_active])]
+    m, s, e, wc, work = c.model, c.scratch, c.scratch.edges, c.compaction, c.work
+    return [c.blocks(kwev.evaluate_world_blocks, threads,
+                     threads, wc.nodes.start, wc.tets.start, int(start_energy), s.energy0, s.newton_active,
+                     work.positions, *_world_node_terms(c),
+                     s.residual, s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force,
+                     work.pad_normal_force, work.pad_force, s.penetration,
+                     *_world_edge_terms(c), e.triangle_first, e.point_block,
+                     *_world_tet_terms(c), s.cofactor, work.von_mises, s.tet_r, s.tet_twist,
+                     m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm, s.node_aggregate,
+                     1.0 / (c.h * c.h), s.coarse_size, s.coarse_matrix, s.coarse_rhs, s.coarse_lower_inv,
+                     s.coarse_inverse, s.coarse_coef, s.coarse_guess, s.coarse_scratch,
+                     s.substep_newton_it, s.patient, s.last_dx, config.newton_tolerance, config.cg_tolerance,
+                     config.cg_tolerance_far, s.rz_stop, s.cg_active)]
 
 
 def _cg(c: _Context, config, listed: bool = False) -> list:
@@ -333,46 +352,36 @@ def _cg_world(c: _Context, config, threads: int) -> list:
     """Each world's whole CG (``kernels/world_cg.py``) in one launch of ``threads`` threads per world
     (CUDA thread blocks of that size)."""
     m, s, e, wc = c.model, c.scratch, c.scratch.edges, c.compaction
-    return [wp.launch(kwcg.cg_world_blocks, dim=m.num_worlds * threads, block_dim=threads, device=m.device,
-                      record_cmd=True, inputs=[
-                          threads, config.cg_iterations, wc.nodes.start, wc.tets.start,
-                          e.points_per_world if e.active else 0,
-                          m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world,
-                          s.tet_r, s.tet_twist,
-                          e.triangles, e.point_tri, e.point_bary, e.point_block,
-                          m.node_mass, s.contact_hessian, m.free_axes, m.node_world, s.node_aggregate, s.precond,
-                          1.0 / (c.h * c.h),
-                          s.rz_stop, config.cg_update_fraction * config.newton_tolerance, s.coarse_size,
-                          s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it,
-                          s.cg_total, s.cg_active, s.cg_update,
-                          s.p, s.ap, s.dx, s.residual, s.z])]
+    return [c.blocks(kwcg.cg_world_blocks, threads,
+                     threads, config.cg_iterations, wc.nodes.start, wc.tets.start,
+                     e.points_per_world if e.active else 0,
+                     m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world,
+                     s.tet_r, s.tet_twist,
+                     e.triangles, e.point_tri, e.point_bary, e.point_block,
+                     m.node_mass, s.contact_hessian, m.free_axes, m.node_world, s.node_aggregate, s.precond,
+                     1.0 / (c.h * c.h),
+                     s.rz_stop, config.cg_update_fraction * config.newton_tolerance, s.coarse_size,
+                     s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it,
+                     s.cg_total, s.cg_active, s.cg_update,
+                     s.p, s.ap, s.dx, s.residual, s.z)]
 
 
 def _newton_step_world(c: _Context, config, threads: int, first: bool) -> list:
     """``coarse_post``, the line search (``first``: with the nodes' part of ``energy0``) and
     ``apply`` as one launch: each world's in a block of ``threads`` threads
     (``kernels/world_newton_step.py``)."""
-    m, s, e, wc, ctl = c.model, c.scratch, c.scratch.edges, c.compaction, c.control
-    return [wp.launch(kwns.newton_step_world_blocks, dim=m.num_worlds * threads, block_dim=threads, device=m.device,
-                      record_cmd=True, inputs=[
-                          threads, wc.nodes.start, wc.tets.start, s.newton_active,
-                          s.residual, m.free_axes, s.node_aggregate, s.coarse_size, s.coarse_inverse, s.coarse_rhs,
-                          s.coarse_coef,
-                          config.line_search_steps + 1 if config.line_search_steps > 0 else 0, int(first), 1e-6,
-                          0.5 ** config.line_search_steps,
-                          c.work.positions, s.dx, s.step_length, s.x_trial, s.searching, s.energy0, s.energy_trial,
-                          s.x_start, c.work.velocities, m.node_mass, m.node_world, ctl.external_force, m.gravity, c.h,
-                          *s.pads, m.pad_half_extents, m.pads_per_world, s.lag_normal_force, s.lag_normal,
-                          m.node_contact_stiffness, m.contact.stiffening_depth, m.contact.ground_friction,
-                          m.contact.pad_friction, m.contact.stick_velocity,
-                          e.triangles, e.points, e.point_pad, e.points_per_world if e.active else 0, e.point_tri,
-                          e.point_bary, e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction,
-                          m.contact.stick_velocity * c.h,
-                          m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, m.tet_world,
-                          s.tet_rotation,
-                          config.max_node_step, s.dx_norm, s.diverged, config.newton_tolerance,
-                          config.newton_iterations, s.substep_newton_it, s.newton_it, s.rz, s.res_norm, s.cg_it,
-                          s.last_dx, s.unconverged])]
+    m, s = c.model, c.scratch
+    return [c.blocks(kwns.newton_step_world_blocks, threads,
+                     threads, c.compaction.nodes.start, c.compaction.tets.start, s.newton_active,
+                     s.residual, m.free_axes, s.node_aggregate, s.coarse_size, s.coarse_inverse, s.coarse_rhs,
+                     s.coarse_coef,
+                     config.line_search_steps + 1 if config.line_search_steps > 0 else 0, int(first), 1e-6,
+                     0.5 ** config.line_search_steps,
+                     c.work.positions, s.dx, s.step_length, s.x_trial, s.searching, s.energy0, s.energy_trial,
+                     *_world_node_terms(c), *_world_edge_terms(c), *_world_tet_terms(c),
+                     config.max_node_step, s.dx_norm, s.diverged, config.newton_tolerance,
+                     config.newton_iterations, s.substep_newton_it, s.newton_it, s.rz, s.res_norm, s.cg_it,
+                     s.last_dx, s.unconverged)]
 
 
 def _trial(c: _Context, config) -> list:
@@ -404,10 +413,8 @@ def _outputs(c: _Context) -> list:
     return [c.rec(ksub.clear_outputs, m.num_worlds, s.solve_worlds, m.pads_per_world, work.pad_normal_force,
                   work.pad_force, s.res_norm),
             *_nodes(c, x, s.solve_worlds, 1), _tets(c, x, s.solve_worlds, outputs=1), _begin_solve(c, s.solve_worlds),
-            wp.launch(ksub.mean_stress, dim=m.num_worlds * c.block_threads, block_dim=c.block_threads,
-                      device=m.device, record_cmd=True,
-                      inputs=[c.block_threads, work.von_mises, m.tet_rest_volume, s.tet_start, s.tet_end,
-                              s.solve_worlds, m.world_volume, s.stress_partial, work.mean_von_mises])]
+            c.blocks(ksub.mean_stress, c.block_threads, c.block_threads, work.von_mises, m.tet_rest_volume,
+                     s.tet_start, s.tet_end, s.solve_worlds, m.world_volume, s.stress_partial, work.mean_von_mises)]
 
 
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
