@@ -217,6 +217,9 @@ def main(argv=None) -> int:
     ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=None,
                     help="evaluate with (or --no-edge-contact without) the pads' box edges held out of the "
                          "object (PickupConfig.edge_contact; default: the run's)")
+    ap.add_argument("--episode-seconds", type=float, default=None,
+                    help="evaluate with another time limit (s) than the run's (e.g. the env's default 15 s for "
+                         "a run trained on shorter episodes)")
     ap.add_argument("--workers", type=int, default=1,
                     help="processes to spread the worlds over (the same episodes as one process)")
     ap.add_argument("--json", default=None, help="write the result (every episode) to this file")
@@ -225,7 +228,8 @@ def main(argv=None) -> int:
         ap.error(f"--workers and --worlds must be >= 1, got {args.workers} and {args.worlds}")
     result = evaluate(pathlib.Path(args.run), args.worlds, args.seed, args.device, args.torch_device,
                       deterministic=not args.stochastic, workers=args.workers, object=args.object,
-                      youngs_modulus=args.youngs_modulus, edge_contact=args.edge_contact)
+                      youngs_modulus=args.youngs_modulus, edge_contact=args.edge_contact,
+                      episode_seconds=args.episode_seconds)
     env = result["env"]
     moduli = env["youngs_modulus"]
     moduli = f"{moduli:g}" if isinstance(moduli, (int, float)) else ", ".join(f"{m:g}" for m in moduli)

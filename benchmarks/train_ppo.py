@@ -27,13 +27,21 @@ and the jaw but not turn the wrist (4 actions instead of 7); ``position-yaw-jaw`
 about the vertical (5). ``--object cuboid,sphere,torus,cylinder,rope --fixed-world-objects`` trains
 on the five objects at once, each in a fifth of the worlds for every episode (no model rebuild at
 the autoresets, which a draw per episode would cost at nearly every step). ``--init-from`` may
-start from a run with another action set (its action head is mapped by component). The PPO
+start from a run with another action set (its action head is mapped by component). ``--goal-noise``
+draws each training episode's goal around ``--goal`` (``PickupConfig.goal_noise``; the goal is in the
+observation): goals from near the ground up make the lift pay from its first centimetres, where
+the fixed 0.6 m goal's reward barely changes (a policy from scratch learned to hold the cube on the
+ground and not to lift it, benchmarks/RESULTS.md); the curve then also reports the cohort's
+episodes whose goal lies at the task's (within the success tolerance of the default 0, 0.6, 0),
+and ``eval_ppo.py`` evaluates at the task's goal. The PPO
 settings default to those ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
 8 epochs of 32 minibatches per rollout, 3 x 256 networks, initial log std -0.5, target KL 0.1);
 fewer minibatches where a rollout is too small for 64 samples in each (small CPU runs).
 
     python benchmarks/train_ppo.py --num-envs 16 --timesteps 200000 --object cuboid --youngs-modulus 1e6
     python benchmarks/train_ppo.py --num-envs 256 --device cuda:0 --timesteps 5000000   # at scale
+    python benchmarks/train_ppo.py --num-envs 2048 --device cuda:0 --torch-device cuda --actions position-yaw-jaw \
+        --episode-seconds 6 --goal 0 0.35 0 --goal-noise 0 0.3 0 --minutes 9   # from scratch, drawn goals
 """
 
 from __future__ import annotations
@@ -105,8 +113,11 @@ class LearningCurve(BaseCallback):
 
     def __init__(self, settings: dict, env_seed: int, max_seconds: float = float("inf"),
                  rows: list[dict] | None = None, success_tolerance: float = 0.05, episode_steps: int = 300,
-                 best: BestPolicy | None = None):
+                 best: BestPolicy | None = None, task_goal=None):
         super().__init__()
+        #: m [3], or None: where training goals are drawn (``--goal-noise``), the cohort's episodes
+        #: whose goal lies within the success tolerance of this one (the task's) are also counted apart
+        self.task_goal = None if task_goal is None else np.asarray(task_goal, dtype=np.float64)
         self.best = best  # keeps the policy of the best cohort rate (None: not kept)
         self.episode_steps = episode_steps  # the env's time limit (vector steps): every episode has ended this long after its start
         self.success_tolerance = success_tolerance  # m: the env's; "at goal" = grasped and this close
@@ -126,7 +137,8 @@ class LearningCurve(BaseCallback):
         self._step_t0 = self._t0
         self._steps = 0  # vector steps of this session
         self._starts: np.ndarray | None = None  # [N] the vector step at which each world's episode began
-        self._ended: list[tuple[int, bool]] = []  # (start step, success) of the episodes not yet in a cohort
+        self._ended: list[tuple[int, bool, bool]] = []  # (start step, success, at the task goal) of the episodes not yet in a cohort
+        self._near_task: np.ndarray | None = None  # [N] bool: the world's episode has a goal at the task's
 
     def _on_rollout_start(self) -> None:
         self._rollout_t0 = self._step_t0 = time.perf_counter()
@@ -143,18 +155,31 @@ class LearningCurve(BaseCallback):
                                             < self.success_tolerance for info in infos])))
         if self._starts is None:
             self._starts = np.zeros(len(infos), int)
+            self._near_task = np.array([self._at_task_goal(w) for w in range(len(infos))])
         self._steps += 1
         for world, (done, info) in enumerate(zip(self.locals["dones"], infos)):
             if done:
                 self._success.append(bool(info.get("is_success", False)))
                 self._returns.append(float(info.get("episode", {}).get("r", np.nan)))
-                self._ended.append((int(self._starts[world]), self._success[-1]))
+                self._ended.append((int(self._starts[world]), self._success[-1], bool(self._near_task[world])))
                 self._starts[world] = self._steps
+                self._near_task[world] = self._at_task_goal(world)
         return time.perf_counter() - self._t0 < self.max_seconds
+
+    def _at_task_goal(self, world: int) -> bool:
+        """Whether world ``world``'s current episode (its reset info's ``goal``) has its goal within
+        the success tolerance of ``task_goal`` (False where that is not tracked)."""
+        if self.task_goal is None:
+            return False
+        env = self.training_env
+        while hasattr(env, "venv"):  # VecNormalize -> VecMonitor -> (ActionSubset) -> SB3VectorEnv
+            env = env.venv
+        goal = np.asarray(env.reset_infos[world]["goal"], dtype=np.float64)
+        return bool(np.linalg.norm(goal - self.task_goal) < self.success_tolerance)
 
     def _on_rollout_end(self) -> None:
         n = len(self._success)
-        cohort = self._cohort()
+        cohort, task_cohort = self._cohort()
         self.rows.append({"env_steps": self.num_timesteps, "wall_s": round(self._wall0 + time.perf_counter() - self._t0, 1),
                           "episodes": n, "success_rate": float(np.mean(self._success)) if n else float("nan"),
                           "mean_return": float(np.nanmean(self._returns)) if n else float("nan"),
@@ -162,6 +187,9 @@ class LearningCurve(BaseCallback):
                           "at_goal_fraction": float(np.mean(self._at_goal)) if self._at_goal else float("nan"),
                           "cohort_episodes": len(cohort),
                           "cohort_success_rate": float(np.mean(cohort)) if cohort else float("nan"),
+                          **({} if self.task_goal is None else {
+                              "task_goal_cohort_episodes": len(task_cohort),
+                              "task_goal_cohort_success_rate": float(np.mean(task_cohort)) if task_cohort else float("nan")}),
                           # seconds of this rollout's collection (env steps + policy forward passes)
                           "rollout_s": round(time.perf_counter() - self._rollout_t0, 2),
                           **self._step_costs()})
@@ -173,23 +201,26 @@ class LearningCurve(BaseCallback):
               f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}  "
               f"at goal {r['at_goal_fraction']:.3f}  cohort success {r['cohort_success_rate']:.2f} "
               f"[{r['cohort_episodes']}]  "
-              f"collection {r['rollout_s']:.1f} s  step p50/p95 {r['step_ms_p50']:.0f}/{r['step_ms_p95']:.0f} ms  "
+              + (f"at the task goal {r['task_goal_cohort_success_rate']:.2f} [{r['task_goal_cohort_episodes']}]  "
+                 if self.task_goal is not None else "")
+              + f"collection {r['rollout_s']:.1f} s  step p50/p95 {r['step_ms_p50']:.0f}/{r['step_ms_p95']:.0f} ms  "
               f"slowest world Newton {r['slowest_newton']:.0f} CG {r['slowest_cg']:.0f}",
               flush=True)
         self._success, self._returns, self._grasped, self._at_goal, self._step_s, self._slowest = [], [], [], [], [], []
 
-    def _cohort(self) -> list[bool]:
+    def _cohort(self) -> tuple[list[bool], list[bool]]:
         """Success of the episodes that began in the window of vector steps that ended a time limit
         ago (of the length of a rollout): all of them have ended, short successful ones and long
         failed ones alike, so their success rate is unbiased (the rate among episodes that merely
         *ended* in a rollout over-represents early successes), for the policy of ~one episode ago.
         Per session: a resumed run's env is reset, so its first rows have no cohort (nan) and the
-        episodes begun in a session's last time limit are not counted."""
+        episodes begun in a session's last time limit are not counted. Returns the cohort's
+        successes and those of its episodes at the task goal (``task_goal``)."""
         now = self._steps - self.episode_steps
         begin = now - self.model.n_steps
-        cohort = [success for start, success in self._ended if begin <= start < now]
-        self._ended = [(start, success) for start, success in self._ended if start >= now]
-        return cohort
+        cohort = [(success, near) for start, success, near in self._ended if begin <= start < now]
+        self._ended = [item for item in self._ended if item[0] >= now]
+        return [success for success, _ in cohort], [success for success, near in cohort if near]
 
     def _step_costs(self) -> dict:
         """Median / p95 ms of the rollout's vector steps (policy forward pass + env step) and the median
@@ -254,7 +285,7 @@ def load_normalisation(folder: pathlib.Path, venv, gamma: float | None = None):
 
 
 #: ``curve.csv`` columns that are counts (an older run's rows lack the later ones: "nan").
-COUNT_COLUMNS = ("env_steps", "episodes", "cohort_episodes")
+COUNT_COLUMNS = ("env_steps", "episodes", "cohort_episodes", "task_goal_cohort_episodes")
 
 
 def read_curve(folder: pathlib.Path) -> list[dict]:
@@ -334,6 +365,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         settings["fixed_world_objects"] = True
     tolerance = PickupConfig(**env_kwargs).success_tolerance
     episode_steps = PickupConfig(**env_kwargs).max_episode_steps
+    # drawn training goals: the episodes at the task's goal (the default config's, eval_ppo's) apart
+    task_goal = PickupConfig().goal if any(PickupConfig(**env_kwargs).goal_noise) else None
     if resume is not None:
         resume = pathlib.Path(resume)
         rows = check_resume(resume, settings)
@@ -344,7 +377,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
         curve = LearningCurve(settings, env_seed, max_seconds, rows=rows, success_tolerance=tolerance,
-                              episode_steps=episode_steps, best=best)
+                              episode_steps=episode_steps, best=best, task_goal=task_goal)
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, fixed_world_objects=fixed_world_objects,
@@ -366,7 +399,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model.policy.load_state_dict(transfer_policy(trained.policy.state_dict(), source_actions,
                                                      model.policy.state_dict(), actions, log_std_init))
     curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps,
-                          best=best)
+                          best=best, task_goal=task_goal)
     model.learn(timesteps, callback=curve)
     return model, curve
 
@@ -390,6 +423,9 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
                 label="success rate (episodes ended in the rollout: early successes over-represented)")
         ax.plot(x, [r.get("cohort_success_rate", float("nan")) for r in rows], "D-", ms=3,
                 label="success rate (episodes begun one time limit earlier: unbiased)")
+        if any("task_goal_cohort_success_rate" in r for r in rows):  # drawn training goals
+            ax.plot(x, [r.get("task_goal_cohort_success_rate", float("nan")) for r in rows], "*-", ms=4,
+                    label="success rate (the cohort's episodes with a goal at the task's)")
         ax.plot(x, [r["grasped_fraction"] for r in rows], "s-", ms=3, label="grasped fraction (world-steps)")
         ax.plot(x, [r.get("at_goal_fraction", float("nan")) for r in rows], "^-", ms=3,
                 label="grasped at the goal (world-steps)")
@@ -431,6 +467,12 @@ def main(argv=None) -> int:
     ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
                     help="hold the pads' box edges and corners out of the object (PickupConfig.edge_contact, the "
                          "default; --no-edge-contact: node-vs-box contact alone, as runs before 2026-11-26)")
+    ap.add_argument("--goal", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                    help="train with this goal (m, world; default the env's 0 0.6 0)")
+    ap.add_argument("--goal-noise", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                    help="draw each training episode's goal within --goal +- this (m per axis; PickupConfig."
+                         "goal_noise): a curriculum of goals from near the ground up, e.g. --goal 0 0.35 0 "
+                         "--goal-noise 0 0.3 0. eval_ppo.py evaluates at the env's task goal")
     ap.add_argument("--device", default="cpu", help="simulation device (cpu, cuda:0)")
     ap.add_argument("--torch-device", default="cpu", help="PPO network device")
     ap.add_argument("--seed", type=int, default=0)
@@ -448,13 +490,15 @@ def main(argv=None) -> int:
     out = pathlib.Path(args.out)
     resumed = args.resume is not None and pathlib.Path(args.resume).resolve() == out.resolve()
     best = BestPolicy(out / "best", args.best_min_episodes, resumed) if args.best_min_episodes > 0 else None
+    # recorded in run.json only where given (the settings of earlier runs lack them)
+    goals = {k: tuple(v) for k, v in (("goal", args.goal), ("goal_noise", args.goal_noise)) if v is not None}
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
                          max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma,
                          learning_rate=args.learning_rate, resume=args.resume,
                          init_from=args.init_from, fixed_world_objects=args.fixed_world_objects,
                          object=parse_object(args.object), youngs_modulus=args.youngs_modulus,
                          episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=args.device,
-                         best=best)
+                         best=best, **goals)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {args.youngs_modulus:g} Pa, "
              f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "

@@ -33,8 +33,9 @@ FLAGS = ("is_success", "grasped", "pierced", "sim_diverged", "terminated", "trun
 
 
 def reference(q, gap, tip, pad_force, feature, finite, embedding, penetration, solver_diverged, live, held,
-              elapsed, config: PickupConfig, hold_steps: int, max_steps: int) -> dict:
-    """The task's rules in numpy (the env's evaluation before it moved to the device)."""
+              elapsed, goals, config: PickupConfig, hold_steps: int, max_steps: int) -> dict:
+    """The task's rules in numpy (the env's evaluation before it moved to the device); ``goals``
+    [W, 3] m: each world's goal."""
     w = len(q)
     g = Gripper(GripperConfig(), w)
     g.arrays.q.assign(q)
@@ -44,7 +45,7 @@ def reference(q, gap, tip, pad_force, feature, finite, embedding, penetration, s
     diverged = (solver_diverged | ~finite) & live
     valid = live & ~diverged
     reach_dist = np.linalg.norm(pad_pos.mean(axis=1) - feature, axis=1)
-    goal_dist = np.linalg.norm(feature - np.asarray(config.goal), axis=1)
+    goal_dist = np.linalg.norm(feature - goals, axis=1)
     grasped = np.all(tip > GRASP_FORCE, axis=1)
     with np.errstate(invalid="ignore"):
         quality = grasp_quality(angles, config.pad_friction, feature_beyond_pad_faces(feature, pad_pos, pad_quat))
@@ -69,7 +70,7 @@ def reference(q, gap, tip, pad_force, feature, finite, embedding, penetration, s
     return out, held
 
 
-def _random_worlds(rng, w, config):
+def _random_worlds(rng, w, goals):
     """Random states over the rules' regimes (see the module docstring)."""
     q = np.column_stack([rng.uniform(-0.2, 0.2, w), rng.uniform(0.02, 0.7, w), rng.uniform(-0.2, 0.2, w),
                          rng.uniform(-np.pi, np.pi, w), rng.uniform(-0.6, 0.6, w), rng.uniform(-0.6, 0.6, w)])
@@ -91,7 +92,7 @@ def _random_worlds(rng, w, config):
     choice = rng.integers(0, 4, w)
     feature = tcp + rng.normal(0.0, 0.003, (w, 3))
     feature[choice == 1] += side[choice == 1] * rng.uniform(0.005, 0.04, (np.sum(choice == 1), 1))
-    feature[choice == 2] = np.asarray(config.goal) + rng.normal(0.0, 0.03, (np.sum(choice == 2), 3))
+    feature[choice == 2] = goals[choice == 2] + rng.normal(0.0, 0.03, (np.sum(choice == 2), 3))
     feature[choice == 3] = rng.uniform(-0.3, 0.7, (np.sum(choice == 3), 3))
     finite = rng.random(w) > 0.05
     embedding = rng.choice([0.0, 0.004, PIERCE_DEPTH, 0.006], size=w).astype(np.float32)
@@ -113,8 +114,10 @@ def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, de
     task._held.assign(held.astype(np.int32))
     task._elapsed.assign(elapsed.astype(np.int32))
     seen = {name: 0 for name in FLAGS}
+    # each world's own goal (a config's goal_noise draws them per episode): half at the config's
+    goals = np.where(rng.random((w, 1)) < 0.5, np.asarray(config.goal), rng.uniform([-0.1, 0.05, -0.1], [0.1, 0.6, 0.1], (w, 3)))
     for _ in range(steps):
-        q, gap, tip, forces, feature, finite, embedding, penetration, solver_diverged, live = _random_worlds(rng, w, config)
+        q, gap, tip, forces, feature, finite, embedding, penetration, solver_diverged, live = _random_worlds(rng, w, goals)
         # world 0: grasped, one pad's force NaN, the other's inside the cone; world 1: grasped with
         # a NaN feature point (a diverged world): numpy's quality is NaN there, so neither holds well
         tip[:2] = 5.0
@@ -123,7 +126,7 @@ def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, de
         forces[1, 0] = quat_to_matrix(fk_analytic(q[1:2])[1])[:, :, 0] * 5.0
         feature[1], finite[1] = np.nan, False
         want, held = reference(q, gap, tip, forces, feature, finite, embedding, penetration, solver_diverged, live,
-                               held, elapsed, config, task.hold_steps, 5)
+                               held, elapsed, goals, config, task.hold_steps, 5)
         elapsed = want["elapsed"]
         records = wp.zeros(w, dtype=SolveRecord, device="cpu")
         r = records.numpy()  # a view on the CPU
@@ -134,7 +137,8 @@ def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, de
                 wp.array(tip, dtype=wp.vec2d, device=d), wp.array(forces, dtype=wp.vec3d, device=d),
                 wp.array(feature, dtype=wp.vec3d, device=d), wp.array(finite.astype(np.int32), dtype=wp.int32, device=d),
                 wp.array(embedding, dtype=wp.float32, device=d), records, wp.zeros(w, dtype=wp.float32, device=d),
-                wp.array(live.astype(np.int32), dtype=wp.int32, device=d), task.params, task._held, task._elapsed]
+                wp.array(live.astype(np.int32), dtype=wp.int32, device=d), wp.array(goals, dtype=wp.vec3d, device=d),
+                task.params, task._held, task._elapsed]
         wp.launch(evaluate_worlds, dim=w, inputs=args, outputs=[task.outputs], device=d)
         task._host = None
         got = task.result()
@@ -163,17 +167,19 @@ def test_device_observations_are_the_states_copies():
     gap, tip = rng.uniform(0, 0.085, w), rng.uniform(0, 30, (w, 2))
     feature, velocity = rng.normal(size=(w, 3)), rng.normal(size=(w, 3))
     keypoints = rng.normal(size=(w * NUM_KEYPOINTS, 3)).astype(np.float32)
+    goals = rng.uniform(0.05, 0.6, (w, 3))
     d = "cpu"
     wp.launch(observe_worlds, dim=w, inputs=[wp.array(q, dtype=gk.vec6d, device=d), wp.array(gap, dtype=wp.float64, device=d),
                                              wp.array(tip, dtype=wp.vec2d, device=d), wp.array(feature, dtype=wp.vec3d, device=d),
                                              wp.array(velocity, dtype=wp.vec3d, device=d),
-                                             wp.array(keypoints, dtype=wp.vec3, device=d), task.params],
+                                             wp.array(keypoints, dtype=wp.vec3, device=d), wp.array(goals, dtype=wp.vec3d, device=d),
+                                             task.params],
               outputs=[task.outputs], device=d)
     obs = task.observations()
     pos, quat = fk_analytic(q)
     want_agent = AGENT_POS.pack(wrist_position=pos, wrist_quat=quat, jaw_gap=gap[:, None], tip_normal_force=tip)
     want_env = ENV_STATE.pack(feature_position=feature, feature_velocity=velocity,
-                              goal=np.broadcast_to(config.goal, (w, 3)), keypoints=keypoints.reshape(w, -1))
+                              goal=goals, keypoints=keypoints.reshape(w, -1))
     np.testing.assert_allclose(obs["agent_pos"], want_agent.astype(np.float32), rtol=0, atol=np.float32(1e-7))
     np.testing.assert_array_equal(obs["environment_state"], want_env.astype(np.float32))
     # the orientation's float64 may differ from numpy's in the last bit (sin / cos): the rest is exact
@@ -187,12 +193,15 @@ def test_device_observations_are_the_states_copies():
 def test_vector_env_outputs_follow_the_numpy_rules_along_episodes_with_autoresets():
     """Four worlds (two objects) with random actions, episodes of 6 steps (autoresets every
     seventh step): every step's reward, terms and flags against the numpy rules applied to the
-    scene's host readouts, the gripper's numpy state and the step's solver report."""
+    scene's host readouts, the gripper's numpy state and the step's solver report; each world's
+    goal drawn per episode (``goal_noise``) as the reset info reports it."""
     n = 4
     venv = gym.make_vec("DeformablePickup-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                        object=("cuboid", "torus"), youngs_modulus=1e5, max_episode_steps=6)
+                        object=("cuboid", "torus"), youngs_modulus=1e5, max_episode_steps=6,
+                        goal=(0.0, 0.3, 0.0), goal_noise=(0.1, 0.25, 0.1))
     env = venv.unwrapped
-    obs, _ = venv.reset(seed=11)
+    obs, reset_info = venv.reset(seed=11)
+    goals = reset_info["goal"].copy()
     rng = np.random.default_rng(11)
     held, elapsed = np.zeros(n, int), np.zeros(n, int)
     resets_seen = 0
@@ -204,6 +213,10 @@ def test_vector_env_outputs_follow_the_numpy_rules_along_episodes_with_autoreset
         obs, reward, terminated, truncated, info = venv.step(action)
         scene, report = env.scene, env.scene.solve_report.records.numpy()  # the step's solver report
         done = terminated | truncated
+        if "_goal" in info:  # the worlds reset by this step drew new goals
+            goals[info["_goal"]] = info["goal"][info["_goal"]]
+            assert info["_goal"].tolist() == (~live).tolist()
+        np.testing.assert_array_equal(ENV_STATE.get(obs["environment_state"], "goal"), goals.astype(np.float32))
         if not live.all():
             # the reset worlds' readouts are now those of their new episode: this step is not
             # compared; the others' counters advance (no world is at the goal with random actions)
@@ -215,7 +228,7 @@ def test_vector_env_outputs_follow_the_numpy_rules_along_episodes_with_autoreset
         r = scene.readout()
         g = scene.gripper
         want, held = reference(g.q, g.gap, g.tip_force, g.pad_force, r.feature_position, r.finite, r.pad_embedding,
-                               report["penetration"], report["diverged"] != 0, live, held, elapsed, env.config,
+                               report["penetration"], report["diverged"] != 0, live, held, elapsed, goals, env.config,
                                env.task.hold_steps, 6)
         elapsed = want["elapsed"]
         np.testing.assert_allclose(reward, want["reward"], rtol=RTOL, atol=ATOL)
@@ -232,6 +245,7 @@ def test_vector_env_outputs_follow_the_numpy_rules_along_episodes_with_autoreset
         np.testing.assert_array_equal(obs["environment_state"][:, :3], r.feature_position.astype(np.float32))
         np.testing.assert_array_equal(info["mean_von_mises"], scene.state.mean_von_mises.numpy().astype(np.float64))
     assert resets_seen >= 2 and column("reward") == AGENT_POS.size + ENV_STATE.size
+    assert len(np.unique(goals[:, 1])) == n  # the goals were drawn (no two alike)
 
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])

@@ -15,7 +15,8 @@ from .task import REWARD_TERMS, PickupTask
 
 def draw_setup(config: PickupConfig, rng: np.random.Generator, object_name: str | None = None) -> WorldSetup:
     """Random episode start of one world: object (if not given), E, position and yaw noise, then
-    Poisson ratio and density where the config gives tuples of them."""
+    Poisson ratio and density where the config gives tuples of them, then the goal where the
+    config's ``goal_noise`` is not zero (drawn last, so that the other draws stay as they were)."""
     drawn = config.object_names[rng.integers(len(config.object_names))]  # always drawn: same stream either way
     name = object_name if object_name is not None else drawn
     e = config.moduli[rng.integers(len(config.moduli))]
@@ -26,8 +27,12 @@ def draw_setup(config: PickupConfig, rng: np.random.Generator, object_name: str 
     nu = config.poisson_ratio[rng.integers(len(config.poisson_ratio))] \
         if isinstance(config.poisson_ratio, tuple) else config.poisson_ratio
     rho = config.density[rng.integers(len(config.density))] if isinstance(config.density, tuple) else config.density
+    goal = np.asarray(config.goal, dtype=np.float64)
+    noise = np.asarray(config.goal_noise, dtype=np.float64)
+    if noise.any():
+        goal = goal + rng.uniform(-noise, noise)
     return WorldSetup(name, Material(float(rho), float(e), float(nu)),
-                      np.array([xz[0], 0.0, xz[1]]), quat)
+                      np.array([xz[0], 0.0, xz[1]]), quat, goal)
 
 
 def draw_world(config: PickupConfig, rng: np.random.Generator, seed: int | None, object_name: str | None = None,
@@ -39,7 +44,7 @@ def draw_world(config: PickupConfig, rng: np.random.Generator, seed: int | None,
     setup = draw_setup(config, rng, object_name)
     spec = ReplaySpec(None if seed is None else int(seed), rng_state, None if options is None else dict(options),
                       setup.object_name, setup.material, tuple(float(v) for v in setup.position),
-                      tuple(float(v) for v in setup.quat))
+                      tuple(float(v) for v in setup.quat), tuple(float(v) for v in setup.goal))
     return setup, spec
 
 
@@ -79,8 +84,8 @@ class SceneCamera:
         self.config = config
         self._renderers: dict[int, tuple[str, object]] = {}
 
-    def render(self, scene: PickupScene, w: int) -> np.ndarray:
-        """HxWx3 uint8 image of world ``w``."""
+    def render(self, scene: PickupScene, w: int, goal) -> np.ndarray:
+        """HxWx3 uint8 image of world ``w`` with its goal ``goal`` [3] (m, world)."""
         from ..render.renderer import SceneRenderer
 
         name = scene.object_names[w]
@@ -91,4 +96,4 @@ class SceneCamera:
         centers, quats = scene.gripper.pad_poses()
         half = np.repeat(Gripper.pad_half_extents[None], 2, axis=0)
         return self._renderers[w][1].render(scene.node_positions(w), centers[w], quats[w], half,
-                                            goal=np.asarray(self.config.goal, np.float32))
+                                            goal=np.asarray(goal, np.float32))

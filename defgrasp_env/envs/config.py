@@ -69,7 +69,10 @@ class PickupConfig:
     surface, so a bad name or file fails at ``gym.make``, not at ``reset``). ``youngs_modulus`` is a value in Pa or a tuple of values
     to sample from per episode (e.g. the paper's (1e4, 1e5, 1e6, 1e7)); ``poisson_ratio`` and
     ``density`` (kg/m^3) likewise (a tuple is sampled per episode, after the pose; a single value
-    draws nothing, so the draws of existing configurations are unchanged).
+    draws nothing, so the draws of existing configurations are unchanged). ``goal_noise`` (m, >= 0
+    per world axis) draws each episode's goal uniformly within ``goal`` +- ``goal_noise`` (last, and
+    only where a component is > 0: zeros draw nothing); the lowest goal must lie above the ground.
+    The episode's goal is in the observation (``environment_state``) and the reset info (``goal``).
     """
 
     object: str | tuple[str, ...] = "cuboid"
@@ -88,6 +91,7 @@ class PickupConfig:
     control_hz: float = 20.0
     episode_seconds: float = 15.0
     goal: tuple[float, float, float] = (0.0, 0.6, 0.0)
+    goal_noise: tuple[float, float, float] = (0.0, 0.0, 0.0)
     success_tolerance: float = 0.05
     success_hold_seconds: float = 0.5
     max_linear_speed: float = 0.3
@@ -125,6 +129,16 @@ class PickupConfig:
         check_range("max_angular_speed", self.max_angular_speed, 0.0, 2 * math.pi, "rad/s", high_open=False)
         if len(self.goal) != 3 or not all(math.isfinite(float(g)) for g in self.goal):
             raise ValueError(f"goal must be 3 finite numbers in m, got {self.goal!r}")
+        if isinstance(self.goal, list):
+            object.__setattr__(self, "goal", tuple(self.goal))  # frozen: normalised once, here
+        if isinstance(self.goal_noise, list):
+            object.__setattr__(self, "goal_noise", tuple(self.goal_noise))
+        if len(self.goal_noise) != 3 or not all(math.isfinite(float(g)) and float(g) >= 0.0 for g in self.goal_noise):
+            raise ValueError(f"goal_noise must be 3 finite numbers >= 0 in m (half-widths of the goal's draw), "
+                             f"got {self.goal_noise!r}")
+        if float(self.goal[1]) - float(self.goal_noise[1]) <= 0.0:
+            raise ValueError(f"the lowest goal height, goal[1] - goal_noise[1] = {self.goal[1]} - {self.goal_noise[1]} m, "
+                             "must be above the ground (> 0 m)")
         _check_choice("obs_type", self.obs_type, OBS_TYPES)
         _check_choice("action_mode", self.action_mode, ACTION_MODES)
         for name, cls in (("gripper", GripperConfig), ("solver", SolverConfig), ("camera", Camera)):

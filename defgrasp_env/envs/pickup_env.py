@@ -58,9 +58,10 @@ class DeformablePickupEnv(gym.Env):
 
     The object is a tetrahedral FEM body (fixed-corotated hyperelasticity, Warp) resting on the
     ground (y = 0, world y up) at the paper's initial pose [0, 0, 0] (plus seeded noise); the goal
-    is [0, 0.6, 0] m. The gripper hangs on an invisible 6-DOF wrist (3 prismatic + 3 revolute
-    joints, ``defgrasp_env/assets/wrist_6dof.urdf``); its pads are kinematic boxes with Coulomb
-    friction. One step is one control period (default 1/20 s). The wrist is force-limited like a
+    is ``goal`` ([0, 0.6, 0] m), or drawn per episode within ``goal`` +- ``goal_noise`` (m, per
+    axis; e.g. goals from near the ground up, a curriculum for RL). The gripper hangs on an
+    invisible 6-DOF wrist (3 prismatic + 3 revolute joints, ``defgrasp_env/assets/wrist_6dof.urdf``);
+    its pads are kinematic boxes with Coulomb friction. One step is one control period (default 1/20 s). The wrist is force-limited like a
     collaborative arm: within each physics substep, wrist and closing jaw move only the fraction
     of their motion that keeps the net force of the pads on the object (``wrist_force``) within
     ``wrist_force_limit`` (default 150 N, a UR e-Series default safety limit) and each pad's normal
@@ -125,8 +126,9 @@ class DeformablePickupEnv(gym.Env):
     deeper than ``solver.penetration_bound``, 1 mm, in a pad or the ground, or a pad's edge that
     much beyond the 0.5 mm skin inside the object, measured to its surface: ``penetration`` is the
     deepest of these over the step's substeps); ``reset`` returns
-    ``is_success``, ``object``, ``youngs_modulus`` (Pa) and ``replay_spec`` (a ``ReplaySpec``: seed
-    or RNG state, options, object, material, initial pose and the reset that built the simulation;
+    ``is_success``, ``object``, ``youngs_modulus`` (Pa), ``goal`` (m, [3]) and ``replay_spec`` (a
+    ``ReplaySpec``: seed or RNG state, options, object, material, initial pose, goal and the reset
+    that built the simulation;
     ``spec.reset(env)`` repeats the reset bit for bit).
 
     **Arguments**: every field of ``PickupConfig`` as a keyword (``object``: a name, ``"random"``,
@@ -190,13 +192,14 @@ class DeformablePickupEnv(gym.Env):
         if self.task is None:
             self.task = PickupTask(self.config, 1)
             self._decoder = DeviceActionDecoder(self.config, 1)
-        self.task.reset(np.ones(1, bool))
+        self.task.reset(np.ones(1, bool), setup.goal[None])
         self.task.observe(self.scene)
         if self._viewer is not None:
             self._viewer.new_episode()
             self.render()
         return self._obs(), {"is_success": False, "object": setup.object_name,
-                             "youngs_modulus": setup.material.youngs_modulus, "replay_spec": spec}
+                             "youngs_modulus": setup.material.youngs_modulus, "goal": setup.goal.copy(),
+                             "replay_spec": spec}
 
     def step(self, action):
         if self.scene is None:
@@ -215,7 +218,7 @@ class DeformablePickupEnv(gym.Env):
 
     def render(self):
         if self.render_mode == "human" and self.scene is not None:
-            self._viewer.show(self.scene, 0, self.config.goal, time_s=float(self.task.elapsed[0]) * self.config.dt)
+            self._viewer.show(self.scene, 0, self.task.goals[0], time_s=float(self.task.elapsed[0]) * self.config.dt)
         if self.render_mode != "rgb_array":
             return None
         return self._render_world(0)
@@ -232,4 +235,4 @@ class DeformablePickupEnv(gym.Env):
         return {k: v[0] for k, v in observations(self.task, pixels).items()}
 
     def _render_world(self, w: int) -> np.ndarray:
-        return self._camera.render(self.scene, w)
+        return self._camera.render(self.scene, w, self.task.goals[w])

@@ -35,6 +35,7 @@ class ReplaySpec:
         object_name: the world's object (a name of ``OBJECT_SHAPES`` or a mesh path).
         material: what the reset drew (density kg/m^3, Young's modulus Pa, Poisson ratio).
         position: initial object frame origin (m, world); ``quat``: its orientation (xyzw).
+        goal: the episode's goal (m, world; drawn where the config's ``goal_noise`` is not zero).
         scene_origin: the reset that built the simulation this world lives in (its rest shape
             comes from it), to be repeated first; None when this reset built it.
     """
@@ -46,6 +47,7 @@ class ReplaySpec:
     material: Material
     position: tuple[float, float, float]
     quat: tuple[float, float, float, float]
+    goal: tuple[float, float, float]
     scene_origin: ReplaySpec | None = None
 
     def to_json_dict(self) -> dict[str, Any]:

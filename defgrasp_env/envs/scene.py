@@ -74,12 +74,13 @@ def object_keypoints(name: str, resolution: float | None) -> np.ndarray:
 @dataclass(frozen=True)
 class WorldSetup:
     """What a reset draws for one world: the object (a name of ``OBJECT_SHAPES`` or a mesh path),
-    its material, and its initial pose (object frame in the world)."""
+    its material, its initial pose (object frame in the world), and the episode's goal."""
 
     object_name: str
     material: Material
     position: np.ndarray   # [3] m, object frame origin in the world
     quat: np.ndarray       # [4] xyzw
+    goal: np.ndarray | None = None  # [3] m, world: the feature point's target (None: the config's ``goal``)
 
 
 def _remap_index(old_start: np.ndarray, new_start: np.ndarray, keep: np.ndarray, device: str) -> wp.array:

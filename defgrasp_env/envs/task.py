@@ -147,11 +147,9 @@ class PickupTask:
     def __init__(self, config: PickupConfig, num_worlds: int, max_episode_steps: int | None = None):
         self.config = config
         self.num_worlds = num_worlds
-        self.goal = np.asarray(config.goal, dtype=np.float64)
         self.hold_steps = int(round(config.success_hold_seconds * config.control_hz))
         self.device = d = wp.get_device(config.device)
         p = TaskParams()
-        p.goal = wp.vec3d(*self.goal)
         p.success_tolerance = float(config.success_tolerance)
         p.friction_cone = float(np.cos(np.arctan(config.pad_friction)))
         p.hold_steps = self.hold_steps
@@ -160,6 +158,8 @@ class PickupTask:
         p.pierce_depth = PIERCE_DEPTH
         p.reach_scale, p.lift_scale, p.place_scale, p.centre_scale = REACH_SCALE, LIFT_SCALE, PLACE_SCALE, CENTRE_SCALE
         self.params = p
+        self._goals_host = np.tile(np.asarray(config.goal, dtype=np.float64), (num_worlds, 1))
+        self._goals = wp.array(self._goals_host, dtype=wp.vec3d, device=d)  # each world's goal, m, world
         self._held = wp.zeros(num_worlds, dtype=wp.int32, device=d)
         self._elapsed = wp.zeros(num_worlds, dtype=wp.int32, device=d)
         #: [W, len(OUTPUT_COLUMNS)] float64 on the device: the last observation and step result
@@ -185,8 +185,22 @@ class PickupTask:
         """[W] int: control steps taken in each world's episode (downloaded)."""
         return self._elapsed.numpy().astype(np.int64)
 
-    def reset(self, mask: np.ndarray) -> None:
-        """Worlds in ``mask`` [W] bool start a new episode (no step taken, not at the goal)."""
+    @property
+    def goals(self) -> np.ndarray:
+        """[W, 3] float64: each world's goal of its episode (m, world; read-only)."""
+        view = self._goals_host.view()
+        view.flags.writeable = False
+        return view
+
+    def reset(self, mask: np.ndarray, goals: np.ndarray | None = None) -> None:
+        """Worlds in ``mask`` [W] bool start a new episode (no step taken, not at the goal), with
+        the goals ``goals[mask]`` ([W, 3] m, world; None: the config's goal)."""
+        mask = np.asarray(mask, dtype=bool)
+        new = np.asarray(self.config.goal, dtype=np.float64) if goals is None else np.asarray(goals, dtype=np.float64)
+        new = np.broadcast_to(new, (self.num_worlds, 3))[mask]
+        if not np.array_equal(new, self._goals_host[mask]):  # uploaded only when a goal changes
+            self._goals_host[mask] = new
+            self._goals.assign(self._goals_host)
         mask = wp.array(np.asarray(mask, dtype=np.int32), dtype=wp.int32, device=self.device)
         wp.launch(reset_counters, dim=self.num_worlds, inputs=[mask, self._held, self._elapsed], device=self.device)
 
@@ -198,7 +212,8 @@ class PickupTask:
         g, st, report = scene.gripper.arrays, scene.state, scene.solve_report.records
         self._records_for(r.feature_position, g.q, st.mean_von_mises, report).launch(
             "observe", observe_worlds, self.num_worlds,
-            [g.q, g.gap, g.tip_force, r.feature_position, r.feature_velocity, r.keypoints, self.params], [self.outputs])
+            [g.q, g.gap, g.tip_force, r.feature_position, r.feature_velocity, r.keypoints, self._goals, self.params],
+            [self.outputs])
         self._host = None
 
     def evaluate(self, scene: PickupScene, live: np.ndarray | None = None,
@@ -220,7 +235,8 @@ class PickupTask:
             records = self._launches = LaunchCache(self.device)  # the records bake the parameters in
         records.launch("evaluate", evaluate_worlds, self.num_worlds,
                        [g.q, g.gap, g.tip_force, g.pad_force, r.feature_position, r.finite, r.pad_embedding,
-                        report, st.mean_von_mises, self._live, self.params, self._held, self._elapsed], [self.outputs])
+                        report, st.mean_von_mises, self._live, self._goals, self.params, self._held, self._elapsed],
+                       [self.outputs])
         self._observe(scene, r)
 
     def download(self) -> np.ndarray:

@@ -74,7 +74,6 @@ _BACKING = wp.constant(_F(PAD_BACKING))
 class TaskParams:
     """The task's constants (``envs.task`` and the env's config) for the kernels."""
 
-    goal: wp.vec3d                 # m, world
     success_tolerance: wp.float64  # m
     friction_cone: wp.float64      # cos(atan(pad_friction)): 1 for frictionless pads
     hold_steps: wp.int32           # control steps at the goal that make a success (0 counts as 1)
@@ -118,9 +117,11 @@ def beyond_width(feature: wp.vec3d, center: wp.vec3d, R: wp.mat33d):
 @wp.kernel
 def observe_worlds(q: wp.array(dtype=gk.vec6d), gap: wp.array(dtype=wp.float64), tip_force: wp.array(dtype=wp.vec2d),
                    feature: wp.array(dtype=wp.vec3d), feature_velocity: wp.array(dtype=wp.vec3d),
-                   keypoints: wp.array(dtype=wp.vec3), params: TaskParams, out: wp.array2d(dtype=wp.float64)):
+                   keypoints: wp.array(dtype=wp.vec3), goals: wp.array(dtype=wp.vec3d), params: TaskParams,
+                   out: wp.array2d(dtype=wp.float64)):
     """World w's observation columns of ``out``: ``AGENT_POS`` (flange position and orientation,
-    jaw gap, tip forces) and ``ENV_STATE`` (feature point, its velocity, the goal, the keypoints)."""
+    jaw gap, tip forces) and ``ENV_STATE`` (feature point, its velocity, its goal ``goals[w]`` (m,
+    world), the keypoints)."""
     w = wp.tid()
     qw = q[w]
     quat = gk.flange_quat(qw)
@@ -134,10 +135,11 @@ def observe_worlds(q: wp.array(dtype=gk.vec6d), gap: wp.array(dtype=wp.float64),
     out[w, 9] = t[1]
     fp = feature[w]
     fv = feature_velocity[w]
+    goal = goals[w]
     for i in range(3):
         out[w, _ENV_STATE + i] = fp[i]
         out[w, _ENV_STATE + 3 + i] = fv[i]
-        out[w, _ENV_STATE + 6 + i] = params.goal[i]
+        out[w, _ENV_STATE + 6 + i] = goal[i]
     for k in range(_KEYPOINTS):
         p = keypoints[w * _KEYPOINTS + k]
         for i in range(3):
@@ -149,12 +151,14 @@ def evaluate_worlds(q: wp.array(dtype=gk.vec6d), gap: wp.array(dtype=wp.float64)
                     pad_force: wp.array2d(dtype=wp.vec3d), feature: wp.array(dtype=wp.vec3d),
                     finite: wp.array(dtype=wp.int32), pad_embedding: wp.array(dtype=wp.float32),
                     report: wp.array(dtype=SolveRecord), mean_von_mises: wp.array(dtype=wp.float32),
-                    live: wp.array(dtype=wp.int32), params: TaskParams, held: wp.array(dtype=wp.int32),
+                    live: wp.array(dtype=wp.int32), goals: wp.array(dtype=wp.vec3d), params: TaskParams,
+                    held: wp.array(dtype=wp.int32),
                     elapsed: wp.array(dtype=wp.int32), out: wp.array2d(dtype=wp.float64)):
     """World w after a control step: reward terms, grasp and its quality, piercing, success (the
     hold counter ``held``), the step count ``elapsed``, divergence, termination and truncation, and
     the info readings, into its result columns of ``out`` (``envs.task.PickupTask.evaluate``'s
-    rules; ``live[w] == 0``: a world being reset, whose step counts for nothing)."""
+    rules; ``live[w] == 0``: a world being reset, whose step counts for nothing; ``goals[w]``: its
+    goal, m, world)."""
     w = wp.tid()
     qw = q[w]
     g = gap[w]
@@ -168,7 +172,7 @@ def evaluate_worlds(q: wp.array(dtype=gk.vec6d), gap: wp.array(dtype=wp.float64)
     diverged = (rec.diverged != 0 or finite[w] == 0) and is_live
     valid = is_live and not diverged
     reach_distance = wp.length((c0 + c1) / _F(2.0) - fp)
-    goal_distance = wp.length(fp - params.goal)
+    goal_distance = wp.length(fp - goals[w])
     grasped = t[0] > params.grasp_force and t[1] > params.grasp_force
     # the grasp quality: the worse pad's friction-cone margin times the centring across the pads' width
     opening = wp.vec3d(R[0, 0], R[1, 0], R[2, 0])

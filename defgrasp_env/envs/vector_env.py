@@ -223,7 +223,7 @@ class DeformablePickupVectorEnv(VectorEnv):
     def render(self):
         if self.render_mode == "human" and self.scene is not None:
             w = self._viewer_world
-            self._viewer.show(self.scene, w, self.config.goal, time_s=float(self.task.elapsed[w]) * self.config.dt)
+            self._viewer.show(self.scene, w, self.task.goals[w], time_s=float(self.task.elapsed[w]) * self.config.dt)
         if self.render_mode != "rgb_array":
             return None
         return np.stack([self._render_world(w) for w in range(self.num_envs)])
@@ -249,7 +249,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         """Reset the worlds in ``mask`` (all of them when the scene is built) from their RNGs, just
         seeded with ``seeds[w]`` where that is not None. Returns the reset info entries of the reset
         worlds: ``replay_spec`` (object array [N]), ``object`` (object array [N]),
-        ``youngs_modulus`` [N] Pa, each with its ``_key`` mask."""
+        ``youngs_modulus`` [N] Pa, ``goal`` [N, 3] m, each with its ``_key`` mask."""
         seeds = seeds if seeds is not None else [None] * self.num_envs
         built = self.scene is None
         reset = np.ones(self.num_envs, bool) if built else mask
@@ -273,15 +273,16 @@ class DeformablePickupVectorEnv(VectorEnv):
         if self.task is None:
             self.task = PickupTask(self.config, self.num_envs, self.max_episode_steps)
             self._decoder = DeviceActionDecoder(self.config, self.num_envs)
-        self.task.reset(mask)
-        self.task.observe(self.scene)
-        self._needs_reset[mask] = False
         objects = np.full(self.num_envs, None, dtype=object)
         moduli = np.zeros(self.num_envs)
+        goals = np.zeros((self.num_envs, 3))
         for w in np.flatnonzero(reset):
-            objects[w], moduli[w] = setups[w].object_name, setups[w].material.youngs_modulus
+            objects[w], moduli[w], goals[w] = setups[w].object_name, setups[w].material.youngs_modulus, setups[w].goal
+        self.task.reset(reset, goals)  # at the build: every world (all drew), else the mask
+        self.task.observe(self.scene)
+        self._needs_reset[mask] = False
         return {"replay_spec": specs, "_replay_spec": reset.copy(), "object": objects, "_object": reset.copy(),
-                "youngs_modulus": moduli, "_youngs_modulus": reset.copy()}
+                "youngs_modulus": moduli, "_youngs_modulus": reset.copy(), "goal": goals, "_goal": reset.copy()}
 
     def _obs(self, result_names: tuple[str, ...] = ()):
         """The observation dict; with ``torch_outputs`` also the step result columns
@@ -299,4 +300,4 @@ class DeformablePickupVectorEnv(VectorEnv):
         return obs
 
     def _render_world(self, w: int) -> np.ndarray:
-        return self._camera.render(self.scene, w)
+        return self._camera.render(self.scene, w, self.task.goals[w])

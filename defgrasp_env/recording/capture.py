@@ -11,13 +11,16 @@ import numpy as np
 from ..envs.scene import PickupScene
 
 def object_record(scene: PickupScene, w: int = 0) -> dict[str, np.ndarray]:
-    """The ``object/`` group of world ``w``: initial pose, material and mesh (local node indices)."""
+    """The ``object/`` group of world ``w`` (initial pose, material and mesh: local node indices)
+    and its episode's ``task/goal`` (m, world) where the reset drew one."""
     setup = scene.setups[w]
     mat = scene.materials[w]
     mesh = scene.mesh(w)
     m = scene.model
     tets = m.tets.numpy()[m.world_tets(w)] - int(m.node_start[w])
+    goal = {} if setup.goal is None else {"task/goal": np.asarray(setup.goal, dtype=np.float64).copy()}
     return {
+        **goal,
         "object/initial_position": np.asarray(setup.position, dtype=np.float64).copy(),
         "object/initial_quaternion": np.asarray(setup.quat, dtype=np.float64).copy(),
         "object/density": np.float64(mat.density),

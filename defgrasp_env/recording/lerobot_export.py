@@ -22,14 +22,14 @@ from .reader import Episode, episode_paths, load_episode
 ROBOT_TYPE = "robotiq_2f85_on_6dof_wrist"
 CAMERA_KEY = "observation.images.camera"
 _KEYS = ("observations/agent_pos", "observations/environment_state", "observations/pixels", "steps/action",
-         "steps/reward", "steps/terminated", "steps/truncated", "steps/is_success", "object/youngs_modulus")
+         "steps/reward", "steps/terminated", "steps/truncated", "steps/is_success", "object/youngs_modulus", "task/goal")
 
 
 def default_task(ep: Episode) -> str:
     """The language task of an episode, e.g. 'Pick up the cuboid (E = 1e+05 Pa) and lift it to [0, 0.6, 0] m'."""
     import json
 
-    goal = json.loads(ep.attrs["config_json"])["goal"]
+    goal = ep["task/goal"] if "task/goal" in ep.data else json.loads(ep.attrs["config_json"])["goal"]
     name = pathlib.Path(ep.attrs["object_name"]).stem
     return (f"Pick up the {name} (E = {float(ep['object/youngs_modulus']):.0e} Pa) "
             f"and lift it to [{', '.join(f'{g:g}' for g in goal)}] m")

@@ -48,8 +48,9 @@ class LeRobotRecorder(gym.Wrapper):
         self.dataset = LeRobotDataset.create(repo_id or f"defgrasp/{root.name}", layout.fps,
                                              lerobot_features(layout, names, use_videos), root=root,
                                              robot_type=ROBOT_TYPE, use_videos=use_videos, video_backend="pyav")
-        self.task = task or (f"Pick up the {cfg.object} and lift it to "
-                             f"[{', '.join(f'{g:g}' for g in cfg.goal)}] m")
+        goal = ("the goal in its environment_state" if any(cfg.goal_noise)  # drawn per episode
+                else f"[{', '.join(f'{g:g}' for g in cfg.goal)}] m")
+        self.task = task or f"Pick up the {cfg.object} and lift it to {goal}"
         self.record_frames = record_frames
         self._obs = None
         self._frame = None

@@ -44,6 +44,8 @@ FIELDS: dict[str, Field] = {
     "object/triangles": Field("int32", ("N1", 3), "1", "surface triangles, node indices (0-based)", True),
     "object/tetrahedra": Field("int32", ("N2", 4), "1", "tetrahedra, node indices (0-based)", True),
     "object/rest_nodes": Field("float64", ("N3", 3), "m", "mesh nodes in the object frame (rest shape)"),
+    "task/goal": Field("float64", (3,), "m", "the episode's goal for the feature point, world frame "
+                       "(drawn per episode with the config's goal_noise)", required=False),
     # -- Per time step (Table 1, lower half) -----------------------------------------------------
     "steps/time": Field("float64", ("T",), "s", "simulation time at the end of the step", True),
     "steps/node_positions": Field("float32", ("T", "N3", 3), "m", "node positions, world frame", True),

@@ -98,7 +98,7 @@ class EpisodeFrames:
     def __init__(self, path):
         from ..recording.reader import load_episode
 
-        ep = load_episode(path, self.KEYS)
+        ep = load_episode(path, self.KEYS + ("task/goal",), missing_ok=True)  # the goal: files since it
         self.path = ep.path
         self.attrs = ep.attrs
         self.triangles = np.asarray(ep["object/triangles"], dtype=np.int64)
@@ -107,8 +107,11 @@ class EpisodeFrames:
         self.num_steps = int(len(ep["steps/time"]))
         if self.num_steps == 0:
             raise ValueError(f"{self.path}: episode has no steps to view")
-        config = ep.config if "config_json" in ep.attrs else None
-        self.goal = np.asarray(config.goal if config is not None else (0.0, 0.6, 0.0), dtype=np.float64)
+        if "task/goal" in ep.data:  # the episode's own goal (files of before it fall back to the config's)
+            self.goal = np.asarray(ep["task/goal"], dtype=np.float64)
+        else:
+            config = ep.config if "config_json" in ep.attrs else None
+            self.goal = np.asarray(config.goal if config is not None else (0.0, 0.6, 0.0), dtype=np.float64)
         n = ep["steps/node_positions"].shape[1]
         self._stress = np.stack([node_stress(self._tets, s, n) for s in ep["steps/von_mises"]])
         self.stress_max = float(self._stress.max())
