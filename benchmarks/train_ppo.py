@@ -33,7 +33,12 @@ observation): goals from near the ground up make the lift pay from its first cen
 the fixed 0.6 m goal's reward barely changes (a policy from scratch learned to hold the cube on the
 ground and not to lift it, benchmarks/RESULTS.md); the curve then also reports the cohort's
 episodes whose goal lies at the task's (within the success tolerance of the default 0, 0.6, 0),
-and ``eval_ppo.py`` evaluates at the task's goal. The PPO
+and ``eval_ppo.py`` evaluates at the task's goal. Goals lower than the object's feature point
+plus the success tolerance (~0.07 m for the cuboid) succeed on a grasp without a lift: the
+curriculum's first step. ``--out/best`` is still chosen by the cohort over all goals (a rollout's
+episodes at the task's goal are too few for ``--best-min-episodes``). A run ``--init-from`` one
+trained at a fixed goal starts with the normalisation statistics of a constant goal: its goal
+inputs saturate until the running variance catches up. The PPO
 settings default to those ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
 8 epochs of 32 minibatches per rollout, 3 x 256 networks, initial log std -0.5, target KL 0.1);
 fewer minibatches where a rollout is too small for 64 samples in each (small CPU runs).

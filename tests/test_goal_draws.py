@@ -7,12 +7,14 @@ world's object to that world's goal, and the success and reward are measured the
 from __future__ import annotations
 
 import gymnasium as gym
+import h5py
 import numpy as np
 import pytest
 
 from defgrasp_env import PickupConfig
 from defgrasp_env.layout import ENV_STATE
-from defgrasp_env.recording import HDF5Recorder, load_episode
+from defgrasp_env.recording import HDF5Recorder, load_episode, replay_episode
+from defgrasp_env.recording.reader import EpisodeFileError
 from defgrasp_env.viewer.frame import EpisodeFrames
 
 ENV_ID = "DeformablePickup-v0"
@@ -27,13 +29,13 @@ def _vec(n: int, **kwargs):
     ((0.0, -0.1, 0.0), "goal_noise must be 3 finite numbers >= 0"),
     ((0.0, 0.1), "goal_noise must be 3 finite numbers >= 0"),
     ((0.0, float("nan"), 0.0), "goal_noise must be 3 finite numbers >= 0"),
-    ((0.0, 0.6, 0.0), "lowest goal height, goal[1] - goal_noise[1] = 0.6 - 0.6 m"),
+    (0.1, "goal_noise must be 3 finite numbers >= 0"),
+    ((0.0, 0.6, 0.0), "lowest goal height drawn, goal[1] - goal_noise[1] = 0.6 - 0.6 m"),
 ])
 def test_bad_goal_noise_is_refused_naming_the_value(noise, words):
-    with pytest.raises(ValueError, match=words.replace("[", r"\[").replace("]", r"\]")):
+    with pytest.raises(ValueError, match=words.replace("[", r"\[").replace("]", r"\]")) as err:
         PickupConfig(goal_noise=noise)
-    with pytest.raises(ValueError, match="lowest goal height"):
-        PickupConfig(goal=(0.0, -0.01, 0.0))  # a goal below the ground, without noise
+    assert repr(noise) in str(err.value) or "0.6 - 0.6" in str(err.value)
 
 
 def test_zero_noise_draws_nothing_and_noise_draws_last():
@@ -128,9 +130,28 @@ def test_the_expert_lifts_each_world_to_its_own_goal():
     assert success_step[low] < success_step[high], (goals, success_step)
 
 
+def test_a_partial_reset_draws_goals_for_its_worlds_only():
+    """``reset(options={"reset_mask": ...})``: the masked worlds draw new goals (reported with the
+    mask), the others keep theirs, in the observation too."""
+    from gymnasium.vector import AutoresetMode
+
+    venv = _vec(3, goal=GOAL, goal_noise=NOISE, autoreset_mode=AutoresetMode.DISABLED)
+    _, info = venv.reset(seed=60)
+    before = info["goal"].copy()
+    mask = np.array([True, False, True])
+    obs, info = venv.reset(options={"reset_mask": mask})
+    assert info["_goal"].tolist() == mask.tolist()
+    now = venv.unwrapped.task.goals
+    np.testing.assert_array_equal(now[1], before[1])
+    np.testing.assert_array_equal(now[mask], info["goal"][mask])
+    assert not np.any(now[mask] == before[mask])
+    np.testing.assert_array_equal(ENV_STATE.get(obs["environment_state"], "goal"), now.astype(np.float32))
+
+
 def test_recorded_episode_keeps_its_goal_and_replays_it(tmp_path):
     """The episode file stores the episode's goal (``task/goal``), the viewer's playback shows it,
-    and the replay spec repeats it in a fresh env."""
+    the replay spec repeats it in a fresh env, and a replay of a file whose goal was changed
+    reports the goal (not a later difference of rewards)."""
     env = HDF5Recorder(gym.make(ENV_ID, goal=GOAL, goal_noise=NOISE, max_episode_steps=3), tmp_path)
     obs, info = env.reset(seed=9)
     for _ in range(3):
@@ -144,3 +165,8 @@ def test_recorded_episode_keeps_its_goal_and_replays_it(tmp_path):
     obs2, info2 = info["replay_spec"].reset(fresh)
     np.testing.assert_array_equal(info2["goal"], info["goal"])
     np.testing.assert_array_equal(obs2["environment_state"], obs["environment_state"])
+    assert replay_episode(path).bit_exact
+    with h5py.File(path, "r+") as f:
+        f["task/goal"][1] += 0.01
+    with pytest.raises(EpisodeFileError, match="replayed reset gives the goal"):
+        replay_episode(path)

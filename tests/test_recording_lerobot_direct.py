@@ -58,3 +58,24 @@ def test_direct_recording_keeps_the_state_fields_asked_for(tmp_path):
                                                          "left_tip_normal_force", "right_tip_normal_force"]
     got = np.stack([row["observation.state"][0].numpy() for row in torch.utils.data.DataLoader(ds, batch_size=1)])
     np.testing.assert_array_equal(got, np.stack(seen)[:, [0, 1, 2, 7, 8, 9]])
+
+
+def test_direct_recording_names_each_episodes_goal(tmp_path):
+    """With goals drawn per episode (``goal_noise``) each episode's task text names its own goal,
+    as ``to-lerobot`` names an episode file's (``task_text``)."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from defgrasp_env.recording.lerobot_export import task_text
+
+    env = LeRobotRecorder(gym.make("DeformablePickup-v0", max_episode_steps=2, goal=(0.0, 0.3, 0.0),
+                                   goal_noise=(0.0, 0.2, 0.0)), tmp_path / "lr")
+    want = []
+    for seed in (3, 4):
+        _, info = env.reset(seed=seed)
+        want += [task_text("cuboid", 1e5, info["goal"])] * 2
+        for _ in range(2):
+            env.step(np.zeros(7, np.float32))
+    env.close()
+    ds = LeRobotDataset("defgrasp/lr", root=tmp_path / "lr")
+    got = [row["task"][0] for row in torch.utils.data.DataLoader(ds, batch_size=1, shuffle=False)]
+    assert got == want and want[0] != want[2] and want[0].startswith("Pick up the cuboid (E = 1e+05 Pa) and lift it to [0, 0.")

@@ -304,6 +304,53 @@ def test_cohort_success_rate_is_unbiased_where_the_ended_rate_is_not():
     assert abs(pooled / len(counted) - p) < 0.03 and abs(np.mean(counted) - pooled / len(counted)) < 1e-12
 
 
+def test_task_goal_cohort_counts_the_episodes_whose_goal_is_the_tasks():
+    """With drawn goals (``task_goal`` set) the curve also reports the cohort's episodes whose goal
+    (the reset info's, read from the env when each episode begins) lies within the success
+    tolerance of the task's goal: half the episodes here, succeeding with probability 0.2 where the
+    others succeed with 0.8; its pooled rate recovers 0.2 and it counts each such episode once."""
+    import sys
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import LearningCurve
+
+    rng = np.random.default_rng(4)
+    worlds, limit, n_steps, rollouts, task = 300, 8, 4, 40, (0.0, 0.6, 0.0)
+    curve = LearningCurve({}, 0, episode_steps=limit, task_goal=task)
+    reset_infos = [{} for _ in range(worlds)]
+    env = SimpleNamespace(reset_infos=reset_infos)  # the innermost env (no ``venv``), as SB3VectorEnv updates it
+    curve.model = SimpleNamespace(n_steps=n_steps, get_env=lambda: env)
+    def draw(w):
+        at_task = rng.random() < 0.5
+        reset_infos[w] = {"goal": np.array(task) + (rng.uniform(-0.02, 0.02, 3) if at_task else [0.0, -0.4, 0.0])}
+        success = rng.random() < (0.2 if at_task else 0.8)
+        return at_task, success, int(rng.integers(2, 5)) if success else limit
+    state = [draw(w) for w in range(worlds)]
+    age, starts, begun = np.zeros(worlds, int), np.zeros(worlds, int), []
+    for step in range(1, n_steps * rollouts + 1):
+        age += 1
+        done = np.array([age[w] == state[w][2] for w in range(worlds)])
+        ended = {w: state[w] for w in np.flatnonzero(done)}
+        for w in ended:  # the env resets the ended worlds inside the step: their reset info is the new episode's
+            begun.append((starts[w], ended[w][0], ended[w][1]))
+            starts[w], age[w], state[w] = step, 0, draw(w)
+        curve.locals = {"dones": done, "infos": [{"is_success": bool(w in ended and ended[w][1]), "episode": {"r": 0.0}}
+                                                 for w in range(worlds)]}
+        curve._on_step()
+        if step % n_steps == 0:
+            curve._on_rollout_end()
+    final = n_steps * rollouts - limit
+    counted = [success for start, at_task, success in begun if start < final and at_task]
+    rows = [r for r in curve.rows if r["task_goal_cohort_episodes"]]
+    assert sum(r["task_goal_cohort_episodes"] for r in curve.rows) == len(counted)
+    pooled = sum(r["task_goal_cohort_success_rate"] * r["task_goal_cohort_episodes"] for r in rows) / len(counted)
+    # ~5,000 such episodes: the binomial standard error of 0.2 is ~0.006; 0.03 is 5 of it (the
+    # cohort over all goals reads ~0.5)
+    assert abs(pooled - 0.2) < 0.03 and abs(pooled - np.mean(counted)) < 1e-12
+    assert all(r["task_goal_cohort_episodes"] <= r["cohort_episodes"] for r in curve.rows)
+
+
 def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
     """``eval_ppo.evaluate`` on a saved (barely trained) run: one record per world, each ended at
     the time limit or by success, outcomes that add up, the run's env options unless overridden,
@@ -329,6 +376,8 @@ def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
     assert spread["episodes"] == first["episodes"] and spread["outcomes"] == first["outcomes"]
     with pytest.raises(ValueError, match="workers"):
         evaluate(tmp_path, 3, workers=0)
+    longer = evaluate(tmp_path, 1, seed=11, episode_seconds=0.5)  # eval_ppo --episode-seconds
+    assert longer["env"]["episode_seconds"] == 0.5 and (longer["episodes"][0]["steps"] == 10 or longer["episodes"][0]["success"])
     softer = evaluate(tmp_path, 1, seed=11, youngs_modulus=1e4)  # an option the run left at its default
     assert softer["env"] == {"object": "cuboid", "youngs_modulus": 1e4, "episode_seconds": 0.3, "edge_contact": True}
     nodes = evaluate(tmp_path, 1, seed=11, edge_contact=False)  # node-vs-box contact alone (vector env, CPU)

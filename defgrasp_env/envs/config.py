@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 import pathlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -133,12 +134,13 @@ class PickupConfig:
             object.__setattr__(self, "goal", tuple(self.goal))  # frozen: normalised once, here
         if isinstance(self.goal_noise, list):
             object.__setattr__(self, "goal_noise", tuple(self.goal_noise))
-        if len(self.goal_noise) != 3 or not all(math.isfinite(float(g)) and float(g) >= 0.0 for g in self.goal_noise):
+        if (not isinstance(self.goal_noise, tuple) or len(self.goal_noise) != 3
+                or not all(isinstance(g, numbers.Real) and math.isfinite(g) and g >= 0.0 for g in self.goal_noise)):
             raise ValueError(f"goal_noise must be 3 finite numbers >= 0 in m (half-widths of the goal's draw), "
                              f"got {self.goal_noise!r}")
-        if float(self.goal[1]) - float(self.goal_noise[1]) <= 0.0:
-            raise ValueError(f"the lowest goal height, goal[1] - goal_noise[1] = {self.goal[1]} - {self.goal_noise[1]} m, "
-                             "must be above the ground (> 0 m)")
+        if self.goal_noise[1] > 0.0 and float(self.goal[1]) - self.goal_noise[1] <= 0.0:
+            raise ValueError(f"the lowest goal height drawn, goal[1] - goal_noise[1] = {self.goal[1]} - "
+                             f"{self.goal_noise[1]} m, must be above the ground (> 0 m)")
         _check_choice("obs_type", self.obs_type, OBS_TYPES)
         _check_choice("action_mode", self.action_mode, ACTION_MODES)
         for name, cls in (("gripper", GripperConfig), ("solver", SolverConfig), ("camera", Camera)):

@@ -187,10 +187,8 @@ class PickupTask:
 
     @property
     def goals(self) -> np.ndarray:
-        """[W, 3] float64: each world's goal of its episode (m, world; read-only)."""
-        view = self._goals_host.view()
-        view.flags.writeable = False
-        return view
+        """[W, 3] float64: each world's goal of its episode (m, world; a copy)."""
+        return self._goals_host.copy()
 
     def reset(self, mask: np.ndarray, goals: np.ndarray | None = None) -> None:
         """Worlds in ``mask`` [W] bool start a new episode (no step taken, not at the goal), with

@@ -98,7 +98,7 @@ class DeformablePickupVectorEnv(VectorEnv):
     following ``step``, which returns its first observation with zero reward), ``SAME_STEP`` (reset
     inside the ending step; its last observation and info go to ``info["final_obs"]`` and
     ``info["final_info"]``), ``DISABLED`` (reset with ``reset(options={"reset_mask": mask})``; other
-    worlds stay bit-identical). ``info`` holds arrays [N] with ``_key`` masks.
+    worlds stay bit-identical). ``info`` holds arrays [N] (``goal``: [N, 3]) with ``_key`` masks.
     Every world (re)set by ``reset`` or by an autoreset in ``step`` gets a ``ReplaySpec`` in
     ``info["replay_spec"]`` (object array [N], mask ``info["_replay_spec"]``): the seed or RNG state,
     options, object, material and pose with which a single env repeats that world's episode start.
@@ -249,7 +249,7 @@ class DeformablePickupVectorEnv(VectorEnv):
         """Reset the worlds in ``mask`` (all of them when the scene is built) from their RNGs, just
         seeded with ``seeds[w]`` where that is not None. Returns the reset info entries of the reset
         worlds: ``replay_spec`` (object array [N]), ``object`` (object array [N]),
-        ``youngs_modulus`` [N] Pa, ``goal`` [N, 3] m, each with its ``_key`` mask."""
+        ``youngs_modulus`` [N] Pa, ``goal`` [N, 3] m (a row per world), each with its ``_key`` mask."""
         seeds = seeds if seeds is not None else [None] * self.num_envs
         built = self.scene is None
         reset = np.ones(self.num_envs, bool) if built else mask

@@ -25,14 +25,21 @@ _KEYS = ("observations/agent_pos", "observations/environment_state", "observatio
          "steps/reward", "steps/terminated", "steps/truncated", "steps/is_success", "object/youngs_modulus", "task/goal")
 
 
+def task_text(object_name: str, youngs_modulus: float, goal) -> str:
+    """The language task of an episode of ``object_name`` (a name or mesh path) at E
+    ``youngs_modulus`` (Pa) with its goal ``goal`` [3] (m), e.g. 'Pick up the cuboid (E = 1e+05 Pa)
+    and lift it to [0, 0.6, 0] m' (the export's and ``LeRobotRecorder``'s default)."""
+    name = pathlib.Path(object_name).stem
+    return (f"Pick up the {name} (E = {float(youngs_modulus):.0e} Pa) "
+            f"and lift it to [{', '.join(f'{float(g):g}' for g in goal)}] m")
+
+
 def default_task(ep: Episode) -> str:
-    """The language task of an episode, e.g. 'Pick up the cuboid (E = 1e+05 Pa) and lift it to [0, 0.6, 0] m'."""
+    """The language task of an episode file (``task_text`` of its object, E and goal)."""
     import json
 
     goal = ep["task/goal"] if "task/goal" in ep.data else json.loads(ep.attrs["config_json"])["goal"]
-    name = pathlib.Path(ep.attrs["object_name"]).stem
-    return (f"Pick up the {name} (E = {float(ep['object/youngs_modulus']):.0e} Pa) "
-            f"and lift it to [{', '.join(f'{g:g}' for g in goal)}] m")
+    return task_text(ep.attrs["object_name"], ep["object/youngs_modulus"], goal)
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ import pathlib
 import gymnasium as gym
 
 from ..layout import AGENT_POS, ENV_STATE
-from .lerobot_export import ROBOT_TYPE, FrameShape, lerobot_features, lerobot_frame, state_columns
+from .lerobot_export import ROBOT_TYPE, FrameShape, lerobot_features, lerobot_frame, state_columns, task_text
 
 
 class LeRobotRecorder(gym.Wrapper):
@@ -48,9 +48,8 @@ class LeRobotRecorder(gym.Wrapper):
         self.dataset = LeRobotDataset.create(repo_id or f"defgrasp/{root.name}", layout.fps,
                                              lerobot_features(layout, names, use_videos), root=root,
                                              robot_type=ROBOT_TYPE, use_videos=use_videos, video_backend="pyav")
-        goal = ("the goal in its environment_state" if any(cfg.goal_noise)  # drawn per episode
-                else f"[{', '.join(f'{g:g}' for g in cfg.goal)}] m")
-        self.task = task or f"Pick up the {cfg.object} and lift it to {goal}"
+        self._given_task = task  # None: each episode's ``task_text`` (its object, E and goal)
+        self.task = task
         self.record_frames = record_frames
         self._obs = None
         self._frame = None
@@ -60,6 +59,7 @@ class LeRobotRecorder(gym.Wrapper):
     def reset(self, **kwargs):
         self._save_pending()
         obs, info = self.env.reset(**kwargs)
+        self.task = self._given_task or task_text(info["object"], info["youngs_modulus"], info["goal"])
         self._obs = obs
         self._frame = self.env.render() if self.record_frames else None
         return obs, info

@@ -81,6 +81,9 @@ def replay_episode(path: str | os.PathLike | Episode, device: str | None = None)
         if not np.array_equal(setup.position, ep["object/initial_position"]):
             raise EpisodeFileError(f"{ep.path}: replayed reset gives initial position {setup.position.tolist()}, "
                                    f"recorded {ep['object/initial_position'].tolist()}")
+        if "task/goal" in ep.data and not np.array_equal(setup.goal, ep["task/goal"]):
+            raise EpisodeFileError(f"{ep.path}: replayed reset gives the goal {setup.goal.tolist()}, "
+                                   f"recorded {ep['task/goal'].tolist()}")
         recorded = ep["steps/node_positions"]
         actions = ep["steps/action"]
         max_err, first, flags_ok, replayed = 0.0, None, True, 0
