@@ -72,7 +72,7 @@ class PickupConfig:
     ``density`` (kg/m^3) likewise (a tuple is sampled per episode, after the pose; a single value
     draws nothing, so the draws of existing configurations are unchanged). ``goal_noise`` (m, >= 0
     per world axis) draws each episode's goal uniformly within ``goal`` +- ``goal_noise`` (last, and
-    only where a component is > 0: zeros draw nothing); the lowest goal must lie above the ground.
+    only where a component is > 0: zeros draw nothing); the lowest drawn goal must lie above the ground.
     The episode's goal is in the observation (``environment_state``) and the reset info (``goal``).
     """
 

@@ -61,10 +61,11 @@ class DeformablePickupEnv(gym.Env):
     is ``goal`` ([0, 0.6, 0] m), or drawn per episode within ``goal`` +- ``goal_noise`` (m, per
     axis; e.g. goals from near the ground up, a curriculum for RL). The gripper hangs on an
     invisible 6-DOF wrist (3 prismatic + 3 revolute joints, ``defgrasp_env/assets/wrist_6dof.urdf``);
-    its pads are kinematic boxes with Coulomb friction. One step is one control period (default 1/20 s). The wrist is force-limited like a
-    collaborative arm: within each physics substep, wrist and closing jaw move only the fraction
-    of their motion that keeps the net force of the pads on the object (``wrist_force``) within
-    ``wrist_force_limit`` (default 150 N, a UR e-Series default safety limit) and each pad's normal
+    its pads are kinematic boxes with Coulomb friction. One step is one control period (default
+    1/20 s). The wrist is force-limited like a collaborative arm: within each physics substep, wrist
+    and closing jaw move only the fraction of their motion that keeps the net force of the pads on
+    the object (``wrist_force``) within ``wrist_force_limit`` (default 150 N, a UR e-Series default
+    safety limit) and each pad's normal
     force within ``gripper.grip_force_limit`` + ``wrist_force_limit``, both +10 %
     (``wrist.force_limit``; forces of a converged solve; wrist and jaw stop, they do not yield, so a
     stopped pad still takes the impact of an object it threw, and a pad embedded in an object reads
@@ -218,7 +219,7 @@ class DeformablePickupEnv(gym.Env):
 
     def render(self):
         if self.render_mode == "human" and self.scene is not None:
-            self._viewer.show(self.scene, 0, self.task.goals[0], time_s=float(self.task.elapsed[0]) * self.config.dt)
+            self._viewer.show(self.scene, 0, self.task.goal(0), time_s=float(self.task.elapsed[0]) * self.config.dt)
         if self.render_mode != "rgb_array":
             return None
         return self._render_world(0)
@@ -235,4 +236,4 @@ class DeformablePickupEnv(gym.Env):
         return {k: v[0] for k, v in observations(self.task, pixels).items()}
 
     def _render_world(self, w: int) -> np.ndarray:
-        return self._camera.render(self.scene, w, self.task.goals[w])
+        return self._camera.render(self.scene, w, self.task.goal(w))

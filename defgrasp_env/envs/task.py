@@ -190,6 +190,10 @@ class PickupTask:
         """[W, 3] float64: each world's goal of its episode (m, world; a copy)."""
         return self._goals_host.copy()
 
+    def goal(self, w: int) -> np.ndarray:
+        """[3] float64: world ``w``'s goal (m, world; a copy)."""
+        return self._goals_host[w].copy()
+
     def reset(self, mask: np.ndarray, goals: np.ndarray | None = None) -> None:
         """Worlds in ``mask`` [W] bool start a new episode (no step taken, not at the goal), with
         the goals ``goals[mask]`` ([W, 3] m, world; None: the config's goal)."""

@@ -223,7 +223,7 @@ class DeformablePickupVectorEnv(VectorEnv):
     def render(self):
         if self.render_mode == "human" and self.scene is not None:
             w = self._viewer_world
-            self._viewer.show(self.scene, w, self.task.goals[w], time_s=float(self.task.elapsed[w]) * self.config.dt)
+            self._viewer.show(self.scene, w, self.task.goal(w), time_s=float(self.task.elapsed[w]) * self.config.dt)
         if self.render_mode != "rgb_array":
             return None
         return np.stack([self._render_world(w) for w in range(self.num_envs)])
@@ -300,4 +300,4 @@ class DeformablePickupVectorEnv(VectorEnv):
         return obs
 
     def _render_world(self, w: int) -> np.ndarray:
-        return self._camera.render(self.scene, w, self.task.goals[w])
+        return self._camera.render(self.scene, w, self.task.goal(w))

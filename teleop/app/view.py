@@ -231,7 +231,7 @@ class SceneView3D:
         inner = env.unwrapped
         if inner.scene is None:
             return None
-        return self._viewer.capture(inner.scene, 0, inner.task.goals[0],
+        return self._viewer.capture(inner.scene, 0, inner.task.goal(0),
                                     time_s=float(inner.task.elapsed[0]) * inner.config.dt)
 
     def new_episode(self) -> None:
