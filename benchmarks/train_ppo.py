@@ -35,8 +35,8 @@ ground and not to lift it, benchmarks/RESULTS.md); the curve then also reports t
 episodes whose goal lies at the task's (within the success tolerance of the default 0, 0.6, 0),
 and ``eval_ppo.py`` evaluates at the task's goal. Goals lower than the object's feature point
 plus the success tolerance (~0.07 m for the cuboid) succeed on a grasp without a lift: the
-curriculum's first step. ``--out/best`` is still chosen by the cohort over all goals (a rollout's
-episodes at the task's goal are too few for ``--best-min-episodes``). A run ``--init-from`` one
+curriculum's first step. ``--out/best`` is then chosen by the success rate at the task's goal, pooled
+over the latest rollouts' cohorts back to 256 such episodes (``TASK_GOAL_RANKING``). A run ``--init-from`` one
 trained at a fixed goal starts with the normalisation statistics of a constant goal: its goal
 inputs saturate until the running variance catches up. The PPO
 settings default to those ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
@@ -79,30 +79,35 @@ class BestPolicy:
     Each save writes a new folder and then swaps it in, so a crash leaves the old or the new policy
     whole (or both, as ``folder`` and ``folder.old``). Why: a PPO fine-tune's cohort rate here rose to
     0.68 (over 1,379 episodes) and ended at 0.3 (benchmarks/RESULTS.md): the last policy alone is not
-    the run's best."""
+    the run's best. ``rate_key`` / ``episodes_key``: the row's columns that rank the policies (a run
+    on drawn goals ranks by the pooled rate of its episodes at the task's goal:
+    ``TASK_GOAL_RANKING``)."""
 
-    def __init__(self, folder: pathlib.Path, min_episodes: int = 256, resumed: bool = False):
+    def __init__(self, folder: pathlib.Path, min_episodes: int = 256, resumed: bool = False,
+                 rate_key: str = "cohort_success_rate", episodes_key: str = "cohort_episodes"):
         if min_episodes < 1:
             raise ValueError(f"min_episodes must be >= 1, got {min_episodes}")
         self.folder = pathlib.Path(folder)
         self.min_episodes = min_episodes
+        self.rate_key, self.episodes_key = rate_key, episodes_key
         self.rate = float("-inf")
         marker = self.folder / "best.json"
         if resumed and marker.is_file():
-            self.rate = json.loads(marker.read_text())["cohort_success_rate"]
+            self.rate = json.loads(marker.read_text())[rate_key]
         elif marker.is_file():
             shutil.rmtree(self.folder)
 
     def offer(self, model, row: dict, settings: dict) -> bool:
         """Save ``model`` if ``row`` (a ``LearningCurve`` row) beats the kept rate; True if saved."""
-        rate, episodes = row.get("cohort_success_rate", float("nan")), row.get("cohort_episodes", 0)
+        rate, episodes = row.get(self.rate_key, float("nan")), row.get(self.episodes_key, 0)
         if episodes < self.min_episodes or not rate > self.rate:
             return False
         new, old = self.folder.with_name(self.folder.name + ".new"), self.folder.with_name(self.folder.name + ".old")
         shutil.rmtree(new, ignore_errors=True)
         new.mkdir(parents=True)
         save_policy(model, settings, new)
-        keep = {k: row[k] for k in ("env_steps", "wall_s", "cohort_success_rate", "cohort_episodes")}
+        keep = {k: row[k] for k in dict.fromkeys(("env_steps", "wall_s", "cohort_success_rate", "cohort_episodes",
+                                                  self.rate_key, self.episodes_key))}
         (new / "best.json").write_text(json.dumps(keep, indent=1) + "\n")
         shutil.rmtree(old, ignore_errors=True)
         if self.folder.exists():
@@ -113,13 +118,20 @@ class BestPolicy:
         return True
 
 
+#: The columns a run on drawn goals ranks its policies by (``BestPolicy``): the success rate of the
+#: latest episodes at the task's goal, pooled over the fewest latest rollouts' cohorts that hold
+#: ``LearningCurve.pool_episodes`` of them (one rollout's cohort holds too few: ~1/6 of its episodes).
+TASK_GOAL_RANKING = ("task_goal_pooled_success_rate", "task_goal_pooled_episodes")
+
+
 class LearningCurve(BaseCallback):
     """Success rate and mean return of the episodes that ended in each rollout, vs env steps and wall time."""
 
     def __init__(self, settings: dict, env_seed: int, max_seconds: float = float("inf"),
                  rows: list[dict] | None = None, success_tolerance: float = 0.05, episode_steps: int = 300,
-                 best: BestPolicy | None = None, task_goal=None):
+                 best: BestPolicy | None = None, task_goal=None, pool_episodes: int = 256):
         super().__init__()
+        self.pool_episodes = pool_episodes  # episodes at the task's goal the pooled rate reaches back for
         #: m [3], or None: where training goals are drawn (``--goal-noise``), the cohort's episodes
         #: whose goal lies within the success tolerance of this one (the task's) are also counted apart
         self.task_goal = None if task_goal is None else np.asarray(task_goal, dtype=np.float64)
@@ -131,6 +143,9 @@ class LearningCurve(BaseCallback):
         self.max_seconds = max_seconds  # training stops at the first step after this wall time
         self.rows: list[dict] = list(rows or [])  # a resumed run's earlier rows; wall time goes on from them
         self._wall0 = self.rows[-1]["wall_s"] if self.rows else 0.0
+        # (successes, episodes) of each row's cohort at the task's goal, latest last (a resumed run's too)
+        self._task_pool = [(round(r["task_goal_cohort_success_rate"] * n), n) for r in self.rows
+                           if (n := r.get("task_goal_cohort_episodes", 0)) and n == n and n > 0]
         self._success: list[bool] = []
         self._returns: list[float] = []
         self._grasped: list[float] = []
@@ -192,9 +207,7 @@ class LearningCurve(BaseCallback):
                           "at_goal_fraction": float(np.mean(self._at_goal)) if self._at_goal else float("nan"),
                           "cohort_episodes": len(cohort),
                           "cohort_success_rate": float(np.mean(cohort)) if cohort else float("nan"),
-                          **({} if self.task_goal is None else {
-                              "task_goal_cohort_episodes": len(task_cohort),
-                              "task_goal_cohort_success_rate": float(np.mean(task_cohort)) if task_cohort else float("nan")}),
+                          **({} if self.task_goal is None else self._task_columns(task_cohort)),
                           # seconds of this rollout's collection (env steps + policy forward passes)
                           "rollout_s": round(time.perf_counter() - self._rollout_t0, 2),
                           **self._step_costs()})
@@ -206,12 +219,28 @@ class LearningCurve(BaseCallback):
               f"success {r['success_rate']:.2f}  return {r['mean_return']:.1f}  grasped {r['grasped_fraction']:.3f}  "
               f"at goal {r['at_goal_fraction']:.3f}  cohort success {r['cohort_success_rate']:.2f} "
               f"[{r['cohort_episodes']}]  "
-              + (f"at the task goal {r['task_goal_cohort_success_rate']:.2f} [{r['task_goal_cohort_episodes']}]  "
+              + (f"at the task goal {r['task_goal_cohort_success_rate']:.2f} [{r['task_goal_cohort_episodes']}] "
+                 f"(pooled {r['task_goal_pooled_success_rate']:.2f} [{r['task_goal_pooled_episodes']}])  "
                  if self.task_goal is not None else "")
               + f"collection {r['rollout_s']:.1f} s  step p50/p95 {r['step_ms_p50']:.0f}/{r['step_ms_p95']:.0f} ms  "
               f"slowest world Newton {r['slowest_newton']:.0f} CG {r['slowest_cg']:.0f}",
               flush=True)
         self._success, self._returns, self._grasped, self._at_goal, self._step_s, self._slowest = [], [], [], [], [], []
+
+    def _task_columns(self, task_cohort: list[bool]) -> dict:
+        """The row's columns of the episodes at the task's goal: this rollout's cohort, and the rate
+        pooled over the latest cohorts back to ``pool_episodes`` episodes (all there are, before)."""
+        if task_cohort:
+            self._task_pool.append((sum(task_cohort), len(task_cohort)))
+        successes = episodes = 0
+        for s, n in reversed(self._task_pool):
+            if episodes >= self.pool_episodes:
+                break
+            successes, episodes = successes + s, episodes + n
+        return {"task_goal_cohort_episodes": len(task_cohort),
+                "task_goal_cohort_success_rate": float(np.mean(task_cohort)) if task_cohort else float("nan"),
+                TASK_GOAL_RANKING[1]: episodes,
+                TASK_GOAL_RANKING[0]: successes / episodes if episodes else float("nan")}
 
     def _cohort(self) -> tuple[list[bool], list[bool]]:
         """Success of the episodes that began in the window of vector steps that ended a time limit
@@ -290,7 +319,7 @@ def load_normalisation(folder: pathlib.Path, venv, gamma: float | None = None):
 
 
 #: ``curve.csv`` columns that are counts (an older run's rows lack the later ones: "nan").
-COUNT_COLUMNS = ("env_steps", "episodes", "cohort_episodes", "task_goal_cohort_episodes")
+COUNT_COLUMNS = ("env_steps", "episodes", "cohort_episodes", "task_goal_cohort_episodes", "task_goal_pooled_episodes")
 
 
 def read_curve(folder: pathlib.Path) -> list[dict]:
@@ -494,7 +523,9 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     out = pathlib.Path(args.out)
     resumed = args.resume is not None and pathlib.Path(args.resume).resolve() == out.resolve()
-    best = BestPolicy(out / "best", args.best_min_episodes, resumed) if args.best_min_episodes > 0 else None
+    # a run on drawn goals keeps the policy best at the task's goal (the pooled rate of its episodes there)
+    ranking = TASK_GOAL_RANKING if args.goal_noise is not None and any(args.goal_noise) else ()
+    best = BestPolicy(out / "best", args.best_min_episodes, resumed, *ranking) if args.best_min_episodes > 0 else None
     # recorded in run.json only where given (the settings of earlier runs lack them)
     goals = {k: tuple(v) for k, v in (("goal", args.goal), ("goal_noise", args.goal_noise)) if v is not None}
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,

@@ -229,7 +229,7 @@ def test_best_policy_keeps_the_policy_of_the_best_cohort_rate(tmp_path):
     from stable_baselines3 import PPO
 
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
-    from train_ppo import BestPolicy, train
+    from train_ppo import TASK_GOAL_RANKING, BestPolicy, train
 
     model, curve = train(num_envs=1, timesteps=8, n_steps=8, episode_seconds=0.3, actions="position-jaw",
                          object="cuboid")
@@ -260,6 +260,14 @@ def test_best_policy_keeps_the_policy_of_the_best_cohort_rate(tmp_path):
     assert fresh.rate == float("-inf") and not folder.exists()
     with pytest.raises(ValueError, match="min_episodes must be >= 1, got 0"):
         BestPolicy(folder, min_episodes=0)
+    # a run on drawn goals ranks by its pooled rate at the task's goal, not the cohort over all goals
+    ranked = BestPolicy(tmp_path / "ranked", 100, False, *TASK_GOAL_RANKING)
+    goal_row = {**row(0.9, 300, 900), TASK_GOAL_RANKING[0]: 0.3, TASK_GOAL_RANKING[1]: 260}
+    assert ranked.offer(model, goal_row, curve.settings) and ranked.rate == 0.3
+    assert not ranked.offer(model, {**goal_row, "cohort_success_rate": 0.95, TASK_GOAL_RANKING[0]: 0.25},
+                            curve.settings)
+    assert json.loads((tmp_path / "ranked" / "best.json").read_text()) == goal_row
+    assert BestPolicy(tmp_path / "ranked", 100, True, *TASK_GOAL_RANKING).rate == 0.3
 
 
 def test_cohort_success_rate_is_unbiased_where_the_ended_rate_is_not():
@@ -349,6 +357,24 @@ def test_task_goal_cohort_counts_the_episodes_whose_goal_is_the_tasks():
     # cohort over all goals reads ~0.5)
     assert abs(pooled - 0.2) < 0.03 and abs(pooled - np.mean(counted)) < 1e-12
     assert all(r["task_goal_cohort_episodes"] <= r["cohort_episodes"] for r in curve.rows)
+    # the ranking rate (TASK_GOAL_RANKING): the fewest latest cohorts that hold >= 256 such episodes
+    counts = [r["task_goal_cohort_episodes"] for r in curve.rows]
+    for i, r in enumerate(curve.rows):
+        tail, successes = 0, 0
+        for j in range(i, -1, -1):
+            if tail >= 256:
+                break
+            tail += counts[j]
+            successes += round(curve.rows[j]["task_goal_cohort_success_rate"] * counts[j]) if counts[j] else 0
+        assert r["task_goal_pooled_episodes"] == tail
+        if tail:
+            assert r["task_goal_pooled_success_rate"] == successes / tail
+    late = curve.rows[-1]
+    # >= 256 episodes: a standard error of ~0.025 at 0.2; 0.1 is 4 of it
+    assert late["task_goal_pooled_episodes"] >= 256 and abs(late["task_goal_pooled_success_rate"] - 0.2) < 0.1
+    # a resumed curve rebuilds the pool from its rows: the next row pools the same history
+    resumed = LearningCurve({}, 0, episode_steps=limit, task_goal=task, rows=curve.rows)
+    assert resumed._task_columns([True] * 3) == curve._task_columns([True] * 3)
 
 
 def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
