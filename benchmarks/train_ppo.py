@@ -33,7 +33,11 @@ observation): goals from near the ground up make the lift pay from its first cen
 the fixed 0.6 m goal's reward barely changes (a policy from scratch learned to hold the cube on the
 ground and not to lift it, benchmarks/RESULTS.md); the curve then also reports the cohort's
 episodes whose goal lies at the task's (within the success tolerance of the default 0, 0.6, 0),
-and ``eval_ppo.py`` evaluates at the task's goal. Goals lower than the object's feature point
+and ``eval_ppo.py`` evaluates at the task's goal. ``--no-terminate-on-success``
+(``PickupConfig.terminate_on_success``) lets a training episode go on after its success, the bonus
+repeating while the object stays at the goal (an episode counts as a success if any step was):
+where a success ends the episode, circling through the goal is worth about as much (RESULTS.md).
+Goals lower than the object's feature point
 plus the success tolerance (~0.07 m for the cuboid) succeed on a grasp without a lift: the
 curriculum's first step. ``--out/best`` is then chosen by the success rate at the task's goal, pooled
 over the latest rollouts' cohorts back to 256 such episodes (``TASK_GOAL_RANKING``). A run ``--init-from`` one
@@ -159,6 +163,7 @@ class LearningCurve(BaseCallback):
         self._starts: np.ndarray | None = None  # [N] the vector step at which each world's episode began
         self._ended: list[tuple[int, bool, bool]] = []  # (start step, success, at the task goal) of the episodes not yet in a cohort
         self._near_task: np.ndarray | None = None  # [N] bool: the world's episode has a goal at the task's
+        self._succeeded: np.ndarray | None = None  # [N] bool: a step of the world's episode succeeded
 
     def _on_rollout_start(self) -> None:
         self._rollout_t0 = self._step_t0 = time.perf_counter()
@@ -176,10 +181,14 @@ class LearningCurve(BaseCallback):
         if self._starts is None:
             self._starts = np.zeros(len(infos), int)
             self._near_task = np.array([self._at_task_goal(w) for w in range(len(infos))])
+            self._succeeded = np.zeros(len(infos), bool)
         self._steps += 1
+        # an episode succeeded if any of its steps did (its last one, unless successes do not terminate)
+        self._succeeded |= np.array([bool(info.get("is_success", False)) for info in infos])
         for world, (done, info) in enumerate(zip(self.locals["dones"], infos)):
             if done:
-                self._success.append(bool(info.get("is_success", False)))
+                self._success.append(bool(self._succeeded[world]))
+                self._succeeded[world] = False
                 self._returns.append(float(info.get("episode", {}).get("r", np.nan)))
                 self._ended.append((int(self._starts[world]), self._success[-1], bool(self._near_task[world])))
                 self._starts[world] = self._steps
@@ -501,6 +510,10 @@ def main(argv=None) -> int:
     ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
                     help="hold the pads' box edges and corners out of the object (PickupConfig.edge_contact, the "
                          "default; --no-edge-contact: node-vs-box contact alone, as runs before 2026-11-26)")
+    ap.add_argument("--terminate-on-success", action=argparse.BooleanOptionalAction, default=True,
+                    help="--no-terminate-on-success: a success does not end a training episode, its bonus "
+                         "repeats while the object stays at the goal (PickupConfig.terminate_on_success; "
+                         "eval_ppo.py evaluates with the env's default, terminating)")
     ap.add_argument("--goal", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                     help="train with this goal (m, world; default the env's 0 0.6 0)")
     ap.add_argument("--goal-noise", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
@@ -528,6 +541,8 @@ def main(argv=None) -> int:
     best = BestPolicy(out / "best", args.best_min_episodes, resumed, *ranking) if args.best_min_episodes > 0 else None
     # recorded in run.json only where given (the settings of earlier runs lack them)
     goals = {k: tuple(v) for k, v in (("goal", args.goal), ("goal_noise", args.goal_noise)) if v is not None}
+    if not args.terminate_on_success:  # likewise recorded only where off
+        goals["terminate_on_success"] = False
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
                          max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma,
                          learning_rate=args.learning_rate, resume=args.resume,

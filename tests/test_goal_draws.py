@@ -170,3 +170,34 @@ def test_recorded_episode_keeps_its_goal_and_replays_it(tmp_path):
         f["task/goal"][1] += 0.01
     with pytest.raises(EpisodeFileError, match="replayed reset gives the goal"):
         replay_episode(path)
+
+
+def test_a_success_goes_on_without_termination_when_asked():
+    """``terminate_on_success=False`` (for training): the expert's episode reaches the success at
+    the step the default env terminates, is not terminated there, and the success and its bonus
+    repeat while the object stays held at the goal, until the time limit truncates the episode;
+    the steps up to the success are those of the default env (bit for bit on the CPU)."""
+    from defgrasp_env.policies import ScriptedPickupExpert
+
+    runs = {}
+    for terminate in (True, False):
+        env = gym.make(ENV_ID, goal=(0.0, 0.2, 0.0), terminate_on_success=terminate, max_episode_steps=120)
+        obs, _ = env.reset(seed=2)
+        expert = ScriptedPickupExpert.from_env(env.unwrapped)
+        rows = []
+        for _ in range(120):
+            obs, reward, terminated, truncated, info = env.step(expert(obs))
+            rows.append((reward, terminated, truncated, info["is_success"], info["reward_success"]))
+            if terminated or truncated:
+                break
+        runs[terminate] = rows
+    ended, going = runs[True], runs[False]
+    first = len(ended) - 1
+    assert ended[-1][1] and ended[-1][3]  # the default env terminates at its first success
+    assert going[:first] == ended[:first] and going[first][3] and not going[first][1]
+    assert going[first][0] == ended[first][0] and going[first][4] == 10.0
+    after = going[first:]
+    assert len(going) == 120 and after[-1][2] and not any(r[1] for r in going)  # truncated, never terminated
+    held = [r for r in after if r[3]]
+    assert len(held) > 0.8 * len(after) and all(r[4] == 10.0 for r in held)  # the expert holds it there
+    assert all(r[4] == 0.0 for r in after if not r[3])

@@ -312,6 +312,28 @@ def test_cohort_success_rate_is_unbiased_where_the_ended_rate_is_not():
     assert abs(pooled / len(counted) - p) < 0.03 and abs(np.mean(counted) - pooled / len(counted)) < 1e-12
 
 
+def test_an_episode_counts_as_a_success_if_any_of_its_steps_succeeded():
+    """Without termination on success an episode may succeed and end at its time limit after the
+    object left the goal: the curve counts it as a success (and each episode once)."""
+    import sys
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import LearningCurve
+
+    curve = LearningCurve({}, 0, episode_steps=4)
+    curve.model = SimpleNamespace(n_steps=4)
+    # world 0 succeeds at step 2 and ends at the limit without; world 1 never; both end at step 4
+    flags = [(False, False), (True, False), (False, False), (False, False)]
+    for k, (s0, s1) in enumerate(flags):
+        done = np.array([k == 3, k == 3])
+        curve.locals = {"dones": done, "infos": [{"is_success": s0, "episode": {"r": 0.0}},
+                                                 {"is_success": s1, "episode": {"r": 0.0}}]}
+        curve._on_step()
+    curve._on_rollout_end()
+    assert curve.rows[0]["episodes"] == 2 and curve.rows[0]["success_rate"] == 0.5
+
+
 def test_task_goal_cohort_counts_the_episodes_whose_goal_is_the_tasks():
     """With drawn goals (``task_goal`` set) the curve also reports the cohort's episodes whose goal
     (the reset info's, read from the env when each episode begins) lies within the success

@@ -64,7 +64,7 @@ def reference(q, gap, tip, pad_force, feature, finite, embedding, penetration, s
         out["reward"] = out["reward"] + out[f"reward_{name}"]
     out.update(is_success=success, grasped=grasped, grasp_quality=held_well, pierced=pierced,
                goal_distance=goal_dist, pad_embedding=embedding.astype(np.float64), sim_diverged=diverged,
-               terminated=success & live, truncated=(diverged | (elapsed >= max_steps)) & live, elapsed=elapsed,
+               terminated=success & live & config.terminate_on_success, truncated=(diverged | (elapsed >= max_steps)) & live, elapsed=elapsed,
                left_tip_normal_force=tip[:, 0], right_tip_normal_force=tip[:, 1], jaw_gap=gap,
                wrist_force=np.linalg.norm(pad_force.sum(axis=1), axis=1))
     return out, held
@@ -104,9 +104,10 @@ def _random_worlds(rng, w, goals):
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
 @pytest.mark.parametrize("friction", [0.0, 0.8])
-def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, device):
+@pytest.mark.parametrize("terminate", [True, False])
+def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, terminate, device):
     w, steps = 4000, 3
-    config = PickupConfig(pad_friction=friction, goal=(0.0, 0.6, 0.0), device=device)
+    config = PickupConfig(pad_friction=friction, goal=(0.0, 0.6, 0.0), device=device, terminate_on_success=terminate)
     task = PickupTask(config, w, max_episode_steps=5)
     rng = np.random.default_rng(7 if friction else 8)
     held = rng.integers(0, task.hold_steps + 1, w)  # some worlds one step from their success
@@ -152,6 +153,8 @@ def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, de
         assert not np.isnan(got["reward"][1:2]).any() and not got["sim_diverged"][1] ^ bool(live[1])
         seen = {name: seen[name] + int(want[name].sum()) for name in FLAGS}
     # the regimes were all visited: every flag both set and clear, holds of every quality
+    if not terminate:  # successes go on: none terminates
+        assert seen.pop("terminated") == 0 and seen["is_success"] > 0
     assert all(0 < count < steps * w for count in seen.values()), seen
     assert (want["grasp_quality"] > 0.5).any() and ((want["grasp_quality"] > 0) & (want["grasp_quality"] < 0.5)).any()
 

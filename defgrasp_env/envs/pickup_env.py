@@ -113,7 +113,8 @@ class DeformablePickupEnv(gym.Env):
     **Episode end**: terminated on success = feature point within ``success_tolerance`` (0.05 m) of
     the goal, grasped and not pierced (no node 5 mm deep in a pad or the ground, no pad edge 5 mm
     beyond the 0.5 mm skin inside the object, no tet centroid 5 mm deep in a pad), for
-    ``success_hold_seconds`` (0.5 s);
+    ``success_hold_seconds`` (0.5 s) (with ``terminate_on_success=False`` the episode goes on, and
+    the success and its term of 10 repeat on every further step held there: for training);
     truncated after ``episode_seconds`` (15 s, via ``max_episode_steps``) or when the simulation
     diverges (``info["sim_diverged"]``: the state is then kept at its last finite value).
 

@@ -154,6 +154,7 @@ class PickupTask:
         p.friction_cone = float(np.cos(np.arctan(config.pad_friction)))
         p.hold_steps = self.hold_steps
         p.max_episode_steps = _step_limit(max_episode_steps)
+        p.terminate_on_success = int(config.terminate_on_success)
         p.grasp_force = GRASP_FORCE
         p.pierce_depth = PIERCE_DEPTH
         p.reach_scale, p.lift_scale, p.place_scale, p.centre_scale = REACH_SCALE, LIFT_SCALE, PLACE_SCALE, CENTRE_SCALE

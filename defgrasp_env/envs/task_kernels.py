@@ -78,6 +78,7 @@ class TaskParams:
     friction_cone: wp.float64      # cos(atan(pad_friction)): 1 for frictionless pads
     hold_steps: wp.int32           # control steps at the goal that make a success (0 counts as 1)
     max_episode_steps: wp.int32    # truncation after this many steps
+    terminate_on_success: wp.int32 # 1: a success terminates the episode; 0: it goes on (PickupConfig)
     grasp_force: wp.float64        # N, both tip forces above it: grasped
     pierce_depth: wp.float32       # m, compared with the float32 readings as numpy compares them
     reach_scale: wp.float64        # 1/m
@@ -228,7 +229,7 @@ def evaluate_worlds(q: wp.array(dtype=gk.vec6d), gap: wp.array(dtype=wp.float64)
     out[w, _GOAL_DISTANCE] = goal_distance
     out[w, _EMBEDDING] = _F(embedding)
     out[w, _DIVERGED] = wp.where(diverged, _F(1.0), _F(0.0))
-    out[w, _TERMINATED] = wp.where(success and is_live, _F(1.0), _F(0.0))
+    out[w, _TERMINATED] = wp.where(success and is_live and params.terminate_on_success != 0, _F(1.0), _F(0.0))
     out[w, _TRUNCATED] = wp.where((diverged or steps >= params.max_episode_steps) and is_live, _F(1.0), _F(0.0))
     out[w, _ELAPSED] = _F(steps)
     out[w, _LEFT_TIP] = t[0]

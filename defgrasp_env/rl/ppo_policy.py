@@ -58,7 +58,8 @@ class PPOPolicy:
     ``settings``: the run's ``run.json`` (action set, env options); ``env_kwargs``: the options of
     the env the run was trained in, for ``gym.make("DeformablePickup-v0", **policy.env_kwargs)``
     (``run_env_options``, with the episode length as ``max_episode_steps``; a run trained on drawn
-    goals, ``goal`` / ``goal_noise`` in its run.json, is driven at the task's goal: those are not
+    goals, ``goal`` / ``goal_noise`` in its run.json, is driven at the task's goal, and one trained
+    with ``terminate_on_success`` off is driven with the success ending the episode: those are not
     among ``RUN_ENV_OPTIONS``). ``normalizer``: SB3's ``VecNormalize`` of the run, used
     through ``normalize_obs`` alone, which never updates its statistics (a live training env's
     normaliser may be passed). The policy keeps
