@@ -186,7 +186,11 @@ class LearningCurve(BaseCallback):
         # an episode succeeded if any of its steps did (its last one, unless successes do not terminate)
         self._succeeded |= np.array([bool(info.get("is_success", False)) for info in infos])
         for world, (done, info) in enumerate(zip(self.locals["dones"], infos)):
-            if done:
+            if done and info.get("episode_cut", False):  # a first episode cut to stagger the worlds
+                self._succeeded[world] = False
+                self._starts[world] = self._steps
+                self._near_task[world] = self._at_task_goal(world)
+            elif done:
                 self._success.append(bool(self._succeeded[world]))
                 self._succeeded[world] = False
                 self._returns.append(float(info.get("episode", {}).get("r", np.nan)))
@@ -286,12 +290,13 @@ def cycled_objects(num_envs: int, **env_kwargs) -> tuple[str, ...]:
 
 
 def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float = 0.99,
-                 fixed_world_objects: bool = False, **env_kwargs):
+                 fixed_world_objects: bool = False, stagger_episodes: bool = False, **env_kwargs):
     """The SB3 view of the native vector env (``actions``: a key of
     ``defgrasp_env.rl.action_subset.ACTION_SETS``), with episode statistics and running
     normalisation of observations and rewards (discount ``gamma``).
     ``fixed_world_objects``: world i holds ``cycled_objects(...)[i]`` in every episode (the vector
-    env's ``world_objects``: no model rebuild at autoresets), instead of a draw per episode."""
+    env's ``world_objects``: no model rebuild at autoresets), instead of a draw per episode.
+    ``stagger_episodes``: ``SB3VectorEnv(stagger_first_episodes=True)``."""
     import gymnasium as gym
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
@@ -306,7 +311,7 @@ def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float =
     world_objects = cycled_objects(num_envs, **env_kwargs) if fixed_world_objects else None
     env = gym.make_vec("DeformablePickup-v0", num_envs=num_envs, autoreset_mode="SameStep",
                        max_episode_steps=steps, world_objects=world_objects, **env_kwargs)
-    venv = SB3VectorEnv(env)
+    venv = SB3VectorEnv(env, stagger_first_episodes=stagger_episodes)
     venv.seed(seed)
     if actions != "full":
         venv = ActionSubset(venv, ACTION_SETS[actions])
@@ -378,7 +383,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
           torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
           gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, learning_rate: float = 3e-4,
           resume: pathlib.Path | None = None, init_from: pathlib.Path | None = None,
-          fixed_world_objects: bool = False, best: BestPolicy | None = None,
+          fixed_world_objects: bool = False, stagger_episodes: bool = False, best: BestPolicy | None = None,
           **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
@@ -389,7 +394,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     ``init_from``: a folder ``save_run`` wrote, whose policy weights and normalisation statistics
     start this new run (e.g. a GPU run's policy fine-tuned with fewer worlds or another reward); its
     settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
-    ``fixed_world_objects``: see ``make_vec_env``. ``best``: keeps the policy of the best cohort rate."""
+    ``fixed_world_objects``: see ``make_vec_env``. ``stagger_episodes``: each world's first episode
+    cut at a random step (``SB3VectorEnv(stagger_first_episodes=True)``). ``best``: keeps the policy of the best cohort rate."""
     from stable_baselines3 import PPO
 
     from defgrasp_env import PickupConfig
@@ -406,6 +412,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         settings["edge_contact"] = True
     if fixed_world_objects:  # only when set: the run.json of earlier runs lacks it
         settings["fixed_world_objects"] = True
+    if stagger_episodes:  # the same
+        settings["stagger_episodes"] = True
     tolerance = PickupConfig(**env_kwargs).success_tolerance
     episode_steps = PickupConfig(**env_kwargs).max_episode_steps
     # drawn training goals: the episodes at the task's goal (the default config's, eval_ppo's) apart
@@ -415,7 +423,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         rows = check_resume(resume, settings)
         env_seed = seed + (rows[-1]["env_steps"] if rows else 0)
         venv = make_vec_env(num_envs, env_seed, actions=actions, gamma=gamma,
-                            fixed_world_objects=fixed_world_objects, **env_kwargs)
+                            fixed_world_objects=fixed_world_objects, stagger_episodes=stagger_episodes,
+                            **env_kwargs)
         venv = load_normalisation(resume, venv)
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
@@ -424,7 +433,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, fixed_world_objects=fixed_world_objects,
-                        **env_kwargs)
+                        stagger_episodes=stagger_episodes, **env_kwargs)
     if init_from is not None:
         # the loaded statistics go on; the return normalisation uses this run's discount
         venv = load_normalisation(init_from, venv, gamma)
@@ -510,6 +519,10 @@ def main(argv=None) -> int:
     ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
                     help="hold the pads' box edges and corners out of the object (PickupConfig.edge_contact, the "
                          "default; --no-edge-contact: node-vs-box contact alone, as runs before 2026-11-26)")
+    ap.add_argument("--stagger-episodes", action="store_true",
+                    help="cut each world's first episode at a random step, so that the worlds run their "
+                         "episodes out of phase (SB3VectorEnv(stagger_first_episodes=True)); for "
+                         "--no-terminate-on-success, whose episodes otherwise all end together")
     ap.add_argument("--terminate-on-success", action=argparse.BooleanOptionalAction, default=True,
                     help="--no-terminate-on-success: a success does not end a training episode, its bonus "
                          "repeats while the object stays at the goal (PickupConfig.terminate_on_success; "
@@ -547,6 +560,7 @@ def main(argv=None) -> int:
                          max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma,
                          learning_rate=args.learning_rate, resume=args.resume,
                          init_from=args.init_from, fixed_world_objects=args.fixed_world_objects,
+                         stagger_episodes=args.stagger_episodes,
                          object=parse_object(args.object), youngs_modulus=args.youngs_modulus,
                          episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=args.device,
                          best=best, **goals)

@@ -44,6 +44,83 @@ def test_protocol_matches_the_native_env_and_auto_resets():
     np.testing.assert_array_equal(obs["agent_pos"], ref_obs["agent_pos"])
 
 
+def test_staggered_first_episodes_are_cut_at_seeded_steps_and_leave_the_rest_of_the_run_as_it_was():
+    """``stagger_first_episodes``: each world's first episode ends, as a cut truncation, at a step
+    drawn from 1 .. the time limit (reproducible from the seed); until then every world steps
+    bit-identically to an unstaggered adapter driven by the same actions, the cut world's terminal
+    observation is the unstaggered world's observation of that step, and its next episode starts
+    where the unstaggered world's second one does (the same reset draw from the world's RNG); the
+    other worlds are untouched by the cut's partial reset. Later episodes run to the time limit."""
+    n, limit = 6, 5
+    staggered, plain = SB3VectorEnv(_vec(n, limit), stagger_first_episodes=True), SB3VectorEnv(_vec(n, limit))
+    for venv in (staggered, plain):
+        venv.seed(11)
+    obs_s, obs_p = staggered.reset(), plain.reset()
+    cut_at = staggered._cut_at.copy()
+    again = SB3VectorEnv(_vec(n, limit), stagger_first_episodes=True)
+    again.seed(11)
+    again.reset()
+    np.testing.assert_array_equal(again._cut_at, cut_at)  # seeded
+    again.close()
+    assert ((cut_at >= 1) & (cut_at <= limit)).all() and len(set(cut_at.tolist())) > 1
+    rng = np.random.default_rng(0)
+    plain_second_start = {}  # world -> the unstaggered world's second episode's first agent_pos / environment_state
+    ended = {}  # world -> (step, info) of its staggered first episode's end
+    for step in range(1, 2 * limit + 1):
+        actions = rng.uniform(-1, 1, (n, 7)).astype(np.float32)
+        for venv in (staggered, plain):
+            venv.step_async(actions)
+        obs_s, _, done_s, infos_s = staggered.step_wait()
+        obs_p, _, done_p, infos_p = plain.step_wait()
+        for w in range(n):
+            if step == limit:
+                assert done_p[w]
+                plain_second_start[w] = {k: v[w].copy() for k, v in obs_p.items()}
+            if w in ended:  # its later episodes run to the time limit
+                assert done_s[w] == ((step - ended[w][0]) % limit == 0)
+                continue
+            if step < cut_at[w]:  # still in its first episode, as the unstaggered world
+                assert not done_s[w]
+                for k in obs_s:
+                    np.testing.assert_array_equal(obs_s[k][w], obs_p[k][w])
+            else:
+                assert step == cut_at[w] and done_s[w]
+                info = infos_s[w]
+                assert info["TimeLimit.truncated"] and info.get("episode_cut", False) == (step < limit)
+                terminal = info["terminal_observation"]
+                for k in terminal:
+                    ref = infos_p[w]["terminal_observation"][k] if step == limit else obs_p[k][w]
+                    np.testing.assert_array_equal(terminal[k], ref)
+                ended[w] = (step, {k: v[w].copy() for k, v in obs_s.items()})
+    assert sorted(ended) == list(range(n))
+    for w, (step, first) in ended.items():
+        for k in first:  # the new episode's first observation: the unstaggered world's second reset
+            np.testing.assert_array_equal(first[k], plain_second_start[w][k])
+    staggered.close(), plain.close()
+
+
+def test_learning_curves_leave_cut_episodes_out():
+    """A staggered run's cut first episodes are not episodes of the task: the curve counts neither
+    their success nor their end, and starts the world's next episode at the cut."""
+    import sys
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import LearningCurve
+
+    curve = LearningCurve({}, 0, episode_steps=3)
+    curve.model = SimpleNamespace(n_steps=3)
+    # world 0: cut at step 1, then a success ending at step 3; world 1: a failure at the limit (step 3)
+    plan = [((True, False), ({"episode_cut": True}, {})), ((False, False), ({}, {})),
+            ((True, True), ({"is_success": True}, {}))]
+    for dones, (i0, i1) in plan:
+        curve.locals = {"dones": np.array(dones), "infos": [{"episode": {"r": 0.0}, **i0}, {"episode": {"r": 0.0}, **i1}]}
+        curve._on_step()
+    curve._on_rollout_end()
+    assert curve.rows[0]["episodes"] == 2 and curve.rows[0]["success_rate"] == 0.5
+    assert curve._ended == [(1, True, False), (0, False, False)]  # world 0's episode began at the cut
+
+
 def test_per_world_infos_hold_every_batched_info_entry():
     """Each world's info dict has, for every batched info array of the native env, that world's
     entry: a Python scalar (bool, int, float: SB3 and its loggers expect plain numbers)."""

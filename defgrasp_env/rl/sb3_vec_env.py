@@ -14,7 +14,17 @@ per-world processes) and translates the protocol:
   whose episode ended, ``terminal_observation`` (their last observation; the returned observation is
   already the next episode's first) and ``TimeLimit.truncated`` (truncated and not terminated), as
   SB3 expects for bootstrapping;
-* ``seed(s)`` seeds world i with ``s + i`` at the next ``reset()``.
+* ``seed(s)`` seeds world i with ``s + i`` at the next ``reset()``;
+* ``stagger_first_episodes=True`` cuts each world's first episode after a number of steps drawn
+  uniformly from 1 .. the env's time limit (the draw seeded by ``seed``), so that the worlds, which
+  ``reset()`` starts together, run their episodes out of phase from then on (Isaac Lab / rsl_rl's
+  random initial episode length). Without it, worlds whose episodes all run to the time limit (a
+  success that does not terminate, ``PickupConfig.terminate_on_success=False``) stay in phase: every
+  PPO rollout then holds one phase of the task (reaching, then grasping, then holding), and learning
+  on the holding phase alone unlearnt the grasp (benchmarks/RESULTS.md). A cut episode ends as a
+  truncation (``TimeLimit.truncated``) with ``episode_cut=True`` in its info (not an episode of the
+  task: learning curves leave it out); the world's next episode starts from its reset, drawn from the
+  world's RNG as it would have been at the time limit.
 
 The wrapped env must use ``autoreset_mode="SameStep"`` (SB3's convention) and numpy outputs.
 """
@@ -33,7 +43,7 @@ __all__ = ["SB3VectorEnv"]
 class SB3VectorEnv(VecEnv):
     """Stable-Baselines3 view of a ``DeformablePickupVectorEnv`` (see the module docstring)."""
 
-    def __init__(self, env):
+    def __init__(self, env, stagger_first_episodes: bool = False):
         venv = getattr(env, "unwrapped", env)
         if getattr(venv, "autoreset_mode", None) != AutoresetMode.SAME_STEP:
             raise ValueError(f"the vector env must use autoreset_mode='SameStep', got "
@@ -42,6 +52,10 @@ class SB3VectorEnv(VecEnv):
             raise ValueError("the vector env must return numpy observations (torch_outputs=False)")
         self.env = env
         self._actions: np.ndarray | None = None
+        self.stagger_first_episodes = bool(stagger_first_episodes)
+        self._time_limit = int(venv.max_episode_steps)  # steps: the env truncates its episodes here
+        self._steps_since_reset = 0  # vector steps since ``reset()``
+        self._cut_at = np.zeros(env.num_envs, np.int64)  # [N] step since reset() that cuts a first episode (0: none)
         super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
 
     # -- VecEnv API --------------------------------------------------------------------------
@@ -52,6 +66,10 @@ class SB3VectorEnv(VecEnv):
         obs, info = self.env.reset(seed=seeds)
         self._reset_seeds()
         self.reset_infos = self._split_info(info)
+        self._steps_since_reset = 0
+        if self.stagger_first_episodes:
+            rng = np.random.default_rng(None if seeds is None else seeds[0])
+            self._cut_at = rng.integers(1, self._time_limit + 1, size=self.num_envs)
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -71,6 +89,12 @@ class SB3VectorEnv(VecEnv):
                 self.reset_infos[i] = infos[i]  # the new episode's reset info (its ReplaySpec)
                 infos[i] = {**final_info[i], "terminal_observation": {k: v[i] for k, v in final_obs.items()},
                             "TimeLimit.truncated": bool(truncated[i] and not terminated[i])}
+        self._steps_since_reset += 1
+        self._cut_at[done] = 0  # a first episode that ended by itself is not cut
+        cut = self._cut_at == self._steps_since_reset
+        if cut.any():
+            obs = self._cut_episodes(cut, obs, infos)
+            done = done | cut
         return obs, np.asarray(reward, np.float32), done, infos
 
     def seed(self, seed: int | None = None):
@@ -98,6 +122,20 @@ class SB3VectorEnv(VecEnv):
         return list(self.env.render())
 
     # -- internals -------------------------------------------------------------------------
+    def _cut_episodes(self, cut: np.ndarray, obs: dict, infos: list[dict]) -> dict:
+        """End the episodes of the worlds in ``cut`` [N] as truncations (``stagger_first_episodes``):
+        their infos get the terminal observation and ``episode_cut``; the worlds are reset (the
+        others untouched) and the returned observation holds their new episodes' first rows."""
+        self._cut_at[cut] = 0
+        for i in np.flatnonzero(cut):
+            infos[i] = {**infos[i], "terminal_observation": {k: v[i].copy() for k, v in obs.items()},
+                        "TimeLimit.truncated": True, "episode_cut": True}
+        reset_obs, reset_info = self.env.reset(options={"reset_mask": cut})
+        reset_infos = self._split_info(reset_info)
+        for i in np.flatnonzero(cut):
+            self.reset_infos[i] = reset_infos[i]
+        return {k: np.where(cut.reshape((-1,) + (1,) * (v.ndim - 1)), reset_obs[k], v) for k, v in obs.items()}
+
     def _split_info(self, info: dict) -> list[dict]:
         """Gymnasium's batched info (arrays [N] with ``_key`` masks) -> N per-world dicts: Python
         scalars from 1-D numeric arrays, rows (arrays) or objects (e.g. a ReplaySpec) otherwise.
