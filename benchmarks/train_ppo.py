@@ -37,6 +37,11 @@ and ``eval_ppo.py`` evaluates at the task's goal. ``--no-terminate-on-success``
 (``PickupConfig.terminate_on_success``) lets a training episode go on after its success, the bonus
 repeating while the object stays at the goal (an episode counts as a success if any step was):
 where a success ends the episode, circling through the goal is worth about as much (RESULTS.md).
+Its episodes all last the time limit, so worlds reset together stay in phase and each rollout
+holds one phase of the task: ``--stagger-episodes`` cuts each world's first episode at a random
+step (``SB3VectorEnv(stagger_first_episodes=True)``; the curve leaves the cut episodes out). In
+phase, a fine-tune's success fell from 0.91 to 0.79 in 1.5 M steps; staggered it stayed at 0.91-0.96
+(RESULTS.md, 2026-11-27).
 Goals lower than the object's feature point
 plus the success tolerance (~0.07 m for the cuboid) succeed on a grasp without a lift: the
 curriculum's first step. ``--out/best`` is then chosen by the success rate at the task's goal, pooled
@@ -51,6 +56,9 @@ fewer minibatches where a rollout is too small for 64 samples in each (small CPU
     python benchmarks/train_ppo.py --num-envs 256 --device cuda:0 --timesteps 5000000   # at scale
     python benchmarks/train_ppo.py --num-envs 2048 --device cuda:0 --torch-device cuda --actions position-yaw-jaw \
         --episode-seconds 6 --goal 0 0.35 0 --goal-noise 0 0.3 0 --minutes 9   # from scratch, drawn goals
+    python benchmarks/train_ppo.py --num-envs 2048 --device cuda:0 --torch-device cuda --actions position-yaw-jaw \
+        --episode-seconds 12 --goal 0 0.4 0 --goal-noise 0 0.35 0 --no-terminate-on-success --stagger-episodes \
+        --init-from benchmarks/policies/ppo_cuboid_scratch_goal_noise_e1e6 --minutes 5   # the hold
 """
 
 from __future__ import annotations

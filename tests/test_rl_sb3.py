@@ -295,6 +295,30 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
     assert any(not np.allclose(a.numpy(), b.detach().cpu().numpy()) for a, b in zip(weights, resumed.policy.parameters()))
 
 
+@pytest.mark.slow
+def test_ppo_trains_on_staggered_worlds_whose_successes_do_not_terminate(tmp_path):
+    """``train(stagger_episodes=True, terminate_on_success=False)`` (the hold recipe): the run
+    records both options (a resume must repeat them), and its curve counts every episode that ended
+    except the cut first ones: world i's first episode is cut at step c_i (drawn from the seed as
+    ``SB3VectorEnv`` documents), its next ends c_i + 10 steps in; a draw of 10 is the time limit itself."""
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import save_run, train
+
+    worlds, steps, limit = 4, 16, 10  # 0.5 s episodes at 20 Hz
+    model, curve = train(num_envs=worlds, timesteps=worlds * steps, n_steps=8, minibatches=2, episode_seconds=0.5,
+                         actions="position-jaw", object="cuboid", stagger_episodes=True, terminate_on_success=False)
+    assert curve.settings["stagger_episodes"] is True and curve.settings["terminate_on_success"] is False
+    cut = np.random.default_rng(0).integers(1, limit + 1, size=worlds)  # --seed 0: world 0's seed
+    expected = int(np.sum((cut < limit) & (cut + limit <= steps)) + np.sum(cut == limit))
+    assert sum(r["episodes"] for r in curve.rows) == expected
+    save_run(model, curve, tmp_path, "smoke")
+    with pytest.raises(ValueError, match=r"stagger_episodes: saved True, given None"):
+        train(num_envs=worlds, timesteps=8, n_steps=8, episode_seconds=0.5, actions="position-jaw", object="cuboid",
+              terminate_on_success=False, resume=tmp_path)
+
+
 def test_best_policy_keeps_the_policy_of_the_best_cohort_rate(tmp_path):
     """``BestPolicy``: among rollouts with enough cohort episodes the best rate's policy (the weights
     the model had then, changed between offers here) is saved as a run folder (weights,

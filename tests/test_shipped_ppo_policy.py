@@ -1,7 +1,8 @@
-"""The PPO policy shipped in ``benchmarks/policies/ppo_cuboid_scratch_goal_noise_e1e6`` (one run
-from scratch on goals drawn per episode, benchmarks/RESULTS.md 2026-11-27) drives ``gym.make`` as a
-plain policy object (``PPOPolicy.from_run``) at the task's goal: it picks the cuboid on seeds
-whose episodes the recorded CPU evaluation (``..._eval64_15s_cpu.json``) counted as successes, at
+"""The PPO policies shipped in ``benchmarks/policies`` (``ppo_cuboid_scratch_goal_noise_e1e6``: one
+run from scratch on goals drawn per episode; ``ppo_cuboid_scratch_hold_e1e6``: that policy trained
+on with successes that do not end the episode and staggered worlds; benchmarks/RESULTS.md
+2026-11-27) drive ``gym.make`` as plain policy objects (``PPOPolicy.from_run``) at the task's goal:
+each picks the cuboid on seeds whose episodes its recorded CPU evaluation counted as successes, at
 the same steps (the CPU is bit-deterministic, and a world of the vector env equals the single env
 on its seed). A change of the simulation that alters these episodes fails here: re-evaluate the
 policy (``benchmarks/eval_ppo.py``) and update the recorded evaluation."""
@@ -15,19 +16,25 @@ import pytest
 import defgrasp_env  # noqa: F401
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-RUN = ROOT / "benchmarks" / "policies" / "ppo_cuboid_scratch_goal_noise_e1e6"
-EVALUATION = ROOT / "benchmarks" / "figures" / "ppo_cuboid_scratch_goal_noise_e1e6_h200_4p3m_eval64_15s_cpu.json"
+POLICIES = ROOT / "benchmarks" / "policies"
+FIGURES = ROOT / "benchmarks" / "figures"
+#: (policy folder, its recorded CPU evaluation)
+SCRATCH = (POLICIES / "ppo_cuboid_scratch_goal_noise_e1e6", FIGURES / "ppo_cuboid_scratch_goal_noise_e1e6_h200_4p3m_eval64_15s_cpu.json")
+HOLD = (POLICIES / "ppo_cuboid_scratch_hold_e1e6", FIGURES / "ppo_cuboid_hold_stagger_h200_1p1m_last_eval64_15s_cpu.json")
 
 
-@pytest.mark.parametrize("seed", [1000000040, 1000000056, 1000000005])
-def test_the_shipped_policy_picks_the_cuboid_as_evaluated(seed):
+@pytest.mark.parametrize("shipped, seed", [(SCRATCH, 1000000040), (SCRATCH, 1000000056), (SCRATCH, 1000000005),
+                                           (HOLD, 1000000000), (HOLD, 1000000002), (HOLD, 1000000005)])
+def test_the_shipped_policy_picks_the_cuboid_as_evaluated(shipped, seed):
     from defgrasp_env.rl.ppo_policy import PPOPolicy
 
-    recorded = {e["seed"]: e for e in json.loads(EVALUATION.read_text())["episodes"]}[seed]
+    run, evaluation = shipped
+    recorded = {e["seed"]: e for e in json.loads(evaluation.read_text())["episodes"]}[seed]
     assert recorded["success"]
-    policy = PPOPolicy.from_run(RUN)
+    policy = PPOPolicy.from_run(run)
     assert "goal_noise" in policy.settings and "goal" not in policy.env_kwargs  # trained on drawn goals, driven at the task's
-    env = gym.make("DeformablePickup-v0", **policy.env_kwargs)
+    # the env's 15 s episodes, in which the evaluation ran (a run's own limit may be shorter), ending at a success
+    env = gym.make("DeformablePickup-v0", **(policy.env_kwargs | {"episode_seconds": 15.0}))
     obs, info = env.reset(seed=seed)
     assert tuple(info["goal"]) == (0.0, 0.6, 0.0)
     policy.reset()
