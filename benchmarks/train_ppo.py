@@ -522,7 +522,8 @@ def main(argv=None) -> int:
     ap.add_argument("--fixed-world-objects", action="store_true",
                     help="world i holds the i-th object (mod their count) in every episode: no model rebuild "
                          "at autoresets (the vector env's world_objects)")
-    ap.add_argument("--youngs-modulus", type=float, default=1e6)
+    ap.add_argument("--youngs-modulus", type=float, nargs="+", default=[1e6],
+                    help="Pa; several values: each episode draws one (PickupConfig.youngs_modulus as a tuple)")
     ap.add_argument("--episode-seconds", type=float, default=15.0)
     ap.add_argument("--edge-contact", action=argparse.BooleanOptionalAction, default=True,
                     help="hold the pads' box edges and corners out of the object (PickupConfig.edge_contact, the "
@@ -564,16 +565,18 @@ def main(argv=None) -> int:
     goals = {k: tuple(v) for k, v in (("goal", args.goal), ("goal_noise", args.goal_noise)) if v is not None}
     if not args.terminate_on_success:  # likewise recorded only where off
         goals["terminate_on_success"] = False
+    # one value as before (run.json: a number), several drawn per episode (a list)
+    moduli = args.youngs_modulus[0] if len(args.youngs_modulus) == 1 else tuple(args.youngs_modulus)
     model, curve = train(args.num_envs, args.timesteps, args.seed, args.n_steps, torch_device=args.torch_device,
                          max_seconds=60.0 * args.minutes, actions=args.actions, gamma=args.gamma,
                          learning_rate=args.learning_rate, resume=args.resume,
                          init_from=args.init_from, fixed_world_objects=args.fixed_world_objects,
                          stagger_episodes=args.stagger_episodes,
-                         object=parse_object(args.object), youngs_modulus=args.youngs_modulus,
+                         object=parse_object(args.object), youngs_modulus=moduli,
                          episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=args.device,
                          best=best, **goals)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
-    title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {args.youngs_modulus:g} Pa, "
+    title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {', '.join(f'{e:g}' for e in args.youngs_modulus)} Pa, "
              f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "
              f"in {wall / 60:.1f} min")
     save_run(model, curve, out, title)

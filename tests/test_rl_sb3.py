@@ -606,6 +606,31 @@ def test_transfer_policy_maps_the_action_head_by_component():
         venv.close()
 
 
+@pytest.mark.slow
+def test_train_ppo_draws_the_modulus_per_episode_from_several_values(tmp_path):
+    """``train_ppo.py --youngs-modulus 1e5 1e7``: run.json records both values, the run's policy
+    (``PPOPolicy.from_run``) builds an env that draws one of them per episode (reset info), and a
+    single value stays a number (the run.json of every earlier run)."""
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import main
+
+    from defgrasp_env.rl.ppo_policy import PPOPolicy
+
+    common = ["--num-envs", "2", "--timesteps", "16", "--n-steps", "8", "--episode-seconds", "0.3",
+              "--actions", "position-jaw", "--best-min-episodes", "0"]
+    assert main(common + ["--youngs-modulus", "1e5", "1e7", "--out", str(tmp_path / "two")]) == 0
+    assert json.loads((tmp_path / "two" / "run.json").read_text())["youngs_modulus"] == [1e5, 1e7]
+    policy = PPOPolicy.from_run(tmp_path / "two")
+    env = gym.make("DeformablePickup-v0", **policy.env_kwargs)
+    drawn = {env.reset(seed=s)[1]["youngs_modulus"] for s in range(12)}
+    assert drawn == {1e5, 1e7}  # 12 draws of two values: both (a miss has probability 2 / 4096)
+    env.close()
+    assert main(common + ["--youngs-modulus", "2e6", "--out", str(tmp_path / "one")]) == 0
+    assert json.loads((tmp_path / "one" / "run.json").read_text())["youngs_modulus"] == 2e6
+
+
 def test_fixed_world_objects_cycle_the_objects_over_the_worlds():
     import sys
 
