@@ -39,8 +39,8 @@ repeating while the object stays at the goal (an episode counts as a success if 
 where a success ends the episode, circling through the goal is worth about as much (RESULTS.md).
 Its episodes all last the time limit, so worlds reset together stay in phase and each rollout
 holds one phase of the task: ``--stagger-episodes`` cuts each world's first episode at a random
-step (``SB3VectorEnv(stagger_first_episodes=True)``; the curve leaves the cut episodes out). In
-phase, a fine-tune's success fell from 0.91 to 0.79 in 1.5 M steps; staggered it stayed at 0.91-0.96
+step (``SB3VectorEnv(stagger_first_episodes=True)``; the curve leaves the first episodes out). In
+phase, a fine-tune's success fell from 0.91 to 0.79 in 1.5 M steps; staggered it stayed at 0.91-0.96 after its first cohort
 (RESULTS.md, 2026-11-27).
 Goals lower than the object's feature point
 plus the success tolerance (~0.07 m for the cuboid) succeed on a grasp without a lift: the
@@ -194,7 +194,7 @@ class LearningCurve(BaseCallback):
         # an episode succeeded if any of its steps did (its last one, unless successes do not terminate)
         self._succeeded |= np.array([bool(info.get("is_success", False)) for info in infos])
         for world, (done, info) in enumerate(zip(self.locals["dones"], infos)):
-            if done and info.get("episode_cut", False):  # a first episode cut to stagger the worlds
+            if done and info.get("staggered_start", False):  # a staggered first episode: cut or kept by its end
                 self._succeeded[world] = False
                 self._starts[world] = self._steps
                 self._near_task[world] = self._at_task_goal(world)

@@ -45,8 +45,9 @@ def test_protocol_matches_the_native_env_and_auto_resets():
 
 
 def test_staggered_first_episodes_are_cut_at_seeded_steps_and_leave_the_rest_of_the_run_as_it_was():
-    """``stagger_first_episodes``: each world's first episode ends, as a cut truncation, at a step
-    drawn from 1 .. the time limit (reproducible from the seed); until then every world steps
+    """``stagger_first_episodes``: each world's first episode ends, as a truncation marked
+    ``staggered_start``, at a step drawn from 1 .. the time limit (``first_episode_steps``,
+    reproducible from the seed; a draw of the limit is the env's own truncation); until then every world steps
     bit-identically to an unstaggered adapter driven by the same actions, the cut world's terminal
     observation is the unstaggered world's observation of that step, and its next episode starts
     where the unstaggered world's second one does (the same reset draw from the world's RNG); the
@@ -54,15 +55,16 @@ def test_staggered_first_episodes_are_cut_at_seeded_steps_and_leave_the_rest_of_
     n, limit = 6, 5
     staggered, plain = SB3VectorEnv(_vec(n, limit), stagger_first_episodes=True), SB3VectorEnv(_vec(n, limit))
     for venv in (staggered, plain):
-        venv.seed(11)
+        venv.seed(3)
     obs_s, obs_p = staggered.reset(), plain.reset()
-    cut_at = staggered._cut_at.copy()
+    cut_at = staggered.first_episode_steps.copy()
     again = SB3VectorEnv(_vec(n, limit), stagger_first_episodes=True)
-    again.seed(11)
+    again.seed(3)
     again.reset()
-    np.testing.assert_array_equal(again._cut_at, cut_at)  # seeded
+    np.testing.assert_array_equal(again.first_episode_steps, cut_at)  # seeded
     again.close()
     assert ((cut_at >= 1) & (cut_at <= limit)).all() and len(set(cut_at.tolist())) > 1
+    assert (cut_at == limit).any() and (cut_at < limit).any()  # seed 3: both kinds of first episode end
     rng = np.random.default_rng(0)
     plain_second_start = {}  # world -> the unstaggered world's second episode's first agent_pos / environment_state
     ended = {}  # world -> (step, info) of its staggered first episode's end
@@ -76,8 +78,8 @@ def test_staggered_first_episodes_are_cut_at_seeded_steps_and_leave_the_rest_of_
             if step == limit:
                 assert done_p[w]
                 plain_second_start[w] = {k: v[w].copy() for k, v in obs_p.items()}
-            if w in ended:  # its later episodes run to the time limit
-                assert done_s[w] == ((step - ended[w][0]) % limit == 0)
+            if w in ended:  # its later episodes run to the time limit, unmarked
+                assert done_s[w] == ((step - ended[w][0]) % limit == 0) and "staggered_start" not in infos_s[w]
                 continue
             if step < cut_at[w]:  # still in its first episode, as the unstaggered world
                 assert not done_s[w]
@@ -86,7 +88,7 @@ def test_staggered_first_episodes_are_cut_at_seeded_steps_and_leave_the_rest_of_
             else:
                 assert step == cut_at[w] and done_s[w]
                 info = infos_s[w]
-                assert info["TimeLimit.truncated"] and info.get("episode_cut", False) == (step < limit)
+                assert info["TimeLimit.truncated"] and info["staggered_start"]
                 terminal = info["terminal_observation"]
                 for k in terminal:
                     ref = infos_p[w]["terminal_observation"][k] if step == limit else obs_p[k][w]
@@ -99,9 +101,10 @@ def test_staggered_first_episodes_are_cut_at_seeded_steps_and_leave_the_rest_of_
     staggered.close(), plain.close()
 
 
-def test_learning_curves_leave_cut_episodes_out():
-    """A staggered run's cut first episodes are not episodes of the task: the curve counts neither
-    their success nor their end, and starts the world's next episode at the cut."""
+def test_learning_curves_leave_staggered_first_episodes_out():
+    """A staggered run's first episodes are not a sample of the task's (a success before the cut
+    is kept, a failure cut): the curve counts neither their success nor their end, and starts the
+    world's next episode at their end."""
     import sys
     from types import SimpleNamespace
 
@@ -110,15 +113,16 @@ def test_learning_curves_leave_cut_episodes_out():
 
     curve = LearningCurve({}, 0, episode_steps=3)
     curve.model = SimpleNamespace(n_steps=3)
-    # world 0: cut at step 1, then a success ending at step 3; world 1: a failure at the limit (step 3)
-    plan = [((True, False), ({"episode_cut": True}, {})), ((False, False), ({}, {})),
-            ((True, True), ({"is_success": True}, {}))]
+    # world 0: its staggered first episode succeeds and ends at step 1, its next one fails at step 3;
+    # world 1: a success at step 3
+    plan = [((True, False), ({"staggered_start": True, "is_success": True}, {})), ((False, False), ({}, {})),
+            ((True, True), ({}, {"is_success": True}))]
     for dones, (i0, i1) in plan:
         curve.locals = {"dones": np.array(dones), "infos": [{"episode": {"r": 0.0}, **i0}, {"episode": {"r": 0.0}, **i1}]}
         curve._on_step()
     curve._on_rollout_end()
     assert curve.rows[0]["episodes"] == 2 and curve.rows[0]["success_rate"] == 0.5
-    assert curve._ended == [(1, True, False), (0, False, False)]  # world 0's episode began at the cut
+    assert curve._ended == [(1, False, False), (0, True, False)]  # world 0's second episode began at step 1
 
 
 def test_per_world_infos_hold_every_batched_info_entry():
@@ -299,8 +303,9 @@ def test_ppo_trains_on_the_vector_env(tmp_path, monkeypatch):
 def test_ppo_trains_on_staggered_worlds_whose_successes_do_not_terminate(tmp_path):
     """``train(stagger_episodes=True, terminate_on_success=False)`` (the hold recipe): the run
     records both options (a resume must repeat them), and its curve counts every episode that ended
-    except the cut first ones: world i's first episode is cut at step c_i (drawn from the seed as
-    ``SB3VectorEnv`` documents), its next ends c_i + 10 steps in; a draw of 10 is the time limit itself."""
+    except the staggered first ones: world i's first episode ends at step c_i
+    (``SB3VectorEnv.first_episode_steps``; a draw of 10 is the time limit itself), its next one
+    c_i + 10 steps in."""
     import sys
 
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -308,15 +313,19 @@ def test_ppo_trains_on_staggered_worlds_whose_successes_do_not_terminate(tmp_pat
 
     worlds, steps, limit = 4, 16, 10  # 0.5 s episodes at 20 Hz
     model, curve = train(num_envs=worlds, timesteps=worlds * steps, n_steps=8, minibatches=2, episode_seconds=0.5,
-                         actions="position-jaw", object="cuboid", stagger_episodes=True, terminate_on_success=False)
+                         actions="position-jaw", object="cuboid", stagger_episodes=True, terminate_on_success=False,
+                         seed=4)
     assert curve.settings["stagger_episodes"] is True and curve.settings["terminate_on_success"] is False
-    cut = np.random.default_rng(0).integers(1, limit + 1, size=worlds)  # --seed 0: world 0's seed
-    expected = int(np.sum((cut < limit) & (cut + limit <= steps)) + np.sum(cut == limit))
-    assert sum(r["episodes"] for r in curve.rows) == expected
+    adapter = model.get_env()
+    while not isinstance(adapter, SB3VectorEnv):  # VecNormalize -> VecMonitor -> ActionSubset -> SB3VectorEnv
+        adapter = adapter.venv
+    cut = adapter.first_episode_steps
+    assert (cut == limit).any() and (cut < limit).any()  # seed 4: both kinds of first episode end
+    assert sum(r["episodes"] for r in curve.rows) == int(np.sum(cut + limit <= steps))
     save_run(model, curve, tmp_path, "smoke")
     with pytest.raises(ValueError, match=r"stagger_episodes: saved True, given None"):
         train(num_envs=worlds, timesteps=8, n_steps=8, episode_seconds=0.5, actions="position-jaw", object="cuboid",
-              terminate_on_success=False, resume=tmp_path)
+              terminate_on_success=False, seed=4, resume=tmp_path)
 
 
 def test_best_policy_keeps_the_policy_of_the_best_cohort_rate(tmp_path):

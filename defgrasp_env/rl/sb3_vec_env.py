@@ -16,15 +16,18 @@ per-world processes) and translates the protocol:
   SB3 expects for bootstrapping;
 * ``seed(s)`` seeds world i with ``s + i`` at the next ``reset()``;
 * ``stagger_first_episodes=True`` cuts each world's first episode after a number of steps drawn
-  uniformly from 1 .. the env's time limit (the draw seeded by ``seed``), so that the worlds, which
-  ``reset()`` starts together, run their episodes out of phase from then on (Isaac Lab / rsl_rl's
-  random initial episode length). Without it, worlds whose episodes all run to the time limit (a
-  success that does not terminate, ``PickupConfig.terminate_on_success=False``) stay in phase: every
-  PPO rollout then holds one phase of the task (reaching, then grasping, then holding), and learning
-  on the holding phase alone unlearnt the grasp (benchmarks/RESULTS.md). A cut episode ends as a
-  truncation (``TimeLimit.truncated``) with ``episode_cut=True`` in its info (not an episode of the
-  task: learning curves leave it out); the world's next episode starts from its reset, drawn from the
-  world's RNG as it would have been at the time limit.
+  uniformly from 1 .. the env's time limit (``first_episode_steps``, drawn at each ``reset()`` from
+  a generator of its own that ``seed`` seeds), so that the worlds, which ``reset()`` starts
+  together, run their episodes out of phase from then on (Isaac Lab / rsl_rl's random initial
+  episode length). Without it, worlds whose episodes all run to the time limit (a success that does
+  not terminate, ``PickupConfig.terminate_on_success=False``) stay in phase: every PPO rollout then
+  holds one phase of the task (reaching, then grasping, then holding), and learning on the holding
+  phase alone unlearnt the grasp (benchmarks/RESULTS.md). A cut episode ends as a truncation
+  (``TimeLimit.truncated``); the world's next episode starts from its reset, drawn from the world's
+  RNG as it would have been at the time limit. Every first episode's last info (cut or ended by
+  itself before its cut) holds ``staggered_start=True``: such episodes are not a sample of the
+  task's (a success before the cut is kept, a failure is cut), so learning curves leave them out
+  (``train_ppo.py``'s does; SB3's own ``rollout/ep_*`` logs, through ``VecMonitor``, do not).
 
 The wrapped env must use ``autoreset_mode="SameStep"`` (SB3's convention) and numpy outputs.
 """
@@ -38,6 +41,9 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 __all__ = ["SB3VectorEnv"]
+
+#: Second word of the seed of ``SB3VectorEnv``'s cut draws: a stream apart from the worlds' RNGs.
+_STAGGER_STREAM = 0x57A6
 
 
 class SB3VectorEnv(VecEnv):
@@ -55,7 +61,10 @@ class SB3VectorEnv(VecEnv):
         self.stagger_first_episodes = bool(stagger_first_episodes)
         self._time_limit = int(venv.max_episode_steps)  # steps: the env truncates its episodes here
         self._steps_since_reset = 0  # vector steps since ``reset()``
-        self._cut_at = np.zeros(env.num_envs, np.int64)  # [N] step since reset() that cuts a first episode (0: none)
+        #: [N] steps after which ``reset()``'s first episodes are cut (the time limit: not cut); zeros unstaggered
+        self.first_episode_steps = np.zeros(env.num_envs, np.int64)
+        self._cut_at = np.zeros(env.num_envs, np.int64)  # [N] the same, 0 once the world's first episode ended
+        self._stagger_rng = np.random.default_rng()  # the cuts' draws (``seed`` seeds it)
         super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
 
     # -- VecEnv API --------------------------------------------------------------------------
@@ -68,8 +77,8 @@ class SB3VectorEnv(VecEnv):
         self.reset_infos = self._split_info(info)
         self._steps_since_reset = 0
         if self.stagger_first_episodes:
-            rng = np.random.default_rng(None if seeds is None else seeds[0])
-            self._cut_at = rng.integers(1, self._time_limit + 1, size=self.num_envs)
+            self.first_episode_steps = self._stagger_rng.integers(1, self._time_limit + 1, size=self.num_envs)
+            self._cut_at = self.first_episode_steps.copy()
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -90,7 +99,10 @@ class SB3VectorEnv(VecEnv):
                 infos[i] = {**final_info[i], "terminal_observation": {k: v[i] for k, v in final_obs.items()},
                             "TimeLimit.truncated": bool(truncated[i] and not terminated[i])}
         self._steps_since_reset += 1
-        self._cut_at[done] = 0  # a first episode that ended by itself is not cut
+        first = done & (self._cut_at > 0)  # first episodes that ended by themselves: not cut
+        for i in np.flatnonzero(first):
+            infos[i]["staggered_start"] = True
+        self._cut_at[done] = 0
         cut = self._cut_at == self._steps_since_reset
         if cut.any():
             obs = self._cut_episodes(cut, obs, infos)
@@ -99,6 +111,8 @@ class SB3VectorEnv(VecEnv):
 
     def seed(self, seed: int | None = None):
         self._seeds = [None if seed is None else seed + i for i in range(self.num_envs)]
+        # the cuts' own stream: apart from every world's RNG (world 0's is seeded with ``seed`` itself)
+        self._stagger_rng = np.random.default_rng(None if seed is None else [seed, _STAGGER_STREAM])
         return self._seeds
 
     def close(self) -> None:
@@ -124,12 +138,12 @@ class SB3VectorEnv(VecEnv):
     # -- internals -------------------------------------------------------------------------
     def _cut_episodes(self, cut: np.ndarray, obs: dict, infos: list[dict]) -> dict:
         """End the episodes of the worlds in ``cut`` [N] as truncations (``stagger_first_episodes``):
-        their infos get the terminal observation and ``episode_cut``; the worlds are reset (the
+        their infos get the terminal observation and ``staggered_start``; the worlds are reset (the
         others untouched) and the returned observation holds their new episodes' first rows."""
         self._cut_at[cut] = 0
         for i in np.flatnonzero(cut):
             infos[i] = {**infos[i], "terminal_observation": {k: v[i].copy() for k, v in obs.items()},
-                        "TimeLimit.truncated": True, "episode_cut": True}
+                        "TimeLimit.truncated": True, "staggered_start": True}
         reset_obs, reset_info = self.env.reset(options={"reset_mask": cut})
         reset_infos = self._split_info(reset_info)
         for i in np.flatnonzero(cut):
