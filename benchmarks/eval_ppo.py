@@ -80,7 +80,9 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     per-episode records (``success``, ``steps``, ``success_step``, ``outcome``, ``min_goal_distance``
     while grasped (m), ``grasped_steps``, ``max_lift`` of the feature point above its start (m),
     ``final_flange_height`` (m, world y), ``max_wrist_force`` (N), ``least_grasped_gap`` and
-    ``final_gap`` of the jaw (m), ``pierced_steps``, ``hold_beyond_pad_faces`` [length, width] (m,
+    ``final_gap`` of the jaw (m), ``pierced_steps``, ``penetrated_steps`` (steps flagged
+    ``sim_penetrated``: a node deeper than the solver's bound), ``max_penetration`` (m, of
+    ``info["penetration"]``), ``hold_beyond_pad_faces`` [length, width] (m,
     ``feature_beyond_pad_faces`` at the last grasped step; None if never grasped),
     ``median_grasp_quality`` (of ``info["grasp_quality"]`` over the grasped steps; None if never
     grasped), ``return``) and
@@ -145,6 +147,8 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
     wrist_force = np.zeros(num_worlds)  # N, the greatest wrist force
     least_gap = np.full(num_worlds, np.inf)  # m, the jaw's least gap while grasped
     pierced_steps = np.zeros(num_worlds, int)  # steps whose info["pierced"] was set
+    penetrated_steps = np.zeros(num_worlds, int)  # steps whose info["sim_penetrated"] was set
+    penetration = np.zeros(num_worlds)  # m, the greatest info["penetration"]
     hold_beyond = np.full((num_worlds, 2), np.nan)  # m, feature_beyond_pad_faces at the last grasped step
     qualities: list[list[float]] = [[] for _ in range(num_worlds)]  # info["grasp_quality"] of grasped steps
     scene = venv.unwrapped.env.unwrapped.scene
@@ -168,6 +172,8 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
             grasped_ever[i] |= grasped
             grasped_steps[i] += grasped
             pierced_steps[i] += bool(info.get("pierced", False))
+            penetrated_steps[i] += bool(info["sim_penetrated"])
+            penetration[i] = max(penetration[i], float(info["penetration"]))
             if grasped and not done:
                 hold_beyond[i] = beyond[i]
             if grasped:
@@ -193,6 +199,8 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
                               "least_grasped_gap": None if not np.isfinite(least_gap[i]) else round(least_gap[i], 4),
                               "final_gap": round(float(info["jaw_gap"]), 4),
                               "pierced_steps": int(pierced_steps[i]),
+                              "penetrated_steps": int(penetrated_steps[i]),
+                              "max_penetration": round(float(penetration[i]), 6),
                               "median_grasp_quality": round(float(np.median(qualities[i])), 3) if qualities[i] else None,
                               "hold_beyond_pad_faces": None if np.isnan(hold_beyond[i, 0])
                               else [round(float(v), 4) for v in hold_beyond[i]],
@@ -244,6 +252,10 @@ def main(argv=None) -> int:
                    if e["outcome"] == outcome and e["median_grasp_quality"] is not None]
         print(f"  {outcome}: {n}" + (f" (grasp quality while grasped, median of the episodes' medians: "
                                      f"{np.median(quality):.2f})" if quality else ""))
+    penetrated = [e for e in result["episodes"] if e["penetrated_steps"]]
+    print(f"  episodes with steps flagged sim_penetrated: {len(penetrated)}/{args.worlds} "
+          f"({sum(e['penetrated_steps'] for e in penetrated)} steps; deepest "
+          f"{1e3 * max(e['max_penetration'] for e in result['episodes']):.2f} mm)")
     beyond = [max(e["hold_beyond_pad_faces"]) for e in result["episodes"] if e["success"]]
     if beyond:
         print(f"  successes held with the feature point > 5 mm beyond the pad faces (off-centre; see "

@@ -528,6 +528,21 @@ def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
         assert e["outcome"] in OUTCOMES and (e["steps"] == 6 or e["success"])
         assert e["success"] == (e["outcome"] == "success")
     assert sum(first["outcomes"].values()) == 3
+    # the penetration records against the same episode in a single env (a world = the single env on its seed)
+    from defgrasp_env.rl.ppo_policy import PPOPolicy
+
+    policy = PPOPolicy.from_run(tmp_path)
+    env = gym.make("DeformablePickup-v0", **policy.env_kwargs)
+    obs, _ = env.reset(seed=12)
+    flagged, deepest = 0, 0.0
+    for _ in range(6):
+        obs, _, terminated, truncated, info = env.step(policy(obs))
+        flagged, deepest = flagged + bool(info["sim_penetrated"]), max(deepest, float(info["penetration"]))
+        if terminated or truncated:
+            break
+    env.close()
+    assert first["episodes"][1]["penetrated_steps"] == flagged
+    assert first["episodes"][1]["max_penetration"] == round(deepest, 6) and deepest > 0  # the cube rests in the ground's penalty
     assert evaluate(tmp_path, 3, seed=11)["episodes"] == first["episodes"]
     # spread over processes: the same episodes (a world's episode depends on its seed only)
     spread = evaluate(tmp_path, 3, seed=11, workers=2)
