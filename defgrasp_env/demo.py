@@ -84,9 +84,7 @@ def ppo_episodes(args):
     if args.objects:
         raise SystemExit(f"--policy ppo drives the cuboid it was trained on; --objects {args.objects} is for the expert")
     policy = PPOPolicy.from_run(SHIPPED_PPO_RUN)
-    kwargs = policy.env_kwargs | {"episode_seconds": 15.0, "max_episode_steps": 300}
-    if args.youngs_modulus is not None:
-        kwargs["youngs_modulus"] = args.youngs_modulus
+    kwargs = policy.make_env_kwargs(episode_seconds=15.0, youngs_modulus=args.youngs_modulus)
     env = gym.make("DeformablePickup-v0", **kwargs)
     for seed in range(args.seed, args.seed + args.episodes):
         yield f"cuboid s{seed}", run_episode(env, policy, seed)

@@ -34,7 +34,7 @@ def test_the_shipped_policy_picks_the_cuboid_as_evaluated(shipped, seed):
     policy = PPOPolicy.from_run(run)
     assert "goal_noise" in policy.settings and "goal" not in policy.env_kwargs  # trained on drawn goals, driven at the task's
     # the env's 15 s episodes, in which the evaluation ran (a run's own limit may be shorter), ending at a success
-    env = gym.make("DeformablePickup-v0", **(policy.env_kwargs | {"episode_seconds": 15.0, "max_episode_steps": 300}))
+    env = gym.make("DeformablePickup-v0", **policy.make_env_kwargs(episode_seconds=15.0))
     assert env.spec.max_episode_steps == 300
     obs, info = env.reset(seed=seed)
     assert tuple(info["goal"]) == (0.0, 0.6, 0.0)

@@ -99,9 +99,15 @@ class PPOPolicy:
 
     @property
     def env_kwargs(self) -> dict:
-        """``gym.make`` keyword arguments of the run's env: its options (``run_env_options``) and
-        ``max_episode_steps`` from its episode length (``gym.make`` keeps the registered limit)."""
-        options = run_env_options(self.settings)
+        """``gym.make`` keyword arguments of the run's env: ``make_env_kwargs()``."""
+        return self.make_env_kwargs()
+
+    def make_env_kwargs(self, **overrides) -> dict:
+        """``gym.make`` keyword arguments of the run's env with ``overrides`` (keys of
+        ``RUN_ENV_OPTIONS``; None keeps the run's): its options (``run_env_options``) and
+        ``max_episode_steps`` from their episode length (``gym.make`` keeps the registered limit,
+        so an ``episode_seconds`` override alone would not change it)."""
+        options = run_env_options(self.settings, **overrides)
         return options | {"max_episode_steps": PickupConfig(**options).max_episode_steps}
 
     def reset(self, mask=None) -> None:
