@@ -4,7 +4,7 @@ N worlds of ``gym.make_vec("DeformablePickup-v0", num_envs=N, autoreset_mode="Sa
 batched FEM simulation, on the CPU or a CUDA device) drive SB3's PPO through
 ``defgrasp_env.rl.SB3VectorEnv``, with ``VecMonitor`` (episode returns, ``is_success``) and
 ``VecNormalize`` (running observation / reward normalisation). The env's dense reward is used as
-is (reach + grasp + lift + place + success; see ``DeformablePickupEnv``). After every PPO rollout the
+is (reach + grasp + lift + place + success + force; see ``DeformablePickupEnv``). After every PPO rollout the
 script records the env steps so far, wall time, the success rate and mean return of the
 episodes that ended in that rollout (the stochastic training policy; with worlds that begin their
 episodes together this rate swings: successes end early, failures all at the time limit), the

@@ -126,6 +126,31 @@ def test_reward_terms_sum_to_reward():
         assert reward == pytest.approx(sum(info[f"reward_{t}"] for t in REWARD_TERMS), abs=1e-12)
 
 
+@pytest.mark.parametrize("modulus", [1e5, 1e7])
+def test_force_term_charges_pressing_the_object_into_the_ground(modulus):
+    """The force term against its definition, ``-min(max(wrist_force - FORCE_FREE, 0) / FORCE_SCALE,
+    1)``, on every step of a press: the closed gripper (closed in the air first, free: no cost)
+    driven straight down at 2 m/s onto a cuboid the ground holds (a learner's strike), soft and
+    stiff. The press must reach the full cost (the wrist force limit, 150 N, is 100 N beyond the
+    free 50 N) and the reward stays the sum of its terms."""
+    from defgrasp_env.envs.task import FORCE_FREE, FORCE_SCALE
+
+    env = gym.make(ENV_ID, object="cuboid", youngs_modulus=modulus, max_linear_speed=2.0)
+    env.reset(seed=1)
+    close = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], np.float32)
+    down = np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0], np.float32)
+    terms = []
+    for action in [close] * 12 + [down] * 8:
+        _, reward, _, _, info = env.step(action)
+        want = -min(max(info["wrist_force"] - FORCE_FREE, 0.0) / FORCE_SCALE, 1.0)
+        assert info["reward_force"] == pytest.approx(want, abs=1e-12)
+        assert reward == pytest.approx(sum(info[f"reward_{t}"] for t in REWARD_TERMS), abs=1e-12)
+        terms.append(info["reward_force"])
+    env.close()
+    assert all(t == 0.0 for t in terms[:12])  # closing in the air: no force, no cost
+    assert min(terms[12:]) == -1.0            # the press at the wrist's limit: the full cost
+
+
 def test_shaped_reward_rises_over_the_whole_reach_and_lift():
     """A learner needs a reward gradient from the start pose and from the ground: along the scripted
     expert's episode (cuboid, E = 1e6: not a tuned case) the reach term at reset is > 0.05 of its 0.5

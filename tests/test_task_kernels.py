@@ -18,7 +18,7 @@ import pytest
 import warp as wp
 
 from defgrasp_env.envs.config import PickupConfig
-from defgrasp_env.envs.task import (GRASP_FORCE, LIFT_SCALE, PIERCE_DEPTH, PLACE_SCALE, REACH_SCALE, REWARD_TERMS,
+from defgrasp_env.envs.task import (FORCE_FREE, FORCE_SCALE, GRASP_FORCE, LIFT_SCALE, PIERCE_DEPTH, PLACE_SCALE, REACH_SCALE, REWARD_TERMS,
                                     PickupTask, feature_beyond_pad_faces, grasp_quality, shaped_progress)
 from defgrasp_env.envs.task_kernels import OUTPUT_COLUMNS, RESULT_COLUMNS, column, evaluate_worlds, observe_worlds
 from defgrasp_env.gripper import Gripper, GripperConfig, pad_box_poses
@@ -54,10 +54,13 @@ def reference(q, gap, tip, pad_force, feature, finite, embedding, penetration, s
     at_goal = (goal_dist < config.success_tolerance) & grasped & ~pierced & valid
     held = np.where(at_goal, held + 1, 0)
     elapsed = elapsed + 1
+    wrist_force = np.linalg.norm(pad_force.sum(axis=1), axis=1)
     success = held >= max(hold_steps, 1)
     terms = {"reach": shaped_progress(reach_dist, REACH_SCALE) * 0.5, "grasp": 0.5 * held_well,
              "lift": held_well * shaped_progress(goal_dist, LIFT_SCALE) * 2.0,
-             "place": held_well * shaped_progress(goal_dist, PLACE_SCALE), "success": 10.0 * success}
+             "place": held_well * shaped_progress(goal_dist, PLACE_SCALE), "success": 10.0 * success,
+             # a non-finite force (world 0's NaN pad force) costs nothing: the scene refuses such forces
+             "force": np.where(np.isfinite(wrist_force), -np.clip((wrist_force - FORCE_FREE) / FORCE_SCALE, 0.0, 1.0), 0.0)}
     out = {"reward": np.zeros(w)}
     for name in REWARD_TERMS:
         out[f"reward_{name}"] = np.where(valid, terms[name], 0.0)
@@ -66,7 +69,7 @@ def reference(q, gap, tip, pad_force, feature, finite, embedding, penetration, s
                goal_distance=goal_dist, pad_embedding=embedding.astype(np.float64), sim_diverged=diverged,
                terminated=success & live & config.terminate_on_success, truncated=(diverged | (elapsed >= max_steps)) & live, elapsed=elapsed,
                left_tip_normal_force=tip[:, 0], right_tip_normal_force=tip[:, 1], jaw_gap=gap,
-               wrist_force=np.linalg.norm(pad_force.sum(axis=1), axis=1))
+               wrist_force=wrist_force)
     return out, held
 
 
@@ -75,7 +78,7 @@ def _random_worlds(rng, w, goals):
     q = np.column_stack([rng.uniform(-0.2, 0.2, w), rng.uniform(0.02, 0.7, w), rng.uniform(-0.2, 0.2, w),
                          rng.uniform(-np.pi, np.pi, w), rng.uniform(-0.6, 0.6, w), rng.uniform(-0.6, 0.6, w)])
     gap = rng.uniform(0.0, 0.085, w)
-    tip = rng.choice([0.0, 0.3, GRASP_FORCE, 0.6, 5.0, 40.0], size=(w, 2))
+    tip = rng.choice([0.0, 0.3, GRASP_FORCE, 0.6, 5.0, 40.0, 90.0, 200.0], size=(w, 2))
     pos, quat = fk_analytic(q)
     pad_pos, pad_quat = pad_box_poses(pos, quat, gap)
     R = quat_to_matrix(quat)
@@ -157,6 +160,9 @@ def test_device_evaluation_matches_the_numpy_rules_on_random_worlds(friction, te
         assert seen.pop("terminated") == 0 and seen["is_success"] > 0
     assert all(0 < count < steps * w for count in seen.values()), seen
     assert (want["grasp_quality"] > 0.5).any() and ((want["grasp_quality"] > 0) & (want["grasp_quality"] < 0.5)).any()
+    # the force term free, partial and full: wrist forces below 50 N, between, and beyond 150 N
+    force = want["reward_force"][want["sim_diverged"] == 0]
+    assert (force == 0).any() and ((force < 0) & (force > -1)).any() and (force == -1).any()
 
 
 def test_device_observations_are_the_states_copies():

@@ -98,12 +98,15 @@ class DeformablePickupEnv(gym.Env):
         (3, m), its velocity (3, m/s), goal (3, m), 8 fixed surface keypoints (24, m, world).
       * ``pixels`` [H, W, 3] uint8 (``obs_type`` "pixels" or "pixels_agent_pos"): camera image.
 
-    **Reward**: ``reach + grasp + lift + place + success`` (each also in ``info["reward_<term>"]``):
+    **Reward**: ``reach + grasp + lift + place + success + force`` (each also in ``info["reward_<term>"]``):
     reach = 0.5 (1 - tanh(5 |tcp - feature|)); grasp = 0.5 q when both tip forces exceed 0.5 N
     (grasped); lift = 2 q (1 - tanh(2 |feature - goal|)) while grasped (rising over the whole 0.58 m
     lift); place = q (1 - tanh(10 |feature - goal|)) while grasped (a sharp maximum at the goal, where
-    the object must stay for the success hold); success = 10 on the success step (distances in m;
-    ``envs.task.REACH_SCALE``, ``LIFT_SCALE``, ``PLACE_SCALE``). q in [0, 1] is the grasp quality
+    the object must stay for the success hold); success = 10 on the success step; force =
+    -min(max(wrist_force - 50 N, 0) / 100 N, 1), a cost of pressing the object with the pads (into the
+    ground, or striking it): free up to 50 N (the scripted expert's episodes stay below 30 N), -1 from
+    150 N, the default wrist force limit, on (distances in m; ``envs.task.REACH_SCALE``,
+    ``LIFT_SCALE``, ``PLACE_SCALE``, ``FORCE_FREE``, ``FORCE_SCALE``). q in [0, 1] is the grasp quality
     (``info["grasp_quality"]``, 0 while not grasped; ``envs.task.grasp_quality``): the worse pad's
     margin inside the pads' friction cone times a centring factor, 1 - tanh(70 x how far the feature
     point lies beyond the pad faces across their width); ~1 for an antipodal, centred hold (the

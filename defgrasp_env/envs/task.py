@@ -15,7 +15,7 @@ from .scene import PickupScene
 from .task_kernels import (OBSERVATION_SIZE, OUTPUT_COLUMNS, RESULT_COLUMNS, TaskParams, column, evaluate_worlds,
                            observe_worlds, reset_counters)
 
-REWARD_TERMS = ("reach", "grasp", "lift", "place", "success")
+REWARD_TERMS = ("reach", "grasp", "lift", "place", "success", "force")
 #: Both tip normal forces above this (N) count as a grasp.
 GRASP_FORCE = 0.5
 #: Deepest penetration (m) beyond which the object counts as pierced: of a node in a pad or the
@@ -35,6 +35,15 @@ LIFT_SCALE = 2.0
 #: held it there for ``success_hold_seconds`` (2.9 M steps, benchmarks/RESULTS.md); ManiSkill's pick
 #: tasks shape their place reward with 5/m over a goal 0.1-0.3 m away.
 PLACE_SCALE = 10.0
+#: The force term ``-min(max(wrist_force - FORCE_FREE, 0) / FORCE_SCALE, 1)`` (N): pressing the object
+#: with the pads' net force (into the ground, or striking it) costs up to 1 a step, the full cost at
+#: 150 N (the default wrist force limit). Free up to 50 N: the scripted expert's episodes (five objects
+#: at E = 1e4, 1e6, 1e7, two seeds each) read at most 29 N. Without it a PPO policy learned to strike
+#: the cube at the wrist's force limit before grasping it (sim_penetrated steps in half its episodes),
+#: and such worlds need the most Newton iterations of a batch (the force limit's patient re-solves:
+#: 50-110 a step, against a median of 5-16; benchmarks/RESULTS.md, 2026-11-28).
+FORCE_FREE = 50.0
+FORCE_SCALE = 100.0
 
 
 #: Distance scale (1/m) of the grasp quality's centring factor ``1 - tanh(scale * beyond)`` (beyond:
@@ -158,6 +167,7 @@ class PickupTask:
         p.grasp_force = GRASP_FORCE
         p.pierce_depth = PIERCE_DEPTH
         p.reach_scale, p.lift_scale, p.place_scale, p.centre_scale = REACH_SCALE, LIFT_SCALE, PLACE_SCALE, CENTRE_SCALE
+        p.force_free, p.force_scale = FORCE_FREE, FORCE_SCALE
         self.params = p
         self._goals_host = np.tile(np.asarray(config.goal, dtype=np.float64), (num_worlds, 1))
         self._goals = wp.array(self._goals_host, dtype=wp.vec3d, device=d)  # each world's goal, m, world

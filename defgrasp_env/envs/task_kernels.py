@@ -30,7 +30,7 @@ _F = wp.float64
 
 #: Columns of the step result that follow the observation columns in each world's output row, in order.
 RESULT_COLUMNS = ("reward", "reward_reach", "reward_grasp", "reward_lift", "reward_place", "reward_success",
-                  "is_success", "grasped", "grasp_quality", "pierced", "goal_distance", "pad_embedding",
+                  "reward_force", "is_success", "grasped", "grasp_quality", "pierced", "goal_distance", "pad_embedding",
                   "sim_diverged", "terminated", "truncated", "elapsed", "left_tip_normal_force",
                   "right_tip_normal_force", "jaw_gap", "wrist_force", "mean_von_mises")
 #: One world's output row: ``AGENT_POS`` (10), ``ENV_STATE`` (33), then ``RESULT_COLUMNS``.
@@ -49,6 +49,7 @@ _GRASP = wp.constant(column("reward_grasp"))
 _LIFT = wp.constant(column("reward_lift"))
 _PLACE = wp.constant(column("reward_place"))
 _SUCCESS_TERM = wp.constant(column("reward_success"))
+_FORCE_TERM = wp.constant(column("reward_force"))
 _IS_SUCCESS = wp.constant(column("is_success"))
 _GRASPED = wp.constant(column("grasped"))
 _QUALITY = wp.constant(column("grasp_quality"))
@@ -85,6 +86,8 @@ class TaskParams:
     lift_scale: wp.float64         # 1/m
     place_scale: wp.float64        # 1/m
     centre_scale: wp.float64       # 1/m
+    force_free: wp.float64         # N, wrist force that costs nothing
+    force_scale: wp.float64        # N, wrist force beyond force_free that costs the full penalty
 
 
 @wp.func
@@ -210,18 +213,26 @@ def evaluate_worlds(q: wp.array(dtype=gk.vec6d), gap: wp.array(dtype=wp.float64)
     bonus = _F(0.0)
     if success:
         bonus = _F(10.0)
+    wrist_force = wp.length(f0 + f1)
+    # the pads pressing the object with more than the free force: -1 from force_free + force_scale on
+    # (a non-finite force costs nothing, as numpy's reference says: the scene refuses such forces)
+    force = _F(0.0)
+    if wp.isfinite(wrist_force):
+        force = -wp.min(wp.max((wrist_force - params.force_free) / params.force_scale, _F(0.0)), _F(1.0))
     if not valid:
+        force = _F(0.0)
         reach = _F(0.0)
         grasp = _F(0.0)
         lift = _F(0.0)
         place = _F(0.0)
         bonus = _F(0.0)
-    out[w, _REWARD] = (((_F(0.0) + reach) + grasp) + lift + place) + bonus
+    out[w, _REWARD] = ((((_F(0.0) + reach) + grasp) + lift + place) + bonus) + force
     out[w, _REACH] = reach
     out[w, _GRASP] = grasp
     out[w, _LIFT] = lift
     out[w, _PLACE] = place
     out[w, _SUCCESS_TERM] = bonus
+    out[w, _FORCE_TERM] = force
     out[w, _IS_SUCCESS] = wp.where(success, _F(1.0), _F(0.0))
     out[w, _GRASPED] = wp.where(grasped, _F(1.0), _F(0.0))
     out[w, _QUALITY] = held_well
@@ -235,7 +246,7 @@ def evaluate_worlds(q: wp.array(dtype=gk.vec6d), gap: wp.array(dtype=wp.float64)
     out[w, _LEFT_TIP] = t[0]
     out[w, _RIGHT_TIP] = t[1]
     out[w, _JAW_GAP] = g
-    out[w, _WRIST_FORCE] = wp.length(f0 + f1)
+    out[w, _WRIST_FORCE] = wrist_force
     out[w, _MEAN_VON_MISES] = _F(mean_von_mises[w])
 
 
