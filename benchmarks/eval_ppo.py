@@ -85,7 +85,9 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     ``info["penetration"]``), ``hold_beyond_pad_faces`` [length, width] (m,
     ``feature_beyond_pad_faces`` at the last grasped step; None if never grasped),
     ``median_grasp_quality`` (of ``info["grasp_quality"]`` over the grasped steps; None if never
-    grasped), ``return``) and
+    grasped), ``pressed_steps`` (steps whose force term charged: a wrist force above
+    ``envs.task.FORCE_FREE``), ``newton_iterations_median`` and ``_max`` (``info["newton_iterations"]``
+    per step: what a batched step waits for is its slowest world's), ``return``) and
     their summary (``success_rate``, outcome counts).
 
     ``workers`` > 1 splits the worlds into that many consecutive blocks, each evaluated in its own
@@ -151,6 +153,8 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
     penetration = np.zeros(num_worlds)  # m, the greatest info["penetration"]
     hold_beyond = np.full((num_worlds, 2), np.nan)  # m, feature_beyond_pad_faces at the last grasped step
     qualities: list[list[float]] = [[] for _ in range(num_worlds)]  # info["grasp_quality"] of grasped steps
+    pressed_steps = np.zeros(num_worlds, int)  # steps whose info["reward_force"] < 0
+    newton: list[list[int]] = [[] for _ in range(num_worlds)]  # info["newton_iterations"] per step
     scene = venv.unwrapped.env.unwrapped.scene
     records: list[dict | None] = [None] * num_worlds
     t0 = time.perf_counter()
@@ -174,6 +178,8 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
             pierced_steps[i] += bool(info.get("pierced", False))
             penetrated_steps[i] += bool(info["sim_penetrated"])
             penetration[i] = max(penetration[i], float(info["penetration"]))
+            pressed_steps[i] += float(info["reward_force"]) < 0.0
+            newton[i].append(int(info["newton_iterations"]))
             if grasped and not done:
                 hold_beyond[i] = beyond[i]
             if grasped:
@@ -204,6 +210,9 @@ def _episodes(run, num_worlds: int, seed: int, device: str, torch_device: str, d
                               "median_grasp_quality": round(float(np.median(qualities[i])), 3) if qualities[i] else None,
                               "hold_beyond_pad_faces": None if np.isnan(hold_beyond[i, 0])
                               else [round(float(v), 4) for v in hold_beyond[i]],
+                              "pressed_steps": int(pressed_steps[i]),
+                              "newton_iterations_median": float(np.median(newton[i])),
+                              "newton_iterations_max": int(max(newton[i])),
                               "return": float(info["episode"]["r"])}
     wall = time.perf_counter() - t0
     venv.close()
@@ -256,6 +265,11 @@ def main(argv=None) -> int:
     print(f"  episodes with steps flagged sim_penetrated: {len(penetrated)}/{args.worlds} "
           f"({sum(e['penetrated_steps'] for e in penetrated)} steps; deepest "
           f"{1e3 * max(e['max_penetration'] for e in result['episodes']):.2f} mm)")
+    pressed = [e["pressed_steps"] for e in result["episodes"] if e["pressed_steps"]]
+    print(f"  episodes pressing the object beyond the force term's free force: {len(pressed)}/{args.worlds} "
+          f"({sum(pressed)} steps); Newton iterations a step: median "
+          f"{np.median([e['newton_iterations_median'] for e in result['episodes']]):.0f}, most "
+          f"{max(e['newton_iterations_max'] for e in result['episodes'])}")
     beyond = [max(e["hold_beyond_pad_faces"]) for e in result["episodes"] if e["success"]]
     if beyond:
         print(f"  successes held with the feature point > 5 mm beyond the pad faces (off-centre; see "

@@ -534,14 +534,19 @@ def test_eval_ppo_runs_one_episode_per_world_reproducibly(tmp_path):
     policy = PPOPolicy.from_run(tmp_path)
     env = gym.make("DeformablePickup-v0", **policy.env_kwargs)
     obs, _ = env.reset(seed=12)
-    flagged, deepest = 0, 0.0
+    flagged, deepest, pressed, newton = 0, 0.0, 0, []
     for _ in range(6):
         obs, _, terminated, truncated, info = env.step(policy(obs))
         flagged, deepest = flagged + bool(info["sim_penetrated"]), max(deepest, float(info["penetration"]))
+        pressed += info["reward_force"] < 0.0
+        newton.append(info["newton_iterations"])
         if terminated or truncated:
             break
     env.close()
     assert first["episodes"][1]["penetrated_steps"] == flagged
+    assert first["episodes"][1]["pressed_steps"] == pressed
+    assert first["episodes"][1]["newton_iterations_median"] == np.median(newton) and min(newton) > 0
+    assert first["episodes"][1]["newton_iterations_max"] == max(newton)
     assert first["episodes"][1]["max_penetration"] == round(deepest, 6) and deepest > 0  # the cube rests in the ground's penalty
     assert evaluate(tmp_path, 3, seed=11)["episodes"] == first["episodes"]
     # spread over processes: the same episodes (a world's episode depends on its seed only)
