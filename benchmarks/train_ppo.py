@@ -41,7 +41,11 @@ Its episodes all last the time limit, so worlds reset together stay in phase and
 holds one phase of the task: ``--stagger-episodes`` cuts each world's first episode at a random
 step (``SB3VectorEnv(stagger_first_episodes=True)``; the curve leaves the first episodes out). In
 phase, a fine-tune's success fell from 0.91 to 0.79 in 1.5 M steps; staggered it stayed at 0.91-0.96 after its first cohort
-(RESULTS.md, 2026-11-27).
+(RESULTS.md, 2026-11-27). Such a run's curve also reports the holding rate: the fraction of each
+rollout's world-steps at least ``HOLDING_SECONDS`` into their episode that hold the object at the
+goal (``is_success``), over all worlds and per object (``LearningCurve.holding_steps``). It reads in a
+session shorter than an episode, where no cohort has ended (the five objects' ~8-minute device
+sessions of 2026-11-28: ~125 steps per world against 240-step episodes).
 Goals lower than the object's feature point
 plus the success tolerance (~0.07 m for the cuboid) succeed on a grasp without a lift: the
 curriculum's first step. ``--out/best`` is then chosen by the success rate at the task's goal, pooled
@@ -134,6 +138,10 @@ class BestPolicy:
 #: latest episodes at the task's goal, pooled over the fewest latest rollouts' cohorts that hold
 #: ``LearningCurve.pool_episodes`` of them (one rollout's cohort holds too few: ~1/6 of its episodes).
 TASK_GOAL_RANKING = ("task_goal_pooled_success_rate", "task_goal_pooled_episodes")
+#: s: with ``--no-terminate-on-success`` the curve's holding rate counts the world-steps this far into
+#: their episode (``LearningCurve.holding_steps``): the shipped cuboid policy succeeds at a median 3.1 s,
+#: the five-object policies at ~3.2 s, the scripted expert at 3.8-5.4 s.
+HOLDING_SECONDS = 5.0
 
 
 class LearningCurve(BaseCallback):
@@ -141,8 +149,17 @@ class LearningCurve(BaseCallback):
 
     def __init__(self, settings: dict, env_seed: int, max_seconds: float = float("inf"),
                  rows: list[dict] | None = None, success_tolerance: float = 0.05, episode_steps: int = 300,
-                 best: BestPolicy | None = None, task_goal=None, pool_episodes: int = 256):
+                 best: BestPolicy | None = None, task_goal=None, pool_episodes: int = 256,
+                 holding_steps: int | None = None):
         super().__init__()
+        #: vector steps, or None: where successes do not end episodes, each rollout also reports the
+        #: fraction of its world-steps at least this far into their episode that hold the object at the
+        #: goal (``is_success``), over all worlds and per object: ``holding_rate`` and
+        #: ``holding_rate_<object>``. Unlike the cohort rate it needs no episode to end, so a session
+        #: shorter than an episode (every session restarts all episodes) still reads it
+        self.holding_steps = holding_steps
+        self._holding: dict[str, list[bool]] = {}  # object -> is_success of this rollout's old-enough world-steps
+        self._objects: list[str] | None = None  # each world's object in its current episode
         self.pool_episodes = pool_episodes  # episodes at the task's goal the pooled rate reaches back for
         #: m [3], or None: where training goals are drawn (``--goal-noise``), the cohort's episodes
         #: whose goal lies within the success tolerance of this one (the task's) are also counted apart
@@ -193,7 +210,14 @@ class LearningCurve(BaseCallback):
         self._steps += 1
         # an episode succeeded if any of its steps did (its last one, unless successes do not terminate)
         self._succeeded |= np.array([bool(info.get("is_success", False)) for info in infos])
+        if self.holding_steps is not None:
+            if self._objects is None:
+                self._objects = [self._episode_object(w) for w in range(len(infos))]
+            for world in np.flatnonzero(self._steps - self._starts >= self.holding_steps):
+                self._holding.setdefault(self._objects[world], []).append(bool(infos[world].get("is_success", False)))
         for world, (done, info) in enumerate(zip(self.locals["dones"], infos)):
+            if done and self._objects is not None:
+                self._objects[world] = self._episode_object(world)
             if done and info.get("staggered_start", False):  # a staggered first episode: cut or kept by its end
                 self._succeeded[world] = False
                 self._starts[world] = self._steps
@@ -212,11 +236,19 @@ class LearningCurve(BaseCallback):
         the success tolerance of ``task_goal`` (False where that is not tracked)."""
         if self.task_goal is None:
             return False
+        goal = np.asarray(self._reset_info(world)["goal"], dtype=np.float64)
+        return bool(np.linalg.norm(goal - self.task_goal) < self.success_tolerance)
+
+    def _episode_object(self, world: int) -> str:
+        """World ``world``'s object in its current episode (its reset info's ``object``)."""
+        return str(self._reset_info(world)["object"])
+
+    def _reset_info(self, world: int) -> dict:
+        """The reset info of world ``world``'s current episode, from the innermost env."""
         env = self.training_env
         while hasattr(env, "venv"):  # VecNormalize -> VecMonitor -> (ActionSubset) -> SB3VectorEnv
             env = env.venv
-        goal = np.asarray(env.reset_infos[world]["goal"], dtype=np.float64)
-        return bool(np.linalg.norm(goal - self.task_goal) < self.success_tolerance)
+        return env.reset_infos[world]
 
     def _on_rollout_end(self) -> None:
         n = len(self._success)
@@ -229,6 +261,7 @@ class LearningCurve(BaseCallback):
                           "cohort_episodes": len(cohort),
                           "cohort_success_rate": float(np.mean(cohort)) if cohort else float("nan"),
                           **({} if self.task_goal is None else self._task_columns(task_cohort)),
+                          **self._holding_columns(),
                           # seconds of this rollout's collection (env steps + policy forward passes)
                           "rollout_s": round(time.perf_counter() - self._rollout_t0, 2),
                           **self._step_costs()})
@@ -243,10 +276,23 @@ class LearningCurve(BaseCallback):
               + (f"at the task goal {r['task_goal_cohort_success_rate']:.2f} [{r['task_goal_cohort_episodes']}] "
                  f"(pooled {r['task_goal_pooled_success_rate']:.2f} [{r['task_goal_pooled_episodes']}])  "
                  if self.task_goal is not None else "")
+              + (f"holding after {self.holding_steps} steps {r['holding_rate']:.2f} [{r['holding_world_steps']}] ("
+                 + ", ".join(f"{k[len('holding_rate_'):]} {v:.2f}" for k, v in r.items() if k.startswith("holding_rate_"))
+                 + ")  " if self.holding_steps is not None else "")
               + f"collection {r['rollout_s']:.1f} s  step p50/p95 {r['step_ms_p50']:.0f}/{r['step_ms_p95']:.0f} ms  "
               f"slowest world Newton {r['slowest_newton']:.0f} CG {r['slowest_cg']:.0f}",
               flush=True)
         self._success, self._returns, self._grasped, self._at_goal, self._step_s, self._slowest = [], [], [], [], [], []
+        self._holding = {}
+
+    def _holding_columns(self) -> dict:
+        """The row's holding columns (``holding_steps``; none where it is None): world-steps counted,
+        their fraction at the goal, and that fraction per object (nan for an object without any)."""
+        if self.holding_steps is None:
+            return {}
+        held = [h for values in self._holding.values() for h in values]
+        return {"holding_world_steps": len(held), "holding_rate": float(np.mean(held)) if held else float("nan"),
+                **{f"holding_rate_{name}": float(np.mean(values)) for name, values in sorted(self._holding.items())}}
 
     def _task_columns(self, task_cohort: list[bool]) -> dict:
         """The row's columns of the episodes at the task's goal: this rollout's cohort, and the rate
@@ -341,7 +387,8 @@ def load_normalisation(folder: pathlib.Path, venv, gamma: float | None = None):
 
 
 #: ``curve.csv`` columns that are counts (an older run's rows lack the later ones: "nan").
-COUNT_COLUMNS = ("env_steps", "episodes", "cohort_episodes", "task_goal_cohort_episodes", "task_goal_pooled_episodes")
+COUNT_COLUMNS = ("env_steps", "episodes", "cohort_episodes", "task_goal_cohort_episodes", "task_goal_pooled_episodes",
+                 "holding_world_steps")
 
 
 def read_curve(folder: pathlib.Path) -> list[dict]:
@@ -422,8 +469,11 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         settings["fixed_world_objects"] = True
     if stagger_episodes:  # the same
         settings["stagger_episodes"] = True
-    tolerance = PickupConfig(**env_kwargs).success_tolerance
-    episode_steps = PickupConfig(**env_kwargs).max_episode_steps
+    config = PickupConfig(**env_kwargs)
+    tolerance = config.success_tolerance
+    episode_steps = config.max_episode_steps
+    # successes that do not end episodes: the holding rate of world-steps HOLDING_SECONDS into their episode
+    holding = None if config.terminate_on_success else int(round(HOLDING_SECONDS * config.control_hz))
     # drawn training goals: the episodes at the task's goal (the default config's, eval_ppo's) apart
     task_goal = PickupConfig().goal if any(PickupConfig(**env_kwargs).goal_noise) else None
     if resume is not None:
@@ -437,7 +487,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
         curve = LearningCurve(settings, env_seed, max_seconds, rows=rows, success_tolerance=tolerance,
-                              episode_steps=episode_steps, best=best, task_goal=task_goal)
+                              episode_steps=episode_steps, best=best, task_goal=task_goal, holding_steps=holding)
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, fixed_world_objects=fixed_world_objects,
@@ -459,7 +509,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model.policy.load_state_dict(transfer_policy(trained.policy.state_dict(), source_actions,
                                                      model.policy.state_dict(), actions, log_std_init))
     curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps,
-                          best=best, task_goal=task_goal)
+                          best=best, task_goal=task_goal, holding_steps=holding)
     model.learn(timesteps, callback=curve)
     return model, curve
 
@@ -486,6 +536,9 @@ def save_curve(rows: list[dict], out: pathlib.Path, title: str) -> None:
         if any("task_goal_cohort_success_rate" in r for r in rows):  # drawn training goals
             ax.plot(x, [r.get("task_goal_cohort_success_rate", float("nan")) for r in rows], "*-", ms=4,
                     label="success rate (the cohort's episodes with a goal at the task's)")
+        if any("holding_rate" in r for r in rows):  # successes that do not end episodes
+            ax.plot(x, [r.get("holding_rate", float("nan")) for r in rows], "P-", ms=4,
+                    label=f"held at the goal (world-steps {HOLDING_SECONDS:g} s or more into their episode)")
         ax.plot(x, [r["grasped_fraction"] for r in rows], "s-", ms=3, label="grasped fraction (world-steps)")
         ax.plot(x, [r.get("at_goal_fraction", float("nan")) for r in rows], "^-", ms=3,
                 label="grasped at the goal (world-steps)")

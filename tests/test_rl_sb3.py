@@ -322,6 +322,8 @@ def test_ppo_trains_on_staggered_worlds_whose_successes_do_not_terminate(tmp_pat
     cut = adapter.first_episode_steps
     assert (cut == limit).any() and (cut < limit).any()  # seed 4: both kinds of first episode end
     assert sum(r["episodes"] for r in curve.rows) == int(np.sum(cut + limit <= steps))
+    # successes that do not terminate: the curve has the holding columns (no world-step is 5 s into a 0.5 s episode)
+    assert curve.holding_steps == 100 and all(r["holding_world_steps"] == 0 for r in curve.rows)
     save_run(model, curve, tmp_path, "smoke")
     with pytest.raises(ValueError, match=r"stagger_episodes: saved True, given None"):
         train(num_envs=worlds, timesteps=8, n_steps=8, episode_seconds=0.5, actions="position-jaw", object="cuboid",
@@ -442,6 +444,49 @@ def test_an_episode_counts_as_a_success_if_any_of_its_steps_succeeded():
         curve._on_step()
     curve._on_rollout_end()
     assert curve.rows[0]["episodes"] == 2 and curve.rows[0]["success_rate"] == 0.5
+
+
+def test_holding_rate_counts_the_world_steps_old_enough_per_object():
+    """``LearningCurve(holding_steps=3)``: per rollout, the world-steps at least 3 steps into their
+    episode, the fraction of them with ``is_success``, overall and per object (each episode's object
+    from its reset info, re-read when a world's episode ends), against a hand count. World 0
+    (cuboid) holds from its 3rd step on; world 1 (rope) never holds and its episode ends at step 4
+    (a staggered cut), its next one a sphere that holds from its 3rd step (step 7)."""
+    import sys
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from train_ppo import LearningCurve
+
+    curve = LearningCurve({}, 0, episode_steps=100, holding_steps=3)
+    reset_infos = [{"object": "cuboid"}, {"object": "rope"}]
+    env = SimpleNamespace(reset_infos=reset_infos)
+    curve.model = SimpleNamespace(n_steps=4, get_env=lambda: env)
+    for step in range(1, 9):
+        done = [False, step == 4]
+        holding = [step >= 3, step >= 7]
+        if step == 4:
+            reset_infos[1] = {"object": "sphere"}  # the autoreset's new episode
+        infos = [{"is_success": holding[0], "episode": {"r": 0.0}},
+                 {"is_success": holding[1] and step != 4, "episode": {"r": 0.0}, "staggered_start": step == 4}]
+        curve.locals = {"dones": np.array(done), "infos": infos}
+        curve._on_step()
+        if step % 4 == 0:
+            curve._on_rollout_end()
+    first, second = curve.rows
+    # rollout 1 (steps 1-4): world 0 at ages 3, 4 (holding), world 1 at ages 3, 4 (not): 2 / 4
+    assert first["holding_world_steps"] == 4 and first["holding_rate"] == 0.5
+    assert first["holding_rate_cuboid"] == 1.0 and first["holding_rate_rope"] == 0.0 and "holding_rate_sphere" not in first
+    # rollout 2 (steps 5-8): world 0 at ages 5-8 (holding), world 1's sphere at ages 3, 4 (steps 7, 8: holding)
+    assert second["holding_world_steps"] == 6 and second["holding_rate"] == 1.0
+    assert second["holding_rate_sphere"] == 1.0 and "holding_rate_rope" not in second
+    # terminating successes: no holding columns
+    plain = LearningCurve({}, 0, episode_steps=100)
+    plain.model = SimpleNamespace(n_steps=1, get_env=lambda: env)
+    plain.locals = {"dones": np.array([False, False]), "infos": [{"is_success": True}, {}]}
+    plain._on_step()
+    plain._on_rollout_end()
+    assert not any(k.startswith("holding") for k in plain.rows[0])
 
 
 def test_task_goal_cohort_counts_the_episodes_whose_goal_is_the_tasks():
