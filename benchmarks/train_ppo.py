@@ -153,8 +153,8 @@ class LearningCurve(BaseCallback):
                  holding_steps: int | None = None):
         super().__init__()
         #: vector steps, or None: where successes do not end episodes, each rollout also reports the
-        #: fraction of its world-steps at least this far into their episode that hold the object at the
-        #: goal (``is_success``), over all worlds and per object: ``holding_rate`` and
+        #: fraction of its world-steps at least this far into their episode that have held the object
+        #: at the goal for the success hold (``is_success``), over all worlds and per object: ``holding_rate`` and
         #: ``holding_rate_<object>``. Unlike the cohort rate it needs no episode to end, so a session
         #: shorter than an episode (every session restarts all episodes) still reads it
         self.holding_steps = holding_steps
@@ -287,7 +287,9 @@ class LearningCurve(BaseCallback):
 
     def _holding_columns(self) -> dict:
         """The row's holding columns (``holding_steps``; none where it is None): world-steps counted,
-        their fraction at the goal, and that fraction per object (nan for an object without any)."""
+        their fraction with ``is_success`` (held at the goal for the success hold), and that fraction per
+        object (an object without such world-steps in this rollout has no column in the row; curve.csv
+        writes nan there)."""
         if self.holding_steps is None:
             return {}
         held = [h for values in self._holding.values() for h in values]

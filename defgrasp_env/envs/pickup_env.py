@@ -105,11 +105,12 @@ class DeformablePickupEnv(gym.Env):
     the object must stay for the success hold); success = 10 on the success step; force =
     -min(max(wrist_force - 50 N, 0) / 100 N, 1), a cost of pressing the object with the pads (into the
     ground, or striking it): free up to 50 N (the scripted expert's episodes stay below 30 N), -1 from
-    150 N, the default wrist force limit, on (distances in m; ``envs.task.REACH_SCALE``,
-    ``LIFT_SCALE``, ``PLACE_SCALE``, ``FORCE_FREE``, ``FORCE_SCALE``). q in [0, 1] is the grasp quality
-    (``info["grasp_quality"]``, 0 while not grasped; ``envs.task.grasp_quality``): the worse pad's
-    margin inside the pads' friction cone times a centring factor, 1 - tanh(70 x how far the feature
-    point lies beyond the pad faces across their width); ~1 for an antipodal, centred hold (the
+    150 N, the default wrist force limit, on (fixed in N whatever ``wrist_force_limit``). Distances
+    in m; ``envs.task.REACH_SCALE``, ``LIFT_SCALE``, ``PLACE_SCALE``, ``FORCE_FREE``, ``FORCE_SCALE``.
+    q in [0, 1] is the grasp quality (``info["grasp_quality"]``, 0 while not grasped;
+    ``envs.task.grasp_quality``): the worse pad's margin inside the pads' friction cone times a
+    centring factor, 1 - tanh(70 x how far the feature point lies beyond the pad faces across their
+    width); ~1 for an antipodal, centred hold (the
     scripted expert's read 0.9-1.0 on all five objects), ~0.1 for a cube pinched at its edge beside
     the pads.
 

@@ -41,7 +41,8 @@ PLACE_SCALE = 10.0
 #: at E = 1e4, 1e6, 1e7, two seeds each) read at most 29 N. Without it a PPO policy learned to strike
 #: the cube at the wrist's force limit before grasping it (sim_penetrated steps in half its episodes),
 #: and such worlds need the most Newton iterations of a batch (the force limit's patient re-solves:
-#: 50-110 a step, against a median of 5-16; benchmarks/RESULTS.md, 2026-11-28).
+#: 50-110 a step, against a median of 5-16; benchmarks/RESULTS.md, 2026-11-28). Fixed in N: a
+#: ``wrist_force_limit`` other than the default moves the limit, not the cost.
 FORCE_FREE = 50.0
 FORCE_SCALE = 100.0
 
