@@ -45,7 +45,7 @@ phase, a fine-tune's success fell from 0.91 to 0.79 in 1.5 M steps; staggered it
 rollout's world-steps at least ``HOLDING_SECONDS`` into their episode that hold the object at the
 goal (``is_success``), over all worlds and per object (``LearningCurve.holding_steps``). It reads in a
 session shorter than an episode, where no cohort has ended (the five objects' ~8-minute device
-sessions of 2026-11-28: ~125 steps per world against 240-step episodes).
+sessions of 2026-11-28: 125-160 steps per world against 240-step episodes).
 Goals lower than the object's feature point
 plus the success tolerance (~0.07 m for the cuboid) succeed on a grasp without a lift: the
 curriculum's first step. ``--out/best`` is then chosen by the success rate at the task's goal, pooled
@@ -477,7 +477,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     # successes that do not end episodes: the holding rate of world-steps HOLDING_SECONDS into their episode
     holding = None if config.terminate_on_success else int(round(HOLDING_SECONDS * config.control_hz))
     # drawn training goals: the episodes at the task's goal (the default config's, eval_ppo's) apart
-    task_goal = PickupConfig().goal if any(PickupConfig(**env_kwargs).goal_noise) else None
+    task_goal = PickupConfig().goal if any(config.goal_noise) else None
     if resume is not None:
         resume = pathlib.Path(resume)
         rows = check_resume(resume, settings)
