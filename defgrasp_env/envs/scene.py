@@ -178,6 +178,9 @@ class PickupScene:
         #: world-solves run since the scene was built: per solver call, the worlds it computed (all of
         #: them in a substep's first solve, those the force limit retries or re-solves patiently after)
         self.world_solves = 0
+        #: [W] bool: the world's last solve of the current substep was patient (its result is as
+        #: converged as a re-solve from the same input would get: ``_patient_if_over`` skips it)
+        self._patient_solved = np.zeros(self.num_worlds, dtype=bool)
         self._readout: StepReadout | None = None
         world = np.arange(self.num_worlds, dtype=np.int32)
         self._world_ids = wp.array(world, dtype=wp.int32, device=self.model.device)  # [W]: row w is world w
@@ -339,6 +342,7 @@ class PickupScene:
         for k in range(k, count):
             if tried:  # the graph ran this substep's first try and stopped: the force limit decides here
                 first_try = (self._solves, *self._read_loads())
+                self._patient_solved[:] = False  # the graph's first try solved every world, none patiently
                 tried = False
             else:
                 self.gripper.plan_substep(k, count, h)
@@ -448,7 +452,11 @@ class PickupScene:
         solution reads tens of N, so over the limit the forces of a converged solve decide."""
         over = load > 1.0 + FORCE_TOLERANCE
         if over.any():
-            patient = over & ~self._last_solve_converged()
+            # not a world whose last solve was patient already: the flag ``unconverged`` stays set
+            # after a patient solve (it tells of the regular iterations), and a re-solve from the
+            # same input would repeat that solve, bit for bit on the CPU (a stopped world that still
+            # reads over its limit was so re-solved after each of the substep's later retries)
+            patient = over & ~self._last_solve_converged() & ~self._patient_solved
             if patient.any():
                 number, _, _, load = self._solve_substep(fraction, h, patient, worlds=patient)
         return number, load
@@ -467,6 +475,8 @@ class PickupScene:
             self.gripper.move(fraction)
         out = self._next_state
         self.solver.advance(self.state, out, self._control, h, patient, worlds)
+        solved = np.ones(self.num_worlds, dtype=bool) if worlds is None else np.asarray(worlds, dtype=bool)
+        self._patient_solved[solved] = False if patient is None else np.asarray(patient, dtype=bool)[solved]
         self.world_solves += self.num_worlds if worlds is None else int(np.count_nonzero(worlds))
         self._launch_loads(out)
         loads = self._read_loads()
