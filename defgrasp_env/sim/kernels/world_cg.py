@@ -28,13 +28,13 @@ import warp as wp
 # CUDA compile time (world_evaluate: 205 s with it, on a 2-core Xeon)
 wp.set_module_options({"enable_backward": False})
 
-from .block_sync import WORLD_BLOCK_MAX_REGISTERS, block_barrier
+from .block_sync import block_barrier
 from .elastic import hessian_product_tet
 from .linear_solve import end_iteration, node_product, update_direction, update_solution
 from .pad_edge_hessian import edge_point_slot_product
 
 
-@wp.kernel(cuda_max_registers=WORLD_BLOCK_MAX_REGISTERS)
+@wp.kernel
 def cg_world_blocks(
     threads: int,
     max_iterations: int,

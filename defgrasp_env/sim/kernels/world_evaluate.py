@@ -20,7 +20,7 @@ import warp as wp
 # CUDA compile time (world_evaluate: 205 s with it, on a 2-core Xeon)
 wp.set_module_options({"enable_backward": False})
 
-from .block_sync import WORLD_BLOCK_MAX_REGISTERS, block_barrier
+from .block_sync import block_barrier
 from .coarse_space import (coarse_assemble_node, coarse_assemble_tet, coarse_factor_world, coarse_guess_node,
                            coarse_start_cg_node)
 from .contact import evaluate_node
@@ -30,7 +30,7 @@ from .pad_edge_contact import evaluate_edge_point
 from .pad_edge_hessian import coarse_assemble_edge_point, edge_point_slot_product
 
 
-@wp.kernel(cuda_max_registers=WORLD_BLOCK_MAX_REGISTERS)
+@wp.kernel
 def evaluate_world_blocks(
     threads: int,
     node_start: wp.array(dtype=int),

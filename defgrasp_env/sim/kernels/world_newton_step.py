@@ -21,7 +21,7 @@ import warp as wp
 # CUDA compile time (world_evaluate: 205 s with it, on a 2-core Xeon)
 wp.set_module_options({"enable_backward": False})
 
-from .block_sync import WORLD_BLOCK_MAX_REGISTERS, block_barrier
+from .block_sync import block_barrier
 from .coarse_space import coarse_correct_node, coarse_reduce_node, coarse_solve_world
 from .energy import node_energy_row, tet_energy_row
 from .line_search import begin_search_world, end_trial, trial_position
@@ -29,7 +29,7 @@ from .pad_edge_contact import edge_point_energy_slot
 from .substep import apply_node_step, end_newton_world
 
 
-@wp.kernel(cuda_max_registers=WORLD_BLOCK_MAX_REGISTERS)
+@wp.kernel
 def newton_step_world_blocks(
     threads: int,
     node_start: wp.array(dtype=int),
