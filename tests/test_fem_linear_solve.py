@@ -348,3 +348,44 @@ def test_an_inexact_solve_depends_on_its_input_alone():
     ((xq, sq),) = _sunk_cuboid_step(dataclasses.replace(patient, cg_tolerance_far=patient.cg_tolerance), patient=True)
     np.testing.assert_array_equal(xp, xq)
     assert int(sp.cg_iterations[0]) == int(sq.cg_iterations[0]) > 0
+
+
+def test_each_world_solves_its_own_coarse_rows_with_the_same_bits():
+    """A batch's coarse arrays are as wide as its most aggregates (a rope's 8: 24 unknowns), and a
+    compact object's world (1 aggregate) solves only its own 3 (``SolverScratch.coarse_sizes``):
+    the rows beyond are empty, so eight worlds of five objects (ropes among them) under the expert,
+    its noisy variant and a gripper pressing into the ground (contact, retries, patient re-solves)
+    step with the same bits as with every world solving all 24 (the code before 2026-11-28)."""
+    import gymnasium as gym
+
+    from contact_rollout import ExpertNoisyPress
+
+    def episode(full_width: bool):
+        objects = ["cuboid", "sphere", "torus", "cylinder", "rope", "rope", "torus", "cuboid"]
+        env = gym.make_vec("DeformablePickup-v0", num_envs=8, vectorization_mode="vector_entry_point",
+                           object="random", world_objects=objects, youngs_modulus=1e5, max_episode_steps=30)
+        obs, _ = env.reset(seed=3)
+        scratch = env.unwrapped.scene.solver.scratch
+        assert scratch.coarse_size == 24
+        assert scratch.coarse_sizes.numpy().tolist() == [3, 3, 3, 3, 24, 24, 3, 3]
+        if full_width:
+            scratch.coarse_sizes.fill_(scratch.coarse_size)
+        policy = ExpertNoisyPress(env, seed=2)
+        rows = []
+        for _ in range(16):
+            obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
+            policy.episodes_ended(terminated, truncated)
+            rows.append((obs, reward, info["newton_iterations"], info["cg_iterations"], info["wrist_force"]))
+        positions = env.unwrapped.scene.state.positions.numpy().copy()
+        env.close()
+        return rows, positions
+
+    own, own_positions = episode(False)
+    full, full_positions = episode(True)
+    np.testing.assert_array_equal(own_positions, full_positions)
+    for (obs, *rest), (obs_full, *rest_full) in zip(own, full):
+        for name in obs:
+            np.testing.assert_array_equal(obs[name], obs_full[name])
+        for a, b in zip(rest, rest_full):
+            np.testing.assert_array_equal(a, b)
+    assert max(float(np.max(r[4])) for r in own) > 50.0  # the pressing world pressed

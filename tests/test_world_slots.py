@@ -110,6 +110,7 @@ def test_a_model_rewritten_in_place_equals_one_assembled_afresh():
     assert all(np.array_equal(a, b) for a, b in zip(model.surfaces, fresh.surfaces))
     fresh_solver = PickupScene(config, list(setups), slotted=True).solver.scratch
     assert np.array_equal(scratch.node_aggregate.numpy(), fresh_solver.node_aggregate.numpy())
+    assert np.array_equal(scratch.coarse_sizes.numpy(), fresh_solver.coarse_sizes.numpy())
     assert np.array_equal(scratch.tet_end.numpy(), fresh_solver.tet_end.numpy())
     assert np.array_equal(scratch.edges.triangles.numpy(), fresh_solver.edges.triangles.numpy())
     assert scratch.coarse_size == fresh_solver.coarse_size == 3 * scene.slots.aggregates

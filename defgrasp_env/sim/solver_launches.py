@@ -219,7 +219,7 @@ def _coarse_before(c: _Context, active) -> list:
         *([c.rec(kph.coarse_assemble_edge_points, m.num_worlds * e.points_per_world, e.triangles, active,
                  e.points_per_world, e.point_tri, e.point_bary, e.point_block, m.free_axes,
                  s.node_aggregate, s.coarse_matrix)] if e.active else []),
-        c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_size, s.coarse_matrix, s.coarse_lower_inv,
+        c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_sizes, s.coarse_matrix, s.coarse_lower_inv,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),
         c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx,
               s.coarse_guess),
@@ -237,7 +237,7 @@ def _coarse_after(c: _Context, active) -> list:
     """Coarse correction after CG: dx += T (T^T A T)^-1 T^T r with CG's final residual r."""
     m, s, n = c.model, c.scratch, c.model.num_nodes
     return [c.rec(kcs.coarse_reduce, n, s.residual, m.node_world, s.node_aggregate, active, s.coarse_rhs),
-            c.rec(kcs.coarse_solve, m.num_worlds, active, s.coarse_size, s.coarse_inverse, s.coarse_rhs,
+            c.rec(kcs.coarse_solve, m.num_worlds, active, s.coarse_sizes, s.coarse_inverse, s.coarse_rhs,
                   s.coarse_coef),
             c.rec(kcs.coarse_correct, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx)]
 
@@ -319,7 +319,7 @@ def _evaluate_world(c: _Context, config, threads: int, start_energy: bool = Fals
                      *_world_edge_terms(c), e.triangle_first, e.point_block,
                      *_world_tet_terms(c), s.cofactor, work.von_mises, s.tet_r, s.tet_twist,
                      m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm, s.node_aggregate,
-                     1.0 / (c.h * c.h), s.coarse_size, s.coarse_matrix, s.coarse_rhs, s.coarse_lower_inv,
+                     1.0 / (c.h * c.h), s.coarse_sizes, s.coarse_matrix, s.coarse_rhs, s.coarse_lower_inv,
                      s.coarse_inverse, s.coarse_coef, s.coarse_guess, s.coarse_scratch,
                      s.substep_newton_it, s.patient, s.last_dx, config.newton_tolerance, config.cg_tolerance,
                      config.cg_tolerance_far, s.rz_stop, s.cg_active)]
@@ -341,7 +341,7 @@ def _cg(c: _Context, config, listed: bool = False) -> list:
         c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate, active,
               s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs, nodes),
         c.rec(klin.cg_end_iteration, m.num_worlds, s.rz_stop,
-              config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.coarse_size,
+              config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.coarse_sizes,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it, s.cg_total,
               active, s.cg_update),
         c.rec(klin.cg_update_direction, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef,
@@ -360,7 +360,7 @@ def _cg_world(c: _Context, config, threads: int) -> list:
                      e.triangles, e.point_tri, e.point_bary, e.point_block,
                      m.node_mass, s.contact_hessian, m.free_axes, m.node_world, s.node_aggregate, s.precond,
                      1.0 / (c.h * c.h),
-                     s.rz_stop, config.cg_update_fraction * config.newton_tolerance, s.coarse_size,
+                     s.rz_stop, config.cg_update_fraction * config.newton_tolerance, s.coarse_sizes,
                      s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it,
                      s.cg_total, s.cg_active, s.cg_update,
                      s.p, s.ap, s.dx, s.residual, s.z)]
@@ -373,7 +373,7 @@ def _newton_step_world(c: _Context, config, threads: int, first: bool) -> list:
     m, s = c.model, c.scratch
     return [c.blocks(kwns.newton_step_world_blocks, threads,
                      threads, c.compaction.nodes.start, c.compaction.tets.start, s.newton_active,
-                     s.residual, m.free_axes, s.node_aggregate, s.coarse_size, s.coarse_inverse, s.coarse_rhs,
+                     s.residual, m.free_axes, s.node_aggregate, s.coarse_sizes, s.coarse_inverse, s.coarse_rhs,
                      s.coarse_coef,
                      config.line_search_steps + 1 if config.line_search_steps > 0 else 0, int(first), 1e-6,
                      0.5 ** config.line_search_steps,

@@ -73,6 +73,18 @@ class EdgeContactScratch:
         return self.points.shape[0] > 0 and self.triangles.shape[0] > 0
 
 
+def world_coarse_sizes(model: Model, node_aggregate: np.ndarray) -> np.ndarray:
+    """[W] int32: 3 x (the largest aggregate index of each world's nodes + 1), the unknowns of its
+    coarse solve. A batch's coarse arrays are as wide as its most aggregates (a rope: 8, a compact
+    object: 1); the rows beyond a world's own are empty (no node, no right-hand side), so its
+    solve over its own rows alone gives the same coefficients, bit for bit on the CPU, without the
+    dense factor and products of the others (one thread's serial float64 work per Newton and CG
+    iteration: a cuboid beside a rope factored 24 x 24 where 3 x 3 is its own)."""
+    ends = np.asarray(model.node_start)
+    return np.array([3 * (int(np.max(node_aggregate[ends[w]:ends[w + 1]])) + 1) for w in range(model.num_worlds)],
+                    dtype=np.int32)
+
+
 @dataclass
 class SolverScratch:
     """Per-node, per-tet and per-world work arrays of ``ImplicitSolver`` (device arrays).
@@ -141,6 +153,8 @@ class SolverScratch:
     # coarse space: translations of K node aggregates per world (C = 3K unknowns, sim/aggregates.py;
     # K: the most aggregates of any world)
     coarse_size: int            # host: C
+    coarse_sizes: wp.array      # [W] int: 3 x the aggregates of each world's object (<= C): its coarse
+    #                             solve's unknowns (the rest of its rows, empty aggregates, are left out)
     node_aggregate: wp.array    # [N] int: world-local aggregate of each node
     coarse_matrix: wp.array     # [W, C, C] float64: T^T A T (assembled, then its Cholesky factor)
     coarse_lower_inv: wp.array  # [W, C, C] float64: inverse of the Cholesky factor
@@ -189,7 +203,8 @@ class SolverScratch:
             pad_pos0=vec(pads), pad_rot0=quat(pads), pad_pos1=vec(pads), pad_rot1=quat(pads),
             **{k: per_world(float) for k in floats}, **{k: per_world(int) for k in ints},
             energy0=per_world(wp.float64), energy_trial=per_world(wp.float64),
-            coarse_size=size, node_aggregate=wp.array(aggregate, dtype=int, device=d),
+            coarse_size=size, coarse_sizes=wp.array(world_coarse_sizes(model, aggregate), dtype=int, device=d),
+            node_aggregate=wp.array(aggregate, dtype=int, device=d),
             coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
             coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
             coarse_guess=vec(), tet_start=wp.array(np.asarray(model.tet_start, dtype=np.int32), dtype=int, device=d),
@@ -215,6 +230,7 @@ class SolverScratch:
                              f"{self.coarse_size // 3} this scratch was made for")
         d = model.device
         self.tet_end.assign(np.asarray(model.tet_end, dtype=np.int32))
+        self.coarse_sizes.assign(world_coarse_sizes(model, model.node_aggregate))
         wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(aggregates, dtype=int, device=d),
                                                     wp.array(rows.astype(np.int32), dtype=int, device=d)],
                   outputs=[self.node_aggregate], device=d)

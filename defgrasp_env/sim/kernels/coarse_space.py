@@ -182,7 +182,7 @@ def coarse_assemble_tets(
 def coarse_factor_world(
     w: int,
     world_active: wp.array(dtype=int),
-    size: int,
+    sizes: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
     lower_inv: wp.array3d(dtype=wp.float64),
     inverse: wp.array3d(dtype=wp.float64),
@@ -193,6 +193,7 @@ def coarse_factor_world(
     """Row ``w`` of ``coarse_factor``."""
     if world_active[w] == 0:
         return
+    size = sizes[w]
     ok = int(1)
     for j in range(size):
         if matrix[w, j, j] <= wp.float64(0.0):
@@ -239,7 +240,7 @@ def coarse_factor_world(
 @wp.kernel
 def coarse_factor(
     world_active: wp.array(dtype=int),
-    size: int,
+    sizes: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
     lower_inv: wp.array3d(dtype=wp.float64),
     inverse: wp.array3d(dtype=wp.float64),
@@ -250,7 +251,7 @@ def coarse_factor(
     """Per world: E^-1 by Cholesky (E = L L^T, E^-1 = L^-T L^-1; unknowns with a zero diagonal, i.e.
     empty aggregates or axes prescribed on all of an aggregate's nodes, get 1), coef = E^-1 rhs;
     clears E, rhs and rz (recomputed by ``coarse_start_cg``)."""
-    coarse_factor_world(wp.tid(), world_active, size, matrix, lower_inv, inverse, rhs, coef, rz)
+    coarse_factor_world(wp.tid(), world_active, sizes, matrix, lower_inv, inverse, rhs, coef, rz)
 
 
 @wp.func
@@ -363,7 +364,7 @@ def coarse_reduce(
 def coarse_solve_world(
     w: int,
     world_active: wp.array(dtype=int),
-    size: int,
+    sizes: wp.array(dtype=int),
     inverse: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
     coef: wp.array2d(dtype=float),
@@ -371,19 +372,19 @@ def coarse_solve_world(
     """Row ``w`` of ``coarse_solve``."""
     if world_active[w] == 0:
         return
-    coarse_coefficients(w, size, inverse, rhs, coef)
+    coarse_coefficients(w, sizes[w], inverse, rhs, coef)
 
 
 @wp.kernel
 def coarse_solve(
     world_active: wp.array(dtype=int),
-    size: int,
+    sizes: wp.array(dtype=int),
     inverse: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
     coef: wp.array2d(dtype=float),
 ):
     """coef = E^-1 rhs with the E^-1 of this Newton iteration; clears rhs."""
-    coarse_solve_world(wp.tid(), world_active, size, inverse, rhs, coef)
+    coarse_solve_world(wp.tid(), world_active, sizes, inverse, rhs, coef)
 
 
 @wp.func

@@ -228,7 +228,7 @@ def cg_update_solution(
 
 @wp.func
 def end_iteration(w: int, rz_stop: wp.array(dtype=float), update_tol: float, max_iterations: int,
-                  coarse_size: int, coarse_inverse: wp.array3d(dtype=wp.float64),
+                  coarse_sizes: wp.array(dtype=int), coarse_inverse: wp.array3d(dtype=wp.float64),
                   coarse_rhs: wp.array2d(dtype=float), coarse_coef: wp.array2d(dtype=float),
                   rz: wp.array(dtype=float), rz_new: wp.array(dtype=float), p_ap: wp.array(dtype=float),
                   beta: wp.array(dtype=float), cg_iterations: wp.array(dtype=int),
@@ -238,7 +238,7 @@ def end_iteration(w: int, rz_stop: wp.array(dtype=float), update_tol: float, max
     stopping test (``cg_end_iteration``)."""
     if cg_active[w] == 0:
         return
-    rz_next = rz_new[w] + coarse_coefficients(w, coarse_size, coarse_inverse, coarse_rhs, coarse_coef)
+    rz_next = rz_new[w] + coarse_coefficients(w, coarse_sizes[w], coarse_inverse, coarse_rhs, coarse_coef)
     it = cg_iterations[w] + 1
     cg_iterations[w] = it
     cg_iterations_total[w] = cg_iterations_total[w] + 1
@@ -260,7 +260,7 @@ def cg_end_iteration(
     rz_stop: wp.array(dtype=float),
     update_tol: float,
     max_iterations: int,
-    coarse_size: int,
+    coarse_sizes: wp.array(dtype=int),
     coarse_inverse: wp.array3d(dtype=wp.float64),
     coarse_rhs: wp.array2d(dtype=float),
     coarse_coef: wp.array2d(dtype=float),
@@ -278,7 +278,7 @@ def cg_end_iteration(
     ``update_tol`` (m: the absolute test, as r.z cannot fall below float32 noise near a
     solution; applied from the 8th iteration on), on the iteration cap, or on a non-positive
     curvature."""
-    end_iteration(wp.tid(), rz_stop, update_tol, max_iterations, coarse_size, coarse_inverse, coarse_rhs,
+    end_iteration(wp.tid(), rz_stop, update_tol, max_iterations, coarse_sizes, coarse_inverse, coarse_rhs,
                   coarse_coef, rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total, cg_active, cg_update)
 
 

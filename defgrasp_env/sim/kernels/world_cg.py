@@ -67,7 +67,7 @@ def cg_world_blocks(
     # per world
     rz_stop: wp.array(dtype=float),
     update_tol: float,
-    coarse_size: int,
+    coarse_sizes: wp.array(dtype=int),
     coarse_inverse: wp.array3d(dtype=wp.float64),
     coarse_rhs: wp.array2d(dtype=float),
     coarse_coef: wp.array2d(dtype=float),
@@ -116,7 +116,7 @@ def cg_world_blocks(
                             rz_new, cg_update, coarse_rhs)
         block_barrier()
         if lane == 0:
-            end_iteration(w, rz_stop, update_tol, max_iterations, coarse_size, coarse_inverse, coarse_rhs,
+            end_iteration(w, rz_stop, update_tol, max_iterations, coarse_sizes, coarse_inverse, coarse_rhs,
                           coarse_coef, rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total, cg_active,
                           cg_update)
         block_barrier()

@@ -105,7 +105,7 @@ def evaluate_world_blocks(
     residual_norm: wp.array(dtype=float),
     node_aggregate: wp.array(dtype=int),
     inv_dt2: float,
-    coarse_size: int,
+    coarse_sizes: wp.array(dtype=int),
     coarse_matrix: wp.array3d(dtype=wp.float64),
     coarse_rhs: wp.array2d(dtype=float),
     coarse_lower_inv: wp.array3d(dtype=wp.float64),
@@ -170,7 +170,7 @@ def evaluate_world_blocks(
                                    node_aggregate, coarse_matrix)
     block_barrier()
     if lane == 0:
-        coarse_factor_world(w, active, coarse_size, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
+        coarse_factor_world(w, active, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
                             coarse_coef, rz)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
