@@ -448,8 +448,9 @@ class PickupScene:
 
     def _patient_if_over(self, number: int, load: np.ndarray, fraction: np.ndarray, h: float):
         """(solve number, load [W]) of a solve, re-solved patiently in the worlds over an actuator
-        limit whose solve is unconverged: an unconverged stiff contact can read kN where its
-        solution reads tens of N, so over the limit the forces of a converged solve decide."""
+        limit whose solve is unconverged and was not patient already (``_patient_solved``): an
+        unconverged stiff contact can read kN where its solution reads tens of N, so over the
+        limit the forces of a converged solve decide."""
         over = load > 1.0 + FORCE_TOLERANCE
         if over.any():
             # not a world whose last solve was patient already: the flag ``unconverged`` stays set

@@ -80,9 +80,8 @@ def world_coarse_sizes(model: Model, node_aggregate: np.ndarray) -> np.ndarray:
     solve over its own rows alone gives the same coefficients, bit for bit on the CPU, without the
     dense factor and products of the others (one thread's serial float64 work per Newton and CG
     iteration: a cuboid beside a rope factored 24 x 24 where 3 x 3 is its own)."""
-    ends = np.asarray(model.node_start)
-    return np.array([3 * (int(np.max(node_aggregate[ends[w]:ends[w + 1]])) + 1) for w in range(model.num_worlds)],
-                    dtype=np.int32)
+    starts = np.asarray(model.node_start[:-1], dtype=np.int64)  # every world has nodes
+    return (3 * (np.maximum.reduceat(np.asarray(node_aggregate), starts) + 1)).astype(np.int32)
 
 
 @dataclass
