@@ -24,6 +24,8 @@ for the device, "auto" in the table), a row each side by side.
 ``--world-block-threads N [N ...]``: ``SolverConfig.world_block_threads`` (each world's Newton
 iteration in three launches with a block of N threads per world; 0 = the phase launches over all
 rows; default: the solver's choice for the device, "auto" in the table), a row each, side by side.
+``--cg-block-threads N [N ...]``: ``SolverConfig.cg_block_threads`` (threads per world of the world
+blocks' CG launch alone, up to 512; default: those of the other world-block launches), a row each.
 ``--edge-contact on|off|both``: pad edge contact (``PickupConfig.edge_contact``, on by default;
 both: a row each, side by side). ``--split``: also time the solver's share of each step: every
 ``ImplicitSolver.advance`` is bracketed by ``wp.synchronize_device`` (one more synchronisation per
@@ -73,11 +75,13 @@ from defgrasp_env.sim import ImplicitSolver, SolverConfig  # noqa: E402
 from machine import append_results, git_state, host  # noqa: E402
 
 
-def solver_config(graphs: str, listed_cg_worlds: int | None, world_block_threads: int | None = None) -> SolverConfig:
-    """The env's default solver settings with ``graphs`` ("auto", "on", "off"), ``listed_cg_worlds``
-    and ``world_block_threads``."""
+def solver_config(graphs: str, listed_cg_worlds: int | None, world_block_threads: int | None = None,
+                  cg_block_threads: int | None = None) -> SolverConfig:
+    """The env's default solver settings with ``graphs`` ("auto", "on", "off"), ``listed_cg_worlds``,
+    ``world_block_threads`` and ``cg_block_threads``."""
     return dataclasses.replace(PickupConfig().solver, graphs={"auto": None, "on": True, "off": False}[graphs],
-                               listed_cg_worlds=listed_cg_worlds, world_block_threads=world_block_threads)
+                               listed_cg_worlds=listed_cg_worlds, world_block_threads=world_block_threads,
+                               cg_block_threads=cg_block_threads)
 
 
 def press_actions(obs: dict, scene) -> np.ndarray:
@@ -123,19 +127,20 @@ class SolverClock:
 
 def run_case(device: str, worlds: int, policy: str, obj: str, modulus: float, warmup: int, steps: int,
              graphs: str = "auto", noise: float = 0.0, edge_contact: bool = True, split: bool = False,
-             listed_cg_worlds: int | None = None, world_block_threads: int | None = None) -> dict:
+             listed_cg_worlds: int | None = None, world_block_threads: int | None = None,
+             cg_block_threads: int | None = None) -> dict:
     """Time ``steps`` env steps after ``warmup`` ones; returns one row of the table (with
     ``split``, the solver's share of each step too: ``SolverClock``)."""
     with SolverClock(device) if split else contextlib.nullcontext() as clock:
         return _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock,
-                         listed_cg_worlds, world_block_threads)
+                         listed_cg_worlds, world_block_threads, cg_block_threads)
 
 
 def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise, edge_contact, clock,
-              listed_cg_worlds, world_block_threads) -> dict:
+              listed_cg_worlds, world_block_threads, cg_block_threads) -> dict:
     env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
                        device=device, object=obj, youngs_modulus=modulus,
-                       solver=solver_config(graphs, listed_cg_worlds, world_block_threads),
+                       solver=solver_config(graphs, listed_cg_worlds, world_block_threads, cg_block_threads),
                        edge_contact=edge_contact)
     obs, _ = env.reset(seed=0)
     rng = np.random.default_rng(0)
@@ -181,6 +186,7 @@ def _run_case(device, worlds, policy, obj, modulus, warmup, steps, graphs, noise
     return {"W": worlds, "policy": policy + (f" + noise {noise:g}" if noise > 0.0 else ""), "graphs": graphs,
             "edges": "on" if edge_contact else "off", "listed": "auto" if listed_cg_worlds is None else listed_cg_worlds,
             "world_blocks": "auto" if world_block_threads is None else world_block_threads,
+            "cg_blocks": "auto" if cg_block_threads is None else cg_block_threads,
             "object": obj, "E": modulus, "median_ms": 1e3 * float(np.median(t)), "mean_ms": 1e3 * float(np.mean(t)),
             "p95_ms": 1e3 * float(np.percentile(t, 95)), "world_steps_per_s": worlds / float(np.median(t)),
             "solver_ms": 1e3 * float(np.median(solver_t)), "outside_ms": 1e3 * float(np.median(t - solver_t)),
@@ -194,14 +200,14 @@ def _ms(value: float) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| W | actions | step graphs | edge contact | CG listed at <= worlds | threads per world block | object | E (Pa) | substeps | median ms | mean ms | p95 ms | "
+    lines = ["| W | actions | step graphs | edge contact | CG listed at <= worlds | threads per world block | threads per CG block | object | E (Pa) | substeps | median ms | mean ms | p95 ms | "
              "world-steps/s | deepest mm | max wrist N | world-solves per world-substep | Newton / step, slowest / "
              "mean | CG / step, slowest / mean | episodes won | solver ms (median) | outside the solver ms (median) | "
              "substeps in period graphs |",
-             "|---" * 22 + "|"]
+             "|---" * 23 + "|"]
     for r in rows:
         won = r["successes"] if r["policy"].startswith("expert") else "-"
-        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['listed']} | {r['world_blocks']} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
+        lines.append(f"| {r['W']} | {r['policy']} | {r['graphs']} | {r['edges']} | {r['listed']} | {r['world_blocks']} | {r.get('cg_blocks', 'auto')} | {r['object']} | {r['E']:.0e} | {r['substeps']} | "
                      f"{r['median_ms']:.1f} | {r['mean_ms']:.1f} | {r['p95_ms']:.1f} | {r['world_steps_per_s']:,.0f} | "
                      f"{r['depth_mm']:.2f} | {r['wrist_N']:.0f} | {r['solves']:.3f} | {r['newton'][0]:.0f} / "
                      f"{r['newton'][1]:.1f} | {r['cg'][0]:.0f} / {r['cg'][1]:.0f} | {won} | {_ms(r['solver_ms'])} | "
@@ -232,6 +238,9 @@ def main(argv=None) -> int:
                     help="SolverConfig.world_block_threads (each world's Newton iteration in three launches, N "
                          "threads per world; 0: the phase launches; default: the solver's choice for the device); "
                          "several: a row each, side by side")
+    ap.add_argument("--cg-block-threads", type=int, nargs="+", default=[None],
+                    help="SolverConfig.cg_block_threads (threads per world of the world blocks' CG launch, up to "
+                         "512; default: as the other world-block launches); several: a row each, side by side")
     ap.add_argument("--split", action="store_true",
                     help="also time the solver's share of each step (a synchronisation around every solve)")
     ap.add_argument("--no-append", action="store_true")
@@ -246,10 +255,11 @@ def main(argv=None) -> int:
             for edges in (["off", "on"] if args.edge_contact == "both" else [args.edge_contact]):
                 for listed in args.listed_cg_worlds:
                     for threads in args.world_block_threads:
-                        rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus,
-                                             args.warmup, args.steps, graphs, args.noise, edges == "on", args.split,
-                                             listed, threads))
-                        print(table(rows[-1:]).splitlines()[-1], flush=True)
+                        for cg_threads in args.cg_block_threads:
+                            rows.append(run_case(args.device, w, args.policy, args.object, args.youngs_modulus,
+                                                 args.warmup, args.steps, graphs, args.noise, edges == "on",
+                                                 args.split, listed, threads, cg_threads))
+                            print(table(rows[-1:]).splitlines()[-1], flush=True)
     report = table(rows)
     print(report)
     if not args.no_append:

@@ -20,7 +20,11 @@ from defgrasp_env.sim.model import ContactParams
 from defgrasp_env.sim.solver import (MANY_WORLDS, WORLD_BLOCK_THREADS, WORLD_BLOCK_THREADS_MANY, ImplicitSolver,
                                      SolverConfig, default_world_block_threads)
 from contact_rollout import ExpertNoisyPress
-from test_fem_batch import REPORT_FIELDS, STATE_ROWS, build, pad_targets, run
+from defgrasp_env.sim.materials import Material
+from defgrasp_env.sim.meshing import make_object_mesh
+from defgrasp_env.sim.model import build_model
+from defgrasp_env.sim.state import Control, State
+from test_fem_batch import PAD_HALF, REPORT_FIELDS, STATE_ROWS, build, pad_targets, run
 
 
 def _episode(world_block_threads: int, steps: int, device: str = "cpu"):
@@ -172,3 +176,106 @@ def test_world_blocks_on_cuda_through_contact_and_resets():
         assert not worlds[f"{k}/info/sim_diverged"].any(), k
     for k in range(8):  # step 9 is world 2's first grasp: from there rounding makes other episodes
         np.testing.assert_allclose(worlds[f"{k}/obs/agent_pos"], phases[f"{k}/obs/agent_pos"], atol=1e-3)
+
+
+def _rope_steps(config: SolverConfig, steps: int = 14, device: str = "cpu"):
+    """A rope (8 coarse aggregates: 24 coarse unknowns) squeezed across its middle by the pads and
+    lifted, beside a squeezed cube (one aggregate), E = 1e5: per step the state rows and the report."""
+    rope, cube = make_object_mesh("rope"), make_object_mesh("cuboid")
+    across = (0.0, float(np.sin(np.pi / 4)), 0.0, float(np.cos(np.pi / 4)))  # the rope along z, pads on +-x
+    model = build_model([rope, cube], [Material(youngs_modulus=1e5)] * 2,
+                        poses=[((0.0, 0.0, 0.0), across), ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))],
+                        pad_half_extents=[PAD_HALF, PAD_HALF], device=device)
+    state, control = State.from_model(model), Control.from_model(model)
+
+    def targets(k):
+        rows = []
+        for reach, squeeze in ((0.008, 5e-5), (0.02, 4e-5)):
+            x = reach + PAD_HALF[0] - squeeze * min(k, 8)
+            lift = 0.002 * max(k - 8, 0)
+            rows.append([[-x, 0.008 + lift, 0.0], [x, 0.008 + lift, 0.0]])
+        return np.asarray(rows, np.float32).reshape(-1, 3)
+
+    state.pad_positions.assign(targets(0))
+    solver = ImplicitSolver(model, config)
+    assert solver.scratch.coarse_sizes.numpy().tolist() == [24, 3]
+    if device != "cpu":
+        assert (solver.world_block_threads, solver.cg_block_threads) == (config.world_block_threads,
+                                                                         config.cg_block_threads)
+    history = []
+    for k in range(1, steps + 1):
+        control.pad_target_positions.assign(targets(k))
+        report = solver.step(state, state, control, 0.05)
+        history.append(({name: getattr(state, name).numpy().copy() for name in STATE_ROWS}, report))
+    return history
+
+
+def test_world_block_cg_applies_a_rope_coarse_solve_row_by_row_with_the_bits_of_one_thread():
+    """The world-block CG applies a coarse solve wider than one aggregate's (``LANE_COARSE_SIZE``:
+    the rope's 24 unknowns) a row per thread (``coarse_space.coarse_row`` / ``coarse_gain``), the
+    cube's 3 on one thread (``end_iteration``): on the CPU, every state row and report field equal
+    to the phase launches' (which apply it on one thread, ``coarse_coefficients``) over 14 steps
+    of a squeezed, lifted rope; with 8 cooperative threads a world (``wp.config.enable_cpu_blocks``,
+    the rows then computed by different threads, the other sums in another order) within 1e-5 m
+    and 10 % of the CG iterations. (Checked by hand: without the barrier after the rows the
+    8-thread rope is 1e-3 m off after the first step.)"""
+    import warp as wp
+
+    from defgrasp_env.sim.kernels.world_cg import LANE_COARSE_SIZE
+
+    assert LANE_COARSE_SIZE < 24
+    reference = _rope_steps(SolverConfig(world_block_threads=0))
+    rows = _rope_steps(SolverConfig(world_block_threads=1))
+    for (got, got_report), (want, want_report) in zip(rows, reference):
+        for name in STATE_ROWS:
+            np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+        for field in REPORT_FIELDS:
+            np.testing.assert_array_equal(getattr(got_report, field), getattr(want_report, field), err_msg=field)
+    rope_cg = sum(int(r.cg_iterations[0]) for _, r in reference)
+    squeeze = max(float(state["pad_normal_force"][:2].min()) for state, _ in reference)
+    assert rope_cg > 100 and squeeze > 0.5, (rope_cg, squeeze)  # CG iterated on a rope both pads press
+    wp.config.enable_cpu_blocks, before = True, wp.config.enable_cpu_blocks
+    try:
+        threads = _rope_steps(SolverConfig(world_block_threads=8))
+    finally:
+        wp.config.enable_cpu_blocks = before
+    for (got, got_report), (want, _) in zip(threads, reference):
+        assert not got_report.diverged.any()
+        np.testing.assert_allclose(got["positions"], want["positions"], atol=1e-5)
+    it = sum(int(r.cg_iterations.sum()) for _, r in threads)
+    it0 = sum(int(r.cg_iterations.sum()) for _, r in reference)
+    assert abs(it - it0) <= 0.1 * it0, (it0, it)
+
+
+def test_cg_block_threads_is_checked_and_defaults_to_the_world_blocks():
+    """``SolverConfig.cg_block_threads``: up to ``MAX_CG_BLOCK_THREADS`` (512: the CG kernel's
+    registers), a multiple of 32 above 32, else refused naming the value; None follows
+    ``world_block_threads``; the CPU runs one thread per world, and none where the blocks are off."""
+    from defgrasp_env.sim.solver import MAX_CG_BLOCK_THREADS
+
+    assert MAX_CG_BLOCK_THREADS == 512
+    for bad in (0, -32, 1.5, True, 48, 544, 1024):
+        with pytest.raises(ValueError, match=f"cg_block_threads.*{bad!r}"):
+            SolverConfig(cg_block_threads=bad)
+    for good in (1, 32, 256, 512):
+        SolverConfig(cg_block_threads=good)
+    model, _, _ = build((0, 1))
+    assert ImplicitSolver(model, SolverConfig(cg_block_threads=512)).cg_block_threads == 1
+    assert ImplicitSolver(model, SolverConfig(world_block_threads=0, cg_block_threads=512)).cg_block_threads == 0
+
+
+@pytest.mark.cuda
+@pytest.mark.parametrize("cg_threads", [256, 512])
+def test_world_block_cg_of_more_threads_on_cuda_agrees_with_the_cpu(cg_threads):
+    """On CUDA, the rope and cube of ``_rope_steps`` with blocks of 256 threads a world and CG in
+    blocks of 256 or 512 (``cg_block_threads``; the rope's coarse rows a thread each) against the
+    CPU's phase launches: positions within 1e-5 m at the first steps and the CG iterations within
+    10 % (float atomics sum in a run-dependent order), none diverged."""
+    reference = _rope_steps(SolverConfig(world_block_threads=0))
+    got = _rope_steps(SolverConfig(world_block_threads=256, cg_block_threads=cg_threads), device="cuda:0")
+    assert not any(r.diverged.any() for _, r in got)
+    for k in (0, 4):
+        np.testing.assert_allclose(got[k][0]["positions"], reference[k][0]["positions"], atol=1e-5)
+    it0 = sum(int(r.cg_iterations.sum()) for _, r in reference)
+    it1 = sum(int(r.cg_iterations.sum()) for _, r in got)
+    assert abs(it1 - it0) <= 0.1 * it0, (it0, it1)

@@ -46,6 +46,9 @@ MANY_WORLDS = 2048
 #: The largest ``SolverConfig.world_block_threads``: a block of 256 threads fits in an SM's 64 K
 #: registers at any register count (at most 255 a thread); 1024 failed to launch on an H200.
 MAX_WORLD_BLOCK_THREADS = 256
+#: The largest ``SolverConfig.cg_block_threads``: the world-block CG kernel alone uses ~96 registers
+#: a thread (H200, warp 1.19), so a block of 512 fits an SM's 64 K registers; 1024 would need <= 64.
+MAX_CG_BLOCK_THREADS = 512
 
 
 @dataclass(frozen=True)
@@ -113,6 +116,11 @@ class SolverConfig:
             bit-identical to the phase-by-phase launches. None (default): ``WORLD_BLOCK_THREADS``
             of the device's kind (on CUDA ``WORLD_BLOCK_THREADS_MANY`` beyond ``MANY_WORLDS``
             worlds).
+        cg_block_threads: threads per world of the world blocks' CG launch
+            (``kernels/world_cg.py``), where ``world_block_threads`` is on: up to
+            ``MAX_CG_BLOCK_THREADS`` (its kernel needs fewer registers than the evaluation's and the
+            Newton step's, which stay at ``world_block_threads``), a multiple of 32 above 32. None
+            (default): ``world_block_threads``. The CPU runs one thread per world either way.
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
@@ -133,6 +141,7 @@ class SolverConfig:
     patient_iterations: int = 60
     listed_cg_worlds: int | None = None
     world_block_threads: int | None = None
+    cg_block_threads: int | None = None
     graphs: bool | None = None
 
     def __post_init__(self) -> None:
@@ -142,6 +151,8 @@ class SolverConfig:
             counts.append(("listed_cg_worlds", 0))
         if self.world_block_threads is not None:
             counts.append(("world_block_threads", 0))
+        if self.cg_block_threads is not None:
+            counts.append(("cg_block_threads", 1))
         for name, low in counts:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
@@ -150,6 +161,10 @@ class SolverConfig:
         if threads is not None and (threads > MAX_WORLD_BLOCK_THREADS or (threads > 32 and threads % 32)):
             raise ValueError(f"world_block_threads must be 0 (off), 1 to 32, or a multiple of 32 up to "
                              f"{MAX_WORLD_BLOCK_THREADS} (a CUDA thread block per world), got {threads}")
+        cg = self.cg_block_threads
+        if cg is not None and (cg > MAX_CG_BLOCK_THREADS or (cg > 32 and cg % 32)):
+            raise ValueError(f"cg_block_threads must be 1 to 32 or a multiple of 32 up to {MAX_CG_BLOCK_THREADS} "
+                             f"(a CUDA thread block per world in CG), got {cg}")
         check_range("newton_tolerance", self.newton_tolerance, 0.0, math.inf, "m")
         check_range("cg_tolerance", self.cg_tolerance, 0.0, 1.0)
         check_range("cg_tolerance_far", self.cg_tolerance_far, 0.0, 1.0)
@@ -227,6 +242,11 @@ class ImplicitSolver:
         #: threads per world of the world blocks (``SolverConfig.world_block_threads``; 0: off; on the
         #: CPU 1, or as configured where ``wp.config.enable_cpu_blocks`` runs several per block)
         self.world_block_threads = min(threads, 1) if is_cpu and not wp.config.enable_cpu_blocks else threads
+        cg_threads = threads if config.cg_block_threads is None else config.cg_block_threads
+        #: threads per world of the world blocks' CG (``SolverConfig.cg_block_threads``; 0 where the
+        #: world blocks are off, 1 on the CPU unless ``wp.config.enable_cpu_blocks``)
+        self.cg_block_threads = (0 if not self.world_block_threads else
+                                 1 if is_cpu and not wp.config.enable_cpu_blocks else cg_threads)
         self.scratch = SolverScratch.from_model(model, block_threads=self.world_block_threads)
         self.loops = DeviceLoops(model, config, self.scratch)
         capacity = config.listed_cg_worlds
@@ -453,7 +473,8 @@ class ImplicitSolver:
                                              start_pads=(state_in.pad_positions, state_in.pad_orientations),
                                              step_start=step_start, compaction=self.compaction,
                                              listed_cg=self._listed_cg, phase_graphs=not self.graphs,
-                                             world_block_threads=self.world_block_threads), {})
+                                             world_block_threads=self.world_block_threads,
+                                             cg_block_threads=self.cg_block_threads), {})
         self._launches[key] = entry  # most recently used last
         while len(self._launches) > _LAUNCH_SETS:
             self._launches.pop(next(iter(self._launches)))

@@ -361,8 +361,8 @@ def _cg_world(c: _Context, config, threads: int) -> list:
                      m.node_mass, s.contact_hessian, m.free_axes, m.node_world, s.node_aggregate, s.precond,
                      1.0 / (c.h * c.h),
                      s.rz_stop, config.cg_update_fraction * config.newton_tolerance, s.coarse_sizes,
-                     s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it,
-                     s.cg_total, s.cg_active, s.cg_update,
+                     s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.coarse_terms, s.rz, s.rz_new, s.p_ap,
+                     s.cg_beta, s.cg_it, s.cg_total, s.cg_active, s.cg_update,
                      s.p, s.ap, s.dx, s.residual, s.z)]
 
 
@@ -420,7 +420,7 @@ def _outputs(c: _Context) -> list:
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
                             h: float, start_pads: tuple, step_start: wp.array, compaction: WorldCompaction,
                             listed_cg: bool = False, phase_graphs: bool = True,
-                            world_block_threads: int = 0) -> SubstepLaunches:
+                            world_block_threads: int = 0, cg_block_threads: int | None = None) -> SubstepLaunches:
     """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step,
     iterating in ``work`` (the output state: positions and velocities hold the step's start when
     it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
@@ -428,8 +428,9 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     as a CPU graph (False where the caller captures the whole substep). ``compaction``: the row maps;
     ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
     ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world
-    (``evaluate``, ``evaluate_first``), and also its whole CG (``cg_world``) and the rest of its
-    Newton iteration (``step_world``, ``step_world_first``)."""
+    (``evaluate``, ``evaluate_first``), and also its whole CG (``cg_world``, in blocks of
+    ``cg_block_threads``, default ``world_block_threads``) and the rest of its Newton iteration
+    (``step_world``, ``step_world_first``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
                  max(world_block_threads, 1))
     if scratch.stress_partial.shape[0] < model.num_worlds * c.block_threads:
@@ -452,7 +453,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         evaluate=seq(evaluate(c, config)),
         evaluate_first=seq(evaluate(c, config, start_energy=config.line_search_steps > 0)),
         cg=seq(_cg(c, config) * block),
-        cg_world=seq(_cg_world(c, config, world_block_threads)) if world_block_threads else [],
+        cg_world=seq(_cg_world(c, config, cg_block_threads or world_block_threads)) if world_block_threads else [],
         cg_listed=seq(_cg(c, config, listed=True) * block) if listed_cg else [],
         list_cg_worlds=seq(compaction.record_list(scratch.cg_active)) if listed_cg else [],
         coarse_post=seq(_coarse_after(c, s.newton_active)),

@@ -160,6 +160,7 @@ class SolverScratch:
     coarse_inverse: wp.array    # [W, C, C] float64: (T^T A T)^-1 of the current Newton iteration
     coarse_rhs: wp.array        # [W, C] float: T^T r
     coarse_coef: wp.array       # [W, C] float: (T^T A T)^-1 T^T r
+    coarse_terms: wp.array      # [W, C] float64: (T^T r)_i ((T^T A T)^-1 T^T r)_i (world-block CG's rows)
     coarse_guess: wp.array      # [N] vec3, m: T coef of the coarse initial guess
     edges: EdgeContactScratch   # pad edge contact (empty unless ContactParams.edge_contact)
     stress_partial: wp.array    # [W*B] float, Pa: a world block's per-thread partial mean stresses (B threads)
@@ -206,6 +207,7 @@ class SolverScratch:
             node_aggregate=wp.array(aggregate, dtype=int, device=d),
             coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
             coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
+            coarse_terms=coarse(wp.float64, 2),
             coarse_guess=vec(), tet_start=wp.array(np.asarray(model.tet_start, dtype=np.int32), dtype=int, device=d),
             tet_end=wp.array(np.asarray(model.tet_end, dtype=np.int32), dtype=int, device=d),
             edges=EdgeContactScratch.from_model(model),

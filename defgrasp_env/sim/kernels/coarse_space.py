@@ -54,6 +54,32 @@ def coarse_coefficients(w: int, size: int, inverse: wp.array3d(dtype=wp.float64)
 
 
 @wp.func
+def coarse_row(w: int, i: int, size: int, inverse: wp.array3d(dtype=wp.float64), rhs: wp.array2d(dtype=float),
+               coef: wp.array2d(dtype=float), terms: wp.array2d(dtype=wp.float64)):
+    """Row ``i`` of ``coarse_coefficients``: coef_i = (E^-1 g)_i and its term g_i (E^-1 g)_i of
+    g . E^-1 g (float64, summed in row order by ``coarse_gain``); rhs is left as it is. The same
+    operations in the same order as there, so that rows computed by the threads of a block give
+    the same bits as one thread's loop."""
+    s = wp.float64(0.0)
+    for j in range(size):
+        s += inverse[w, i, j] * wp.float64(rhs[w, j])
+    coef[w, i] = float(s)
+    terms[w, i] = s * wp.float64(rhs[w, i])
+
+
+@wp.func
+def coarse_gain(w: int, size: int, rhs: wp.array2d(dtype=float), terms: wp.array2d(dtype=wp.float64)):
+    """g . E^-1 g from the rows' ``coarse_row`` terms (summed in row order, as
+    ``coarse_coefficients`` does), then rhs = 0."""
+    g_c = wp.float64(0.0)
+    for i in range(size):
+        g_c += terms[w, i]
+    for i in range(size):
+        rhs[w, i] = 0.0
+    return float(g_c)
+
+
+@wp.func
 def coarse_assemble_node(
     i: int,
     mass: wp.array(dtype=float),

@@ -13,7 +13,9 @@ row functions as the phase kernels (``elastic.hessian_product_tet``,
 the world's alpha and beta are read after it). A world computes its rows in the same order either
 way, so with one thread per world (the CPU, which runs a launch's threads one after another) the
 results are bit-identical to the phase-by-phase CG's; on a GPU the float atomics' order differs, as
-it does between any two GPU runs.
+it does between any two GPU runs. The coarse part of the preconditioner (z's T E^-1 T^T r) is a
+dense product of the world's coarse inverse with T^T r: up to 24 x 24 (the rope's 8 aggregates),
+computed a row per thread where it is larger than one aggregate's 3 x 3 (``LANE_COARSE_SIZE``).
 
 The barrier (``block_sync.py``) is reached by every thread of a block: the iteration loop's bound
 and its exit read the world's flag after a barrier, the same value for all of the block's threads,
@@ -29,8 +31,14 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .block_sync import block_barrier
+from .coarse_space import coarse_gain, coarse_row
 from .elastic import hessian_product_tet
-from .linear_solve import end_iteration, node_product, update_direction, update_solution
+from .linear_solve import end_iteration, finish_iteration, node_product, update_direction, update_solution
+
+#: Coarse solves of at most this many unknowns (one aggregate: a compact object's) are applied by one
+#: thread of the block; larger ones (a slender object's aggregates) row by row by its threads
+#: (``coarse_space.coarse_row``), with one more barrier per iteration. The same bits either way.
+LANE_COARSE_SIZE = 3
 from .pad_edge_hessian import edge_point_slot_product
 
 
@@ -71,6 +79,7 @@ def cg_world_blocks(
     coarse_inverse: wp.array3d(dtype=wp.float64),
     coarse_rhs: wp.array2d(dtype=float),
     coarse_coef: wp.array2d(dtype=float),
+    coarse_terms: wp.array2d(dtype=wp.float64),
     rz: wp.array(dtype=float),
     rz_new: wp.array(dtype=float),
     p_ap: wp.array(dtype=float),
@@ -115,7 +124,16 @@ def cg_world_blocks(
             update_solution(i, p, ap, precond, free, node_world, node_aggregate, cg_active, rz, p_ap, dx, r, z,
                             rz_new, cg_update, coarse_rhs)
         block_barrier()
-        if lane == 0:
+        size = coarse_sizes[w]
+        if size > LANE_COARSE_SIZE:  # the same for every thread of the block: the barrier is reached by all
+            for i in range(lane, size, threads):
+                coarse_row(w, i, size, coarse_inverse, coarse_rhs, coarse_coef, coarse_terms)
+            block_barrier()
+            if lane == 0:
+                finish_iteration(w, coarse_gain(w, size, coarse_rhs, coarse_terms), rz_stop, update_tol,
+                                 max_iterations, rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total,
+                                 cg_active, cg_update)
+        elif lane == 0:
             end_iteration(w, rz_stop, update_tol, max_iterations, coarse_sizes, coarse_inverse, coarse_rhs,
                           coarse_coef, rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total, cg_active,
                           cg_update)
