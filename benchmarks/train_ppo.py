@@ -346,13 +346,17 @@ def cycled_objects(num_envs: int, **env_kwargs) -> tuple[str, ...]:
 
 
 def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float = 0.99,
-                 fixed_world_objects: bool = False, stagger_episodes: bool = False, **env_kwargs):
+                 fixed_world_objects: bool = False, stagger_episodes: bool = False,
+                 shard_devices: list[str] | None = None, **env_kwargs):
     """The SB3 view of the native vector env (``actions``: a key of
     ``defgrasp_env.rl.action_subset.ACTION_SETS``), with episode statistics and running
     normalisation of observations and rewards (discount ``gamma``).
     ``fixed_world_objects``: world i holds ``cycled_objects(...)[i]`` in every episode (the vector
     env's ``world_objects``: no model rebuild at autoresets), instead of a draw per episode.
-    ``stagger_episodes``: ``SB3VectorEnv(stagger_first_episodes=True)``."""
+    ``stagger_episodes``: ``SB3VectorEnv(stagger_first_episodes=True)``. ``shard_devices`` (two or
+    more): the worlds split over one vector env per entry, stepped in threads
+    (``defgrasp_env.make_sharded_vec``: ``["cpu", "cpu"]`` uses two CPU cores, ``["cuda:0",
+    "cuda:1"]`` two GPUs); the same episodes as one vector env, bit for bit on the CPU."""
     import gymnasium as gym
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
@@ -365,8 +369,15 @@ def make_vec_env(num_envs: int, seed: int, actions: str = "full", gamma: float =
     # gym.make_vec passes the registered 300-step limit on: derive it from the options instead
     steps = PickupConfig(**env_kwargs).max_episode_steps
     world_objects = cycled_objects(num_envs, **env_kwargs) if fixed_world_objects else None
-    env = gym.make_vec("DeformablePickup-v0", num_envs=num_envs, autoreset_mode="SameStep",
-                       max_episode_steps=steps, world_objects=world_objects, **env_kwargs)
+    if shard_devices is not None and len(shard_devices) > 1:
+        from defgrasp_env import make_sharded_vec
+
+        kwargs = {k: v for k, v in env_kwargs.items() if k != "device"}
+        env = make_sharded_vec(num_envs, shard_devices, autoreset_mode="SameStep", max_episode_steps=steps,
+                               world_objects=world_objects, **kwargs)
+    else:
+        env = gym.make_vec("DeformablePickup-v0", num_envs=num_envs, autoreset_mode="SameStep",
+                           max_episode_steps=steps, world_objects=world_objects, **env_kwargs)
     venv = SB3VectorEnv(env, stagger_first_episodes=stagger_episodes)
     venv.seed(seed)
     if actions != "full":
@@ -427,7 +438,7 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
         raise FileNotFoundError(f"--resume {folder}: no run.json there (the settings save_run writes)")
     saved = {**RECORDED_SINCE, **json.loads(path.read_text())}
     settings = json.loads(json.dumps(settings))  # as saved: tuples become lists
-    keys = [k for k in sorted(set(saved) | set(settings)) if k != "device"]
+    keys = [k for k in sorted(set(saved) | set(settings)) if k not in ("device", "shard_devices")]
     differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}"
               for k in keys if saved.get(k) != settings.get(k)]
     if differ:
@@ -441,7 +452,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
           gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, learning_rate: float = 3e-4,
           resume: pathlib.Path | None = None, init_from: pathlib.Path | None = None,
           fixed_world_objects: bool = False, stagger_episodes: bool = False, best: BestPolicy | None = None,
-          **env_kwargs):
+          shard_devices: list[str] | None = None, **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
     ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples)
@@ -452,7 +463,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     start this new run (e.g. a GPU run's policy fine-tuned with fewer worlds or another reward); its
     settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
     ``fixed_world_objects``: see ``make_vec_env``. ``stagger_episodes``: each world's first episode
-    cut at a random step (``SB3VectorEnv(stagger_first_episodes=True)``). ``best``: keeps the policy of the best cohort rate."""
+    cut at a random step (``SB3VectorEnv(stagger_first_episodes=True)``). ``best``: keeps the policy of the best cohort rate.
+    ``shard_devices``: see ``make_vec_env``."""
     from stable_baselines3 import PPO
 
     from defgrasp_env import PickupConfig
@@ -471,6 +483,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         settings["fixed_world_objects"] = True
     if stagger_episodes:  # the same
         settings["stagger_episodes"] = True
+    if shard_devices is not None:  # the same (a run may resume on other devices: not compared)
+        settings["shard_devices"] = list(shard_devices)
     config = PickupConfig(**env_kwargs)
     tolerance = config.success_tolerance
     episode_steps = config.max_episode_steps
@@ -484,7 +498,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         env_seed = seed + (rows[-1]["env_steps"] if rows else 0)
         venv = make_vec_env(num_envs, env_seed, actions=actions, gamma=gamma,
                             fixed_world_objects=fixed_world_objects, stagger_episodes=stagger_episodes,
-                            **env_kwargs)
+                            shard_devices=shard_devices, **env_kwargs)
         venv = load_normalisation(resume, venv)
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
@@ -493,7 +507,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model.learn(timesteps, callback=curve, reset_num_timesteps=False)
         return model, curve
     venv = make_vec_env(num_envs, seed, actions=actions, gamma=gamma, fixed_world_objects=fixed_world_objects,
-                        stagger_episodes=stagger_episodes, **env_kwargs)
+                        stagger_episodes=stagger_episodes, shard_devices=shard_devices, **env_kwargs)
     if init_from is not None:
         # the loaded statistics go on; the return normalisation uses this run's discount
         venv = load_normalisation(init_from, venv, gamma)
@@ -597,7 +611,10 @@ def main(argv=None) -> int:
                     help="draw each training episode's goal within --goal +- this (m per axis; PickupConfig."
                          "goal_noise): a curriculum of goals from near the ground up, e.g. --goal 0 0.35 0 "
                          "--goal-noise 0 0.3 0. eval_ppo.py evaluates at the env's task goal")
-    ap.add_argument("--device", default="cpu", help="simulation device (cpu, cuda:0)")
+    ap.add_argument("--device", default="cpu",
+                    help="simulation device (cpu, cuda:0), or several separated by commas: the worlds split over "
+                         "one vector env per entry, stepped in threads (cpu,cpu: two CPU cores; cuda:0,cuda:1: two "
+                         "GPUs; defgrasp_env.make_sharded_vec)")
     ap.add_argument("--torch-device", default="cpu", help="PPO network device")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--minutes", type=float, default=float("inf"), help="stop after this wall time (min)")
@@ -610,6 +627,9 @@ def main(argv=None) -> int:
                     help="keep the policy of the best cohort success rate over at least this many episodes in "
                          "--out/best (0: do not keep it)")
     args = ap.parse_args(argv)
+    devices = [d.strip() for d in args.device.split(",")]
+    if len(devices) > args.num_envs or not all(devices):
+        ap.error(f"--device must name 1 to --num-envs ({args.num_envs}) devices separated by commas, got {args.device!r}")
     t0 = time.perf_counter()
     out = pathlib.Path(args.out)
     resumed = args.resume is not None and pathlib.Path(args.resume).resolve() == out.resolve()
@@ -628,7 +648,8 @@ def main(argv=None) -> int:
                          init_from=args.init_from, fixed_world_objects=args.fixed_world_objects,
                          stagger_episodes=args.stagger_episodes,
                          object=parse_object(args.object), youngs_modulus=moduli,
-                         episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=args.device,
+                         episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=devices[0],
+                         shard_devices=devices if len(devices) > 1 else None,
                          best=best, **goals)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {', '.join(f'{e:g}' for e in args.youngs_modulus)} Pa, "

@@ -1,11 +1,13 @@
 """defgrasp: deformable-object pickup with complete FEM state.
 
-``import defgrasp_env`` registers ``DeformablePickup-v0`` (single env and native vector env).
+``import defgrasp_env`` registers ``DeformablePickup-v0`` (single env and native vector env);
+``make_sharded_vec`` splits a vector env's worlds over several devices or CPU cores.
 """
 
 import gymnasium as gym
 
 from .envs.config import PickupConfig
+from .envs.sharded_vector_env import ShardedVectorEnv, make_sharded_vec
 
 __version__ = "0.1.0"
 ENV_ID = "DeformablePickup-v0"
@@ -18,4 +20,4 @@ if ENV_ID not in gym.registry:
         max_episode_steps=PickupConfig().max_episode_steps,
     )
 
-__all__ = ["ENV_ID", "PickupConfig", "__version__"]
+__all__ = ["ENV_ID", "PickupConfig", "ShardedVectorEnv", "__version__", "make_sharded_vec"]

@@ -25,6 +25,7 @@ import warp as wp
 from ..gripper import Gripper, pad_reach
 from ..gripper import gripper as gripper_module
 from ..layout import NUM_KEYPOINTS
+from ..sim.launch_lock import scoped_capture
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.launch_cache import LaunchCache
@@ -439,7 +440,7 @@ class PickupScene:
             self._launches.launch(("gate", FORCE_TOLERANCE), close_gate_if_limited, self.num_worlds,
                                   [self._loads, FORCE_TOLERANCE], [self._gate])
 
-        with wp.ScopedCapture(device=d, force_module_load=False) as capture:
+        with scoped_capture(device=d, force_module_load=False) as capture:
             self._launches.launch(("open",), open_period_gate, 1, [], [self._gate])
             for k in range(count):
                 wp.capture_if(self._gate, on_true=functools.partial(first_try, k))

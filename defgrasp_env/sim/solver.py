@@ -21,6 +21,7 @@ import numpy as np
 import warp as wp
 
 from .kernels import substep as ksub
+from .launch_lock import scoped_capture
 from .materials import check_range
 from .model import Model
 from .solve_report import SolveReport, SolveStats
@@ -186,7 +187,7 @@ def graphs_supported(device) -> bool:
     if _CPU_GRAPHS is None:
         flag = wp.zeros(1, dtype=wp.int32, device=device)
         try:
-            with wp.ScopedCapture(device=device, force_module_load=False) as capture:
+            with scoped_capture(device=device, force_module_load=False) as capture:
                 wp.capture_while(flag, lambda: flag.zero_())
                 wp.capture_if(flag, on_true=lambda: flag.zero_(), on_false=lambda: flag.zero_())
             wp.capture_launch(capture.graph)
@@ -296,7 +297,7 @@ class ImplicitSolver:
         run, graphs = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
         if self.graphs and patient_any not in graphs:
             try:
-                with wp.ScopedCapture(device=self.model.device, force_module_load=False) as capture:
+                with scoped_capture(device=self.model.device, force_module_load=False) as capture:
                     self._advance(run, state_in, state_out, control, patient_any)
                 graphs[patient_any] = capture.graph
             except RuntimeError as exc:

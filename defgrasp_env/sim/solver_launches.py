@@ -38,6 +38,7 @@ from .kernels import substep as ksub
 from .kernels import world_cg as kwcg
 from .kernels import world_evaluate as kwev
 from .kernels import world_newton_step as kwns
+from .launch_lock import scoped_capture
 from .model import Model
 from .solver_scratch import SolverScratch
 from .state import Control, State
@@ -54,7 +55,7 @@ class LaunchSequence:
         self.graph = None
         if graph and self.commands and wp.get_device(device).is_cpu:
             try:
-                with wp.ScopedCapture(device=device) as capture:
+                with scoped_capture(device=device) as capture:
                     for cmd in self.commands:
                         cmd.launch()
                 self.graph = capture.graph
