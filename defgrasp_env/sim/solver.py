@@ -122,6 +122,10 @@ class SolverConfig:
             ``MAX_CG_BLOCK_THREADS`` (its kernel needs fewer registers than the evaluation's and the
             Newton step's, which stay at ``world_block_threads``), a multiple of 32 above 32. None
             (default): ``world_block_threads``. The CPU runs one thread per world either way.
+            Measured on an H100 (benchmarks/RESULTS.md, 2026-12-06): 512 against 256 made a lone
+            pressing rope's step 7 % shorter (mean 30.4 -> 28.4 ms) and the cuboid's at W = 1 no
+            shorter, but a W = 2000 batch 7 % and W = 4096 13 % longer (fewer worlds resident per
+            SM): hence not the default.
         graphs: capture each ``ImplicitSolver.advance`` as one graph and replay it (None: where
             the device can: CUDA with driver and toolkit >= 12.4 for conditional nodes, or Warp's
             CPU graphs). The results are those of the launches one by one (bitwise on the CPU).
