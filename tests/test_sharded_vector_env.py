@@ -30,9 +30,9 @@ def _actions(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 def _assert_info_equal(got: dict, want: dict, where: str) -> None:
-    """Every entry of ``want`` in ``got``: arrays equal where their ``_key`` mask is set (all rows
+    """The same entries in ``got`` as in ``want``: arrays equal where their ``_key`` mask is set (all rows
     where there is none); nested dicts (``final_obs``, ``final_info``) under their own mask."""
-    assert set(want) <= set(got), (where, sorted(set(want) - set(got)))
+    assert set(got) == set(want), (where, sorted(set(want) ^ set(got)))
     for key, value in want.items():
         rows = np.asarray(want.get(f"_{key}", np.ones(len(got[key]), bool)), bool) if not key.startswith("_") else None
         if isinstance(value, dict):
@@ -118,8 +118,9 @@ def test_sharded_env_checks_its_input():
 
 def test_launch_lock_keeps_captures_apart_from_launches():
     """A capture waits until every shared hold is let go, a shared hold waits for a waiting or
-    running capture (no starvation), a thread holding shared may capture (it lets go meanwhile,
-    no deadlock) and nested shared holds count once."""
+    running capture (no starvation), threads holding shared may capture (each lets go meanwhile:
+    no deadlock, and no thread's launches run during another's capture), nested shared holds count
+    once, and a capture inside the same thread's capture is refused."""
     lock, log = LaunchLock(), []
     inside, release = threading.Event(), threading.Event()
 
@@ -139,32 +140,50 @@ def test_launch_lock_keeps_captures_apart_from_launches():
     assert inside.wait(5.0)
     t2 = threading.Thread(target=capturer)
     t2.start()
-    time.sleep(0.2)
+    _wait_until(lambda: lock._waiting_writers == 1)
     assert log == []  # the capture waits for the launcher's step
     late = threading.Thread(target=lambda: (lock.shared().__enter__(), log.append("late launch")))
     late.start()
-    time.sleep(0.2)
+    time.sleep(0.2)  # time to get in, were it not held back
     assert log == []  # a new launcher waits behind the waiting capture
     release.set()
     for t in (t1, t2, late):
         t.join(5.0)
     assert log == ["launch done", "capture", "late launch"], log
 
-    lock2, order = LaunchLock(), []
+    lock2, spans, active = LaunchLock(), [], [0]
+    counter = threading.Lock()
 
     def step_that_captures(name):
         with lock2.shared():
-            order.append(f"{name} launches")
-            with lock2.capturing():
-                order.append(f"{name} captures")
-            order.append(f"{name} launches again")
+            for _ in range(3):
+                with counter:
+                    active[0] += 1
+                time.sleep(0.01)  # launching
+                with counter:
+                    active[0] -= 1
+                with lock2.capturing():
+                    with counter:
+                        spans.append((name, active[0]))  # launches running during this capture
+                    time.sleep(0.01)
 
-    threads = [threading.Thread(target=step_that_captures, args=(k,)) for k in "ab"]
+    threads = [threading.Thread(target=step_that_captures, args=(k,)) for k in "abc"]
     for t in threads:
         t.start()
     for t in threads:
-        t.join(5.0)
-    assert not any(t.is_alive() for t in threads) and len(order) == 6, order
+        t.join(10.0)
+    assert not any(t.is_alive() for t in threads) and len(spans) == 9, spans
+    assert all(running == 0 for _, running in spans), spans  # no launch ran beside a capture
+    with lock2.capturing(), pytest.raises(RuntimeError, match="already in progress"):
+        with lock2.capturing():
+            pass
+
+
+def _wait_until(condition, timeout: float = 5.0) -> None:
+    end = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.01)
 
 
 def test_sb3_ppo_trains_on_a_sharded_vector_env():

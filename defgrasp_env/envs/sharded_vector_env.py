@@ -22,7 +22,7 @@ arrays on the host (``torch_outputs`` is not supported: the shards' devices diff
 from __future__ import annotations
 
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 import warp as wp
@@ -64,12 +64,17 @@ def make_sharded_vec(num_envs: int, devices: Sequence[str], world_objects: Seque
     if world_objects is not None and (isinstance(world_objects, str) or len(world_objects) != num_envs):
         raise ValueError(f"world_objects must name one object per world ({num_envs}), got {world_objects!r}")
     shards, start = [], 0
-    for device, size in zip(devices, sizes):
-        objects = None if world_objects is None else tuple(world_objects[start:start + size])
-        shards.append(gym.make_vec("DeformablePickup-v0", num_envs=size, vectorization_mode="vector_entry_point",
-                                   device=device, world_objects=objects, **env_kwargs))
-        start += size
-    return ShardedVectorEnv(shards)
+    try:
+        for device, size in zip(devices, sizes):
+            objects = None if world_objects is None else tuple(world_objects[start:start + size])
+            shards.append(gym.make_vec("DeformablePickup-v0", num_envs=size, vectorization_mode="vector_entry_point",
+                                       device=device, world_objects=objects, **env_kwargs))
+            start += size
+        return ShardedVectorEnv(shards)
+    except Exception:
+        for shard in shards:  # the ones built before the error
+            shard.close()
+        raise
 
 
 class ShardedVectorEnv(VectorEnv):
@@ -110,7 +115,7 @@ class ShardedVectorEnv(VectorEnv):
         # shards' devices, and the first reset and step run the shards one after another (the
         # solver's kernels load at its first step, in the block sizes it launches)
         wp.force_load(device=sorted({str(shard.unwrapped.config.device) for shard in shards}))
-        self._sequential_calls = 2
+        self._first_reset = self._first_step = True
 
     # -- gym API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
@@ -129,41 +134,51 @@ class ShardedVectorEnv(VectorEnv):
                 shard_options["reset_mask"] = mask[part]
             return self.shards[k].reset(seed=seeds[part], options=shard_options)
 
-        results = self._run(reset_shard)
-        return _concat([obs for obs, _ in results]), _merge_infos([info for _, info in results])
+        results = self._run(reset_shard, sequential=self._first_reset)
+        self._first_reset = False
+        return _concat([obs for obs, _ in results]), _merge_infos([info for _, info in results], self._sizes())
 
     def step(self, actions):
+        if hasattr(actions, "detach"):  # a torch tensor (on any device), as the native env takes
+            actions = actions.detach().cpu().numpy()
         actions = np.asarray(actions)
         if actions.shape[:1] != (self.num_envs,):
             raise ValueError(f"actions must have {self.num_envs} rows (one per world), got shape {actions.shape}")
-        results = self._run(lambda k: self.shards[k].step(actions[self.offsets[k]:self.offsets[k + 1]]))
+        results = self._run(lambda k: self.shards[k].step(actions[self.offsets[k]:self.offsets[k + 1]]),
+                            sequential=self._first_step)
+        self._first_step = False
         obs, reward, terminated, truncated, infos = zip(*results)
         return (_concat(obs), np.concatenate(reward), np.concatenate(terminated), np.concatenate(truncated),
-                _merge_infos(list(infos)))
+                _merge_infos(list(infos), self._sizes()))
 
     def render(self):
         frames = self._run(lambda k: self.shards[k].render())
         return None if any(f is None for f in frames) else np.concatenate(frames)
 
     def close_extras(self, **kwargs):
+        self._pool.shutdown(wait=True)  # no shard is stepping while it closes
         for shard in self.shards:
             shard.close()
-        self._pool.shutdown(wait=True)
 
     # -- internals -------------------------------------------------------------------------
-    def _run(self, call) -> list:
+    def _sizes(self) -> list[int]:
+        return np.diff(self.offsets).tolist()
+
+    def _run(self, call, sequential: bool = False) -> list:
         """``call(k)`` for every shard k, each in a thread of the pool holding the launch lock
-        shared (one shard, and the first two calls: one after another in the calling thread);
-        results in shard order, a shard's exception raised here."""
+        shared (one shard, or ``sequential``: one after another in the calling thread); results in
+        shard order. Every shard's call has ended when this returns or raises (a shard's exception
+        is raised after the others finished: none is left stepping)."""
 
         def locked(k):
             with LAUNCH_LOCK.shared():
                 return call(k)
 
-        if len(self.shards) == 1 or self._sequential_calls > 0:
-            self._sequential_calls -= 1
+        if len(self.shards) == 1 or sequential:
             return [locked(k) for k in range(len(self.shards))]
-        return [f.result() for f in [self._pool.submit(locked, k) for k in range(len(self.shards))]]
+        futures = [self._pool.submit(locked, k) for k in range(len(self.shards))]
+        wait(futures)
+        return [f.result() for f in futures]
 
 
 def _concat(parts: list):
@@ -173,26 +188,16 @@ def _concat(parts: list):
     return np.concatenate(parts)
 
 
-def _merge_infos(infos: list[dict]) -> dict:
-    """The shards' vector infos as one: each key's arrays joined along the worlds; a key a shard
-    lacks is filled there (zeros, None in object arrays, False masks; nested dicts alike)."""
-    sizes = [_size(info) for info in infos]
+def _merge_infos(infos: list[dict], sizes: list[int]) -> dict:
+    """The shards' vector infos (of ``sizes`` worlds each) as one: each key's arrays joined along
+    the worlds; a key a shard lacks is filled there (zeros, None in object arrays, False masks;
+    nested dicts alike)."""
     merged = {}
     for key in dict.fromkeys(k for info in infos for k in info):
         template = next(info[key] for info in infos if key in info)
         parts = [info[key] if key in info else _blank(template, n) for info, n in zip(infos, sizes)]
-        merged[key] = _merge_infos(parts) if isinstance(template, dict) else np.concatenate(parts)
+        merged[key] = _merge_infos(parts, sizes) if isinstance(template, dict) else np.concatenate(parts)
     return merged
-
-
-def _size(info: dict) -> int:
-    """Worlds of a shard's info (the length of its arrays)."""
-    for value in info.values():
-        if isinstance(value, np.ndarray):
-            return len(value)
-        if isinstance(value, dict):
-            return _size(value)
-    raise ValueError("a shard's info holds no array")
 
 
 def _blank(template, n: int):

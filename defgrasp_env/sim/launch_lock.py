@@ -2,9 +2,11 @@
 
 A ``ShardedVectorEnv`` (``envs/sharded_vector_env.py``) steps several vector envs at once, one
 thread each (on a multi-core CPU, or one GPU each). Warp's kernels are reentrant and its launches
-release the GIL, but a graph capture is process-wide: while one is open (``wp.ScopedCapture``),
-every launch of any thread is recorded into it instead of run (and a second capture is refused,
-``Graph capture already in progress``). So every thread that launches holds the lock shared
+release the GIL, but on the CPU a graph capture is the process's: while one is open
+(``wp.ScopedCapture``), every launch of any thread is recorded into it instead of run, and a second
+capture is refused (``Graph capture already in progress``). On CUDA a capture records its own
+stream, so there the lock serialises more than needed. So every thread that launches holds the lock
+shared
 (``LAUNCH_LOCK.shared()``, around a whole env step or reset), and every capture holds it
 exclusively (``LAUNCH_LOCK.capturing()``): a capture waits until the other threads have finished
 their current step, and they wait for it. A thread that captures while it holds the lock shared
@@ -33,6 +35,7 @@ class LaunchLock:
         self._readers = 0         # shared holds, all threads
         self._writer = False      # a capture holds the lock
         self._waiting_writers = 0
+        self._writer_thread = None  # the thread holding it exclusively
         self._local = threading.local()
 
     def _held(self) -> int:
@@ -54,7 +57,8 @@ class LaunchLock:
     @contextlib.contextmanager
     def shared(self):
         """Hold while launching Warp kernels from a thread that may run beside others."""
-        if self._held():  # nested: the outer hold already keeps captures out
+        if self._held() or self._writer_thread == threading.get_ident():
+            # nested, or inside this thread's own capture: captures are already kept apart
             yield
             return
         self._acquire_shared(1)
@@ -65,7 +69,10 @@ class LaunchLock:
 
     @contextlib.contextmanager
     def capturing(self):
-        """Hold while capturing a Warp graph: no other thread launches meanwhile."""
+        """Hold while capturing a Warp graph: no other thread launches meanwhile. A capture inside
+        a capture of the same thread is refused (RuntimeError, as Warp refuses nested captures)."""
+        if self._writer_thread == threading.get_ident():
+            raise RuntimeError("Graph capture already in progress in this thread (LAUNCH_LOCK)")
         held = self._held()
         if held:
             self._release_shared(held)
@@ -77,11 +84,13 @@ class LaunchLock:
             finally:
                 self._waiting_writers -= 1
             self._writer = True
+            self._writer_thread = threading.get_ident()
         try:
             yield
         finally:
             with self._cond:
                 self._writer = False
+                self._writer_thread = None
                 self._cond.notify_all()
             if held:
                 self._acquire_shared(held)

@@ -244,14 +244,14 @@ def end_iteration(w: int, rz_stop: wp.array(dtype=float), update_tol: float, max
 
 
 @wp.func
-def finish_iteration(w: int, coarse_gain: float, rz_stop: wp.array(dtype=float), update_tol: float,
+def finish_iteration(w: int, gain: float, rz_stop: wp.array(dtype=float), update_tol: float,
                      max_iterations: int, rz: wp.array(dtype=float), rz_new: wp.array(dtype=float),
                      p_ap: wp.array(dtype=float), beta: wp.array(dtype=float), cg_iterations: wp.array(dtype=int),
                      cg_iterations_total: wp.array(dtype=int), cg_active: wp.array(dtype=int),
                      cg_update: wp.array(dtype=float)):
-    """``end_iteration`` after its coarse part (``coarse_gain`` = g . E^-1 g): r.z, beta, the
+    """``end_iteration`` after its coarse part (``gain`` = g . E^-1 g): r.z, beta, the
     stopping test, and the world's sums zeroed for the next iteration."""
-    rz_next = rz_new[w] + coarse_gain
+    rz_next = rz_new[w] + gain
     it = cg_iterations[w] + 1
     cg_iterations[w] = it
     cg_iterations_total[w] = cg_iterations_total[w] + 1
