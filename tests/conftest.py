@@ -27,3 +27,15 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "cuda" in item.keywords:
             item.add_marker(skip)
+
+
+def recording_cpu() -> bool:
+    """Whether this host's CPU is of the kind the shipped policies' CPU evaluations were recorded on
+    (an AMD EPYC): Warp compiles its CPU kernels with ``-march=native``, so their float results,
+    and a chaotic contact episode's steps, are bit-identical on one kind of CPU, not across kinds
+    (on a 2-core Intel Xeon, 2026-12-06, the same code took 1-106 more steps or missed 2 of 6)."""
+    try:
+        text = pathlib.Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+    return "AMD EPYC" in text

@@ -14,6 +14,7 @@ import gymnasium as gym
 import pytest
 
 import defgrasp_env  # noqa: F401
+from conftest import recording_cpu
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 POLICIES = ROOT / "benchmarks" / "policies"
@@ -28,6 +29,9 @@ HOLD = (POLICIES / "ppo_cuboid_scratch_hold_e1e6", FIGURES / "ppo_cuboid_hold_st
 def test_the_shipped_policy_picks_the_cuboid_as_evaluated(shipped, seed):
     from defgrasp_env.rl.ppo_policy import PPOPolicy
 
+    if not recording_cpu():
+        pytest.skip("the evaluation's episodes were recorded on an AMD EPYC: bit-identical there only "
+                    "(conftest.recording_cpu)")
     run, evaluation = shipped
     recorded = {e["seed"]: e for e in json.loads(evaluation.read_text())["episodes"]}[seed]
     assert recorded["success"]
