@@ -75,6 +75,7 @@ import pathlib
 import shutil
 import sys
 import time
+from dataclasses import dataclass
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
@@ -438,7 +439,8 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
         raise FileNotFoundError(f"--resume {folder}: no run.json there (the settings save_run writes)")
     saved = {**RECORDED_SINCE, **json.loads(path.read_text())}
     settings = json.loads(json.dumps(settings))  # as saved: tuples become lists
-    keys = [k for k in sorted(set(saved) | set(settings)) if k not in ("device", "shard_devices")]
+    # the devices may differ; a resumed run is never cloned again (its clone is in its weights)
+    keys = [k for k in sorted(set(saved) | set(settings)) if k not in ("device", "shard_devices", "clone_expert")]
     differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}"
               for k in keys if saved.get(k) != settings.get(k)]
     if differ:
@@ -447,28 +449,16 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
     return read_curve(folder)
 
 
-def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
-          torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
-          gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, learning_rate: float = 3e-4,
-          resume: pathlib.Path | None = None, init_from: pathlib.Path | None = None,
-          fixed_world_objects: bool = False, stagger_episodes: bool = False, best: BestPolicy | None = None,
-          shard_devices: list[str] | None = None, **env_kwargs):
-    """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
-    returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
-    ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples)
-    at Adam's ``learning_rate``.
-    ``resume``: a folder ``save_run`` wrote, with the same settings (``check_resume``); its model,
-    normalisation statistics and curve go on, the env seeded with ``seed`` + the env steps so far.
-    ``init_from``: a folder ``save_run`` wrote, whose policy weights and normalisation statistics
-    start this new run (e.g. a GPU run's policy fine-tuned with fewer worlds or another reward); its
-    settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
-    ``fixed_world_objects``: see ``make_vec_env``. ``stagger_episodes``: each world's first episode
-    cut at a random step (``SB3VectorEnv(stagger_first_episodes=True)``). ``best``: keeps the policy of the best cohort rate.
-    ``shard_devices``: see ``make_vec_env``."""
-    from stable_baselines3 import PPO
+#: The policy's initial log std of a fresh run (and of an action component a ``--init-from`` policy lacks).
+LOG_STD_INIT = -0.5
 
+
+def run_settings(num_envs: int, n_steps: int, actions: str, gamma: float, gae_lambda: float, n_epochs: int,
+                 learning_rate: float, seed: int, init_from=None, fixed_world_objects: bool = False,
+                 stagger_episodes: bool = False, shard_devices: list[str] | None = None, **env_kwargs) -> dict:
+    """A run's ``run.json``: its PPO and env options (``check_resume`` compares them; ``eval_ppo.py``
+    and ``PPOPolicy`` rebuild the env from them)."""
     from defgrasp_env import PickupConfig
-    from defgrasp_env.rl.policy_transfer import transfer_policy
 
     settings = dict(num_envs=num_envs, n_steps=n_steps, actions=actions, gamma=gamma, gae_lambda=gae_lambda,
                     n_epochs=n_epochs, learning_rate=learning_rate, seed=seed, **env_kwargs)
@@ -485,6 +475,97 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         settings["stagger_episodes"] = True
     if shard_devices is not None:  # the same (a run may resume on other devices: not compared)
         settings["shard_devices"] = list(shard_devices)
+    return settings
+
+
+def new_ppo(venv, n_steps: int, minibatches: int, n_epochs: int, learning_rate: float, gamma: float,
+            gae_lambda: float, seed: int, torch_device: str = "cpu", verbose: int = 0):
+    """A fresh SB3 PPO on ``venv`` with this script's settings (see the module docstring): a rollout
+    of ``n_steps`` per world in ``minibatches`` minibatches (fewer where one would hold under 64
+    samples), 3 x 256 networks, log std ``LOG_STD_INIT``."""
+    from stable_baselines3 import PPO
+
+    rollout = n_steps * venv.num_envs
+    minibatches = max(1, min(minibatches, rollout // 64))
+    return PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=rollout // minibatches,
+               n_epochs=n_epochs, learning_rate=learning_rate, gamma=gamma, gae_lambda=gae_lambda, clip_range=0.2,
+               target_kl=0.1, max_grad_norm=0.5, vf_coef=0.5, ent_coef=0.0,
+               policy_kwargs=dict(net_arch=[256, 256, 256], log_std_init=LOG_STD_INIT), seed=seed,
+               device=torch_device, verbose=verbose)
+
+
+@dataclass(frozen=True)
+class ExpertClone:
+    """``--clone-expert-steps``: a new run's policy starts as a clone of the scripted expert
+    (``defgrasp_env.rl.expert_cloning``): ``steps`` vector steps of the expert with Gaussian action
+    noise of std ``noise`` in the run's own env, then ``epochs`` passes of behaviour cloning (actor)
+    and return regression (critic)."""
+
+    steps: int
+    noise: float = 0.3
+    epochs: int = 20
+
+    def __post_init__(self):
+        if self.steps < 1 or self.epochs < 1 or not 0.0 <= self.noise < 1.0:
+            raise ValueError(f"clone steps and epochs must be >= 1 and noise in [0, 1), got {self.steps}, "
+                             f"{self.epochs}, {self.noise}")
+
+
+def clone_expert(model, venv, actions: str, clone: ExpertClone, seed: int) -> dict:
+    """Fit ``model``'s policy to the scripted expert in ``venv`` (``clone``); returns the record
+    ``run.json`` keeps: the options, the samples, the noisy expert's success rate over the episodes
+    that ended, the largest expert action outside the action set, the times and the last epoch's
+    losses (printed per epoch too)."""
+    from defgrasp_env.rl.action_subset import ACTION_SETS
+    from defgrasp_env.rl.expert_cloning import collect_expert_steps, fit_policy
+
+    t0 = time.perf_counter()
+    data = collect_expert_steps(venv, ACTION_SETS[actions], clone.steps, clone.noise,
+                                np.random.default_rng([seed, 0xC10E]))
+    t1 = time.perf_counter()
+    history = fit_policy(model.policy, venv, data, model.gamma, epochs=clone.epochs, rng=np.random.default_rng(seed))
+    t2 = time.perf_counter()
+    for i, row in enumerate(history):
+        print(f"clone epoch {i + 1}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
+    record = dict(steps=clone.steps, noise=clone.noise, epochs=clone.epochs, samples=data.num_samples,
+                  expert_episodes=int(len(data.successes)), expert_successes=int(data.successes.sum()),
+                  dropped_action_max=round(data.dropped_max, 4), collect_s=round(t1 - t0, 1), fit_s=round(t2 - t1, 1),
+                  **{k: round(v, 5) for k, v in history[-1].items()})
+    print("clone: " + json.dumps(record), flush=True)
+    return record
+
+
+def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
+          torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
+          gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, learning_rate: float = 3e-4,
+          resume: pathlib.Path | None = None, init_from: pathlib.Path | None = None,
+          fixed_world_objects: bool = False, stagger_episodes: bool = False, best: BestPolicy | None = None,
+          shard_devices: list[str] | None = None, clone: ExpertClone | None = None, **env_kwargs):
+    """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
+    returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
+    ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples)
+    at Adam's ``learning_rate``.
+    ``resume``: a folder ``save_run`` wrote, with the same settings (``check_resume``); its model,
+    normalisation statistics and curve go on, the env seeded with ``seed`` + the env steps so far.
+    ``init_from``: a folder ``save_run`` wrote, whose policy weights and normalisation statistics
+    start this new run (e.g. a GPU run's policy fine-tuned with fewer worlds or another reward); its
+    settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
+    ``fixed_world_objects``: see ``make_vec_env``. ``stagger_episodes``: each world's first episode
+    cut at a random step (``SB3VectorEnv(stagger_first_episodes=True)``). ``best``: keeps the policy of the best cohort rate.
+    ``shard_devices``: see ``make_vec_env``. ``clone``: a new run (neither ``resume`` nor
+    ``init_from``) starts from the scripted expert (``clone_expert``); its options and outcome go to
+    the run's settings as ``clone_expert``."""
+    from stable_baselines3 import PPO
+
+    from defgrasp_env import PickupConfig
+    from defgrasp_env.rl.policy_transfer import transfer_policy
+
+    settings = run_settings(num_envs=num_envs, n_steps=n_steps, actions=actions, gamma=gamma, gae_lambda=gae_lambda,
+                            n_epochs=n_epochs, learning_rate=learning_rate, seed=seed, init_from=init_from,
+                            fixed_world_objects=fixed_world_objects, stagger_episodes=stagger_episodes,
+                            shard_devices=shard_devices, **env_kwargs)
+    if clone is not None and (resume is not None or init_from is not None):
+        raise ValueError("clone starts a new run: not with resume or init_from")
     config = PickupConfig(**env_kwargs)
     tolerance = config.success_tolerance
     episode_steps = config.max_episode_steps
@@ -495,6 +576,9 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     if resume is not None:
         resume = pathlib.Path(resume)
         rows = check_resume(resume, settings)
+        cloned = json.loads((resume / "run.json").read_text()).get("clone_expert")
+        if cloned is not None:  # the run's start, kept in its record
+            settings["clone_expert"] = cloned
         env_seed = seed + (rows[-1]["env_steps"] if rows else 0)
         venv = make_vec_env(num_envs, env_seed, actions=actions, gamma=gamma,
                             fixed_world_objects=fixed_world_objects, stagger_episodes=stagger_episodes,
@@ -511,19 +595,15 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     if init_from is not None:
         # the loaded statistics go on; the return normalisation uses this run's discount
         venv = load_normalisation(init_from, venv, gamma)
-    rollout = n_steps * num_envs
-    minibatches = max(1, min(minibatches, rollout // 64))
-    log_std_init = -0.5
-    model = PPO("MultiInputPolicy", venv, n_steps=n_steps, batch_size=rollout // minibatches,
-                n_epochs=n_epochs, learning_rate=learning_rate, gamma=gamma, gae_lambda=gae_lambda, clip_range=0.2,
-                target_kl=0.1, max_grad_norm=0.5, vf_coef=0.5, ent_coef=0.0,
-                policy_kwargs=dict(net_arch=[256, 256, 256], log_std_init=log_std_init), seed=seed,
-                device=torch_device, verbose=verbose)
+    model = new_ppo(venv, n_steps=n_steps, minibatches=minibatches, n_epochs=n_epochs, learning_rate=learning_rate,
+                    gamma=gamma, gae_lambda=gae_lambda, seed=seed, torch_device=torch_device, verbose=verbose)
     if init_from is not None:
         trained = PPO.load(pathlib.Path(init_from) / "ppo.zip", device=torch_device)
         source_actions = json.loads((pathlib.Path(init_from) / "run.json").read_text()).get("actions", "full")
         model.policy.load_state_dict(transfer_policy(trained.policy.state_dict(), source_actions,
-                                                     model.policy.state_dict(), actions, log_std_init))
+                                                     model.policy.state_dict(), actions, LOG_STD_INIT))
+    if clone is not None:
+        settings["clone_expert"] = clone_expert(model, venv, actions, clone, seed)
     curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps,
                           best=best, task_goal=task_goal, holding_steps=holding)
     model.learn(timesteps, callback=curve)
@@ -623,6 +703,12 @@ def main(argv=None) -> int:
     ap.add_argument("--init-from", default=None,
                     help="folder of an earlier run whose policy and normalisation start a new run (other options "
                          "allowed); a run started so is resumed with the same --init-from")
+    ap.add_argument("--clone-expert-steps", type=int, default=0,
+                    help="start the new run's policy as a clone of the scripted expert: this many vector steps of "
+                         "the expert with action noise in the run's env, then behaviour cloning (0: off; "
+                         "--timesteps 0 saves the clone alone)")
+    ap.add_argument("--clone-noise", type=float, default=0.3, help="std of the expert's action noise while cloning")
+    ap.add_argument("--clone-epochs", type=int, default=20, help="passes over the expert's steps")
     ap.add_argument("--best-min-episodes", type=int, default=256,
                     help="keep the policy of the best cohort success rate over at least this many episodes in "
                          "--out/best (0: do not keep it)")
@@ -649,8 +735,9 @@ def main(argv=None) -> int:
                          stagger_episodes=args.stagger_episodes,
                          object=parse_object(args.object), youngs_modulus=moduli,
                          episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=devices[0],
-                         shard_devices=devices if len(devices) > 1 else None,
-                         best=best, **goals)
+                         shard_devices=devices if len(devices) > 1 else None, best=best,
+                         clone=ExpertClone(args.clone_expert_steps, args.clone_noise, args.clone_epochs)
+                         if args.clone_expert_steps else None, **goals)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {', '.join(f'{e:g}' for e in args.youngs_modulus)} Pa, "
              f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "

@@ -1,0 +1,137 @@
+"""``rl.expert_cloning``: noise-injected expert rollouts in the training env's SB3 stack, returns,
+and the behaviour-cloning fit; ``train_ppo.py --clone-expert-steps``."""
+
+import json
+import pathlib
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+
+from defgrasp_env.layout import DELTA_ACTION  # noqa: E402
+from defgrasp_env.policies.scripted_expert import ScriptedPickupExpert  # noqa: E402
+from defgrasp_env.rl.action_subset import POSITION_YAW_JAW  # noqa: E402
+from defgrasp_env.rl.expert_cloning import (ExpertSteps, collect_expert_steps, discounted_returns,  # noqa: E402
+                                            fit_policy)
+
+
+def _venv(n=3, seed=7, **kw):
+    from train_ppo import make_vec_env
+
+    return make_vec_env(n, seed, actions="position-yaw-jaw", gamma=0.8, youngs_modulus=1e6, **kw)
+
+
+def test_discounted_returns_sum_each_episode_alone():
+    """Against a direct sum over each episode's remaining steps (powers of gamma, no recursion)."""
+    rng = np.random.default_rng(3)
+    rewards = rng.normal(size=(23, 4))
+    dones = rng.random((23, 4)) < 0.2
+    gamma = 0.8
+    got = discounted_returns(rewards, dones, gamma)
+    for w in range(4):
+        for t in range(23):
+            end = next((k for k in range(t, 23) if dones[k, w]), 22)  # the episode's last step (or the data's)
+            want = sum(gamma ** (k - t) * rewards[k, w] for k in range(t, end + 1))
+            assert got[t, w] == pytest.approx(want, rel=1e-12, abs=1e-12)
+    with pytest.raises(ValueError, match="gamma"):
+        discounted_returns(rewards, dones, 1.5)
+    with pytest.raises(ValueError, match=r"\[T, N\]"):
+        discounted_returns(rewards[:, 0], dones[:, 0], gamma)
+
+
+def test_collected_labels_are_the_experts_actions_on_the_recorded_observations():
+    """A fresh expert replayed on the recorded (unnormalised) observations, reset where the data's
+    episodes ended, gives the labels bit for bit; the worlds stepped with the labels plus clipped
+    noise; the objects' episodes cut by the staggered starts are in ``dones``; the wrist's other
+    turns are ~0 for the top-down expert."""
+    venv = _venv(n=3, object=("cuboid", "rope", "torus"), fixed_world_objects=True, episode_seconds=1.0,
+                 stagger_episodes=True)
+    steps, noise = 30, 0.3
+    data = collect_expert_steps(venv, POSITION_YAW_JAW, steps, noise, np.random.default_rng(1))
+    assert data.actions.shape == data.executed.shape == (steps, 3, 5) and data.rewards.shape == (steps, 3)
+    assert data.obs["agent_pos"].shape == (steps, 3, 10) and data.num_samples == 90
+    assert data.dones.any() and len(data.successes) == data.dones.sum()  # 20-step episodes, staggered cuts
+    expert = ScriptedPickupExpert.from_env(venv.unwrapped.env)
+    columns = [DELTA_ACTION.names.index(c) for c in POSITION_YAW_JAW]
+    expert.reset()
+    for t in range(steps):
+        obs = {k: v[t] for k, v in data.obs.items()}
+        np.testing.assert_array_equal(expert(obs)[:, columns], data.actions[t])
+        if data.dones[t].any():
+            expert.reset(data.dones[t])
+    offset = data.executed - data.actions
+    assert np.all(np.abs(data.executed) <= 1.0) and np.all(np.isfinite(data.rewards))
+    inside = np.abs(data.executed) < 1.0  # not clipped: the raw noise
+    assert 0.2 < offset[inside].std() < 0.4 and abs(offset[inside].mean()) < 0.1  # 400+ draws of std 0.3
+    assert data.dropped_max < 0.05
+    venv.close()
+
+
+def test_noise_free_collection_executes_the_labels_and_the_fit_learns_a_known_mapping():
+    """noise 0: executed == labels. The fit, on labels made a known smooth function of the
+    observations (replacing the expert's), brings the held-out action error below a tenth of the
+    labels' variance and sets the policy's log std to log(noise); its critic error falls too."""
+    from train_ppo import new_ppo
+
+    venv = _venv(n=2, object="cuboid", episode_seconds=1.0)
+    data = collect_expert_steps(venv, POSITION_YAW_JAW, 40, 0.0, np.random.default_rng(0))
+    np.testing.assert_array_equal(data.executed, data.actions)
+    rng = np.random.default_rng(5)
+    weights = rng.normal(size=(10, 5))
+    pos = data.obs["agent_pos"].astype(np.float64)
+    z = (pos - pos.reshape(-1, 10).mean(0)) / (pos.reshape(-1, 10).std(0) + 1e-6)
+    known = ExpertSteps(data.obs, np.tanh(z @ weights * 0.5).astype(np.float32), data.executed, data.rewards,
+                        data.dones, data.successes, 0.0, data.components, 0.25)
+    model = new_ppo(venv, n_steps=8, minibatches=1, n_epochs=1, learning_rate=3e-4, gamma=0.8, gae_lambda=0.9, seed=0)
+    history = fit_policy(model.policy, venv, known, gamma=0.8, epochs=300, batch_size=32, learning_rate=1e-3,
+                         holdout=0.1, rng=np.random.default_rng(2))
+    variance = float(known.actions.var())
+    assert history[-1]["holdout_action_mse"] < 0.1 * variance < history[0]["holdout_action_mse"]
+    assert history[-1]["value_mse"] < 0.5 * history[0]["value_mse"]
+    np.testing.assert_allclose(model.policy.log_std.detach().cpu().numpy(), np.log(0.25), rtol=1e-6)
+    venv.close()
+
+
+def test_collect_and_fit_reject_bad_inputs():
+    from train_ppo import ExpertClone
+
+    venv = _venv(n=1, object="cuboid", episode_seconds=0.5)
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match=r"distinct names"):
+        collect_expert_steps(venv, ("vx", "vx", "vz", "wy", "jaw"), 2, 0.1, rng)
+    with pytest.raises(ValueError, match=r"components \['vx', 'vy', 'vz', 'jaw'\] have 4"):
+        collect_expert_steps(venv, ("vx", "vy", "vz", "jaw"), 2, 0.1, rng)
+    with pytest.raises(ValueError, match="steps must be >= 1, got 0"):
+        collect_expert_steps(venv, POSITION_YAW_JAW, 0, 0.1, rng)
+    with pytest.raises(ValueError, match="noise must be a finite std >= 0, got -0.1"):
+        collect_expert_steps(venv, POSITION_YAW_JAW, 2, -0.1, rng)
+    with pytest.raises(TypeError, match="VecNormalize"):
+        collect_expert_steps(venv.venv, POSITION_YAW_JAW, 2, 0.1, rng)
+    with pytest.raises(ValueError, match="clone steps and epochs"):
+        ExpertClone(steps=10, noise=1.5)
+    venv.close()
+
+
+def test_train_ppo_starts_from_the_clone_records_it_and_resumes_without_cloning_again(tmp_path):
+    """``train(clone=...)``: the clone's record in the run's settings (the noisy expert's episodes
+    counted as they ended); PPO then trains from the fitted policy; ``resume`` goes on without
+    repeating the clone (its record kept), and a clone with ``init_from`` is refused."""
+    from train_ppo import ExpertClone, save_run, train
+
+    kw = dict(num_envs=2, n_steps=8, minibatches=1, episode_seconds=0.5, actions="position-yaw-jaw", object="cuboid",
+              youngs_modulus=1e6, seed=3)
+    model, curve = train(timesteps=16, clone=ExpertClone(steps=12, noise=0.2, epochs=2), **kw)
+    record = curve.settings["clone_expert"]
+    assert record["samples"] == 24 and record["expert_episodes"] == 2 and record["noise"] == 0.2  # 10-step episodes
+    assert np.isclose(model.policy.log_std.detach().cpu().numpy(), np.log(0.2), atol=0.05).all()  # 2 PPO updates on
+    assert model.num_timesteps == 16
+    save_run(model, curve, tmp_path, "clone")
+    assert json.loads((tmp_path / "run.json").read_text())["clone_expert"]["steps"] == 12
+    resumed, curve2 = train(timesteps=32, resume=tmp_path, **kw)
+    assert resumed.num_timesteps == 16 + 32 and curve2.settings["clone_expert"] == record
+    with pytest.raises(ValueError, match="not with resume or init_from"):
+        train(timesteps=8, init_from=tmp_path, clone=ExpertClone(steps=4), **kw)
