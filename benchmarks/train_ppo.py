@@ -498,15 +498,15 @@ def new_ppo(venv, n_steps: int, minibatches: int, n_epochs: int, learning_rate: 
 class ExpertClone:
     """``--clone-expert-steps``: a new run's policy starts as a clone of the scripted expert
     (``defgrasp_env.rl.expert_cloning``): ``steps`` vector steps of the expert with Gaussian action
-    noise of std ``noise`` in the run's own env, then ``epochs`` passes of behaviour cloning (actor)
-    and return regression (critic)."""
+    noise of std ``noise`` (one for all components or one per component of the action set) in the
+    run's own env, then ``epochs`` passes of behaviour cloning (actor) and return regression (critic)."""
 
     steps: int
-    noise: float = 0.3
+    noise: float | tuple[float, ...] = 0.05
     epochs: int = 20
 
     def __post_init__(self):
-        if self.steps < 1 or self.epochs < 1 or not 0.0 <= self.noise < 1.0:
+        if self.steps < 1 or self.epochs < 1 or not all(0.0 <= n < 1.0 for n in np.atleast_1d(self.noise)):
             raise ValueError(f"clone steps and epochs must be >= 1 and noise in [0, 1), got {self.steps}, "
                              f"{self.epochs}, {self.noise}")
 
@@ -527,7 +527,7 @@ def clone_expert(model, venv, actions: str, clone: ExpertClone, seed: int) -> di
     t2 = time.perf_counter()
     for i, row in enumerate(history):
         print(f"clone epoch {i + 1}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
-    record = dict(steps=clone.steps, noise=clone.noise, epochs=clone.epochs, samples=data.num_samples,
+    record = dict(steps=clone.steps, noise=np.asarray(clone.noise).tolist(), epochs=clone.epochs, samples=data.num_samples,
                   expert_episodes=int(len(data.successes)), expert_successes=int(data.successes.sum()),
                   dropped_action_max=round(data.dropped_max, 4), collect_s=round(t1 - t0, 1), fit_s=round(t2 - t1, 1),
                   **{k: round(v, 5) for k, v in history[-1].items()})
@@ -707,7 +707,9 @@ def main(argv=None) -> int:
                     help="start the new run's policy as a clone of the scripted expert: this many vector steps of "
                          "the expert with action noise in the run's env, then behaviour cloning (0: off; "
                          "--timesteps 0 saves the clone alone)")
-    ap.add_argument("--clone-noise", type=float, default=0.3, help="std of the expert's action noise while cloning")
+    ap.add_argument("--clone-noise", type=float, nargs="+", default=[0.05],
+                    help="std of the expert's action noise while cloning: one for all components, or one per "
+                         "component of --actions (e.g. 0.1 0.1 0.1 0.1 0 for position-yaw-jaw: no jaw noise)")
     ap.add_argument("--clone-epochs", type=int, default=20, help="passes over the expert's steps")
     ap.add_argument("--best-min-episodes", type=int, default=256,
                     help="keep the policy of the best cohort success rate over at least this many episodes in "
@@ -736,7 +738,8 @@ def main(argv=None) -> int:
                          object=parse_object(args.object), youngs_modulus=moduli,
                          episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=devices[0],
                          shard_devices=devices if len(devices) > 1 else None, best=best,
-                         clone=ExpertClone(args.clone_expert_steps, args.clone_noise, args.clone_epochs)
+                         clone=ExpertClone(args.clone_expert_steps, args.clone_noise[0] if len(args.clone_noise) == 1
+                                           else tuple(args.clone_noise), args.clone_epochs)
                          if args.clone_expert_steps else None, **goals)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {', '.join(f'{e:g}' for e in args.youngs_modulus)} Pa, "

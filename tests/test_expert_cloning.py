@@ -46,11 +46,11 @@ def test_discounted_returns_sum_each_episode_alone():
 def test_collected_labels_are_the_experts_actions_on_the_recorded_observations():
     """A fresh expert replayed on the recorded (unnormalised) observations, reset where the data's
     episodes ended, gives the labels bit for bit; the worlds stepped with the labels plus clipped
-    noise; the objects' episodes cut by the staggered starts are in ``dones``; the wrist's other
-    turns are ~0 for the top-down expert."""
+    noise of each component's std (none on the jaw); the objects' episodes cut by the staggered
+    starts are in ``dones``; the wrist's other turns are ~0 for the top-down expert."""
     venv = _venv(n=3, object=("cuboid", "rope", "torus"), fixed_world_objects=True, episode_seconds=1.0,
                  stagger_episodes=True)
-    steps, noise = 30, 0.3
+    steps, noise = 30, (0.3, 0.3, 0.3, 0.3, 0.0)
     data = collect_expert_steps(venv, POSITION_YAW_JAW, steps, noise, np.random.default_rng(1))
     assert data.actions.shape == data.executed.shape == (steps, 3, 5) and data.rewards.shape == (steps, 3)
     assert data.obs["agent_pos"].shape == (steps, 3, 10) and data.num_samples == 90
@@ -63,10 +63,12 @@ def test_collected_labels_are_the_experts_actions_on_the_recorded_observations()
         np.testing.assert_array_equal(expert(obs)[:, columns], data.actions[t])
         if data.dones[t].any():
             expert.reset(data.dones[t])
-    offset = data.executed - data.actions
+    offset = (data.executed - data.actions)[..., :4]
     assert np.all(np.abs(data.executed) <= 1.0) and np.all(np.isfinite(data.rewards))
-    inside = np.abs(data.executed) < 1.0  # not clipped: the raw noise
-    assert 0.2 < offset[inside].std() < 0.4 and abs(offset[inside].mean()) < 0.1  # 400+ draws of std 0.3
+    np.testing.assert_array_equal(data.executed[..., 4], data.actions[..., 4])  # the jaw's std 0
+    inside = np.abs(data.executed[..., :4]) < 1.0  # not clipped: the raw noise
+    assert 0.2 < offset[inside].std() < 0.4 and abs(offset[inside].mean()) < 0.1  # 200+ draws of std 0.3
+    np.testing.assert_array_equal(data.noise, noise)
     assert data.dropped_max < 0.05
     venv.close()
 
@@ -74,7 +76,7 @@ def test_collected_labels_are_the_experts_actions_on_the_recorded_observations()
 def test_noise_free_collection_executes_the_labels_and_the_fit_learns_a_known_mapping():
     """noise 0: executed == labels. The fit, on labels made a known smooth function of the
     observations (replacing the expert's), brings the held-out action error below a tenth of the
-    labels' variance and sets the policy's log std to log(noise); its critic error falls too."""
+    labels' variance and sets the policy's log std to log(noise) (0.05 at least); its critic error falls too."""
     from train_ppo import new_ppo
 
     venv = _venv(n=2, object="cuboid", episode_seconds=1.0)
@@ -85,14 +87,14 @@ def test_noise_free_collection_executes_the_labels_and_the_fit_learns_a_known_ma
     pos = data.obs["agent_pos"].astype(np.float64)
     z = (pos - pos.reshape(-1, 10).mean(0)) / (pos.reshape(-1, 10).std(0) + 1e-6)
     known = ExpertSteps(data.obs, np.tanh(z @ weights * 0.5).astype(np.float32), data.executed, data.rewards,
-                        data.dones, data.successes, 0.0, data.components, 0.25)
+                        data.dones, data.successes, 0.0, data.components, np.array([0.25, 0.25, 0.25, 0.25, 0.0]))
     model = new_ppo(venv, n_steps=8, minibatches=1, n_epochs=1, learning_rate=3e-4, gamma=0.8, gae_lambda=0.9, seed=0)
     history = fit_policy(model.policy, venv, known, gamma=0.8, epochs=300, batch_size=32, learning_rate=1e-3,
                          holdout=0.1, rng=np.random.default_rng(2))
     variance = float(known.actions.var())
     assert history[-1]["holdout_action_mse"] < 0.1 * variance < history[0]["holdout_action_mse"]
     assert history[-1]["value_mse"] < 0.5 * history[0]["value_mse"]
-    np.testing.assert_allclose(model.policy.log_std.detach().cpu().numpy(), np.log(0.25), rtol=1e-6)
+    np.testing.assert_allclose(model.policy.log_std.detach().cpu().numpy(), np.log([0.25] * 4 + [0.05]), rtol=1e-6)
     venv.close()
 
 
@@ -107,8 +109,10 @@ def test_collect_and_fit_reject_bad_inputs():
         collect_expert_steps(venv, ("vx", "vy", "vz", "jaw"), 2, 0.1, rng)
     with pytest.raises(ValueError, match="steps must be >= 1, got 0"):
         collect_expert_steps(venv, POSITION_YAW_JAW, 0, 0.1, rng)
-    with pytest.raises(ValueError, match="noise must be a finite std >= 0, got -0.1"):
+    with pytest.raises(ValueError, match=r"noise must be one finite std >= 0 or one per component \(5\), got -0.1"):
         collect_expert_steps(venv, POSITION_YAW_JAW, 2, -0.1, rng)
+    with pytest.raises(ValueError, match="one per component"):
+        collect_expert_steps(venv, POSITION_YAW_JAW, 2, (0.1, 0.1), rng)
     with pytest.raises(TypeError, match="VecNormalize"):
         collect_expert_steps(venv.venv, POSITION_YAW_JAW, 2, 0.1, rng)
     with pytest.raises(ValueError, match="clone steps and epochs"):

@@ -20,13 +20,13 @@ five are what a policy of the same action set can start from.
 * ``fit_policy(policy, normalizer, data, gamma, ...)``: Adam on the mean squared error of the
   policy's Gaussian mean against the labels plus ``value_weight`` times that of its value against
   the returns of the normalised rewards (observations and rewards normalised by the final
-  statistics), over a random held-out share; sets the policy's ``log_std`` to ``log(noise)`` (the
-  data's own spread). Returns the losses per epoch.
+  statistics), over a random held-out share; sets the policy's ``log_std`` to ``log(noise)`` per
+  component (the data's own spread; ``min_std`` at least, so that PPO still explores a component
+  collected without noise). Returns the losses per epoch.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -54,7 +54,7 @@ class ExpertSteps:
         dropped_max: max |action| over the collection of the expert's ``DELTA_ACTION`` components
             outside ``components`` (the policy cannot reproduce them; ~0 for a top-down expert).
         components: the ``DELTA_ACTION`` names of the A action columns.
-        noise: std of the executed actions' Gaussian noise.
+        noise: [A] std of the executed actions' Gaussian noise, per action column.
     """
 
     obs: dict
@@ -65,7 +65,7 @@ class ExpertSteps:
     successes: np.ndarray
     dropped_max: float
     components: tuple[str, ...]
-    noise: float
+    noise: np.ndarray
 
     @property
     def num_samples(self) -> int:
@@ -81,11 +81,12 @@ def _native_env(venv):
     return env
 
 
-def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: float,
+def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: float | Sequence[float],
                          rng: np.random.Generator) -> ExpertSteps:
     """Run ``steps`` vector steps of the noise-injected scripted expert in ``venv`` (see the module
     docstring) from a fresh ``reset()``; ``components``: the ``DELTA_ACTION`` names ``venv``'s action
-    space holds, in its order."""
+    space holds, in its order; ``noise``: the std of the actions' noise, one for all or one per
+    component."""
     from stable_baselines3.common.vec_env import VecNormalize
 
     if not isinstance(venv, VecNormalize):
@@ -99,8 +100,10 @@ def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: flo
                          f"have {len(components)}")
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
-    if not (math.isfinite(noise) and noise >= 0.0):
-        raise ValueError(f"noise must be a finite std >= 0, got {noise}")
+    std = np.broadcast_to(np.asarray(noise, np.float64), (len(components),)) if np.ndim(noise) == 0 \
+        else np.asarray(noise, np.float64)
+    if std.shape != (len(components),) or not np.all(np.isfinite(std) & (std >= 0.0)):
+        raise ValueError(f"noise must be one finite std >= 0 or one per component ({len(components)}), got {noise}")
     columns = np.array([names.index(c) for c in components])
     dropped = np.setdiff1d(np.arange(DELTA_ACTION.size), columns)
     expert = ScriptedPickupExpert.from_env(_native_env(venv))
@@ -123,7 +126,7 @@ def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: flo
         for k, v in raw.items():
             obs[k][t] = v
         labels[t] = full[:, columns]
-        executed[t] = np.clip(labels[t] + rng.normal(0.0, noise, labels[t].shape), -1.0, 1.0) if noise else labels[t]
+        executed[t] = np.clip(labels[t] + rng.normal(0.0, std, labels[t].shape), -1.0, 1.0) if std.any() else labels[t]
         _, _, done, infos = venv.step(executed[t])
         rewards[t] = venv.get_original_reward()
         dones[t] = done
@@ -134,7 +137,7 @@ def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: flo
             expert.reset(done)
         raw = venv.get_original_obs()
     return ExpertSteps(obs, labels, executed, rewards, dones, np.array(successes, bool), dropped_max,
-                       tuple(components), float(noise))
+                       tuple(components), std.copy())
 
 
 def discounted_returns(rewards: np.ndarray, dones: np.ndarray, gamma: float) -> np.ndarray:
@@ -155,16 +158,16 @@ def discounted_returns(rewards: np.ndarray, dones: np.ndarray, gamma: float) -> 
 
 def fit_policy(policy, normalizer, data: ExpertSteps, gamma: float, epochs: int = 20, batch_size: int = 4096,
                learning_rate: float = 3e-4, value_weight: float = 0.5, holdout: float = 0.05,
-               rng: np.random.Generator | None = None) -> list[dict]:
+               min_std: float = 0.05, rng: np.random.Generator | None = None) -> list[dict]:
     """Fit SB3 ``policy`` (an ``ActorCriticPolicy`` with a diagonal Gaussian) to ``data`` (see the
     module docstring); ``normalizer``: the ``VecNormalize`` whose statistics the run will use.
     Returns one dict per epoch: ``action_mse`` / ``value_mse`` on the training and held-out
     samples (``holdout_*``; labels in [-1, 1], returns in normalised-reward units)."""
     import torch
 
-    if epochs < 1 or batch_size < 1 or not 0.0 <= holdout < 1.0:
-        raise ValueError(f"epochs and batch_size must be >= 1 and holdout in [0, 1), got {epochs}, {batch_size}, "
-                         f"{holdout}")
+    if epochs < 1 or batch_size < 1 or not 0.0 <= holdout < 1.0 or not min_std > 0.0:
+        raise ValueError(f"epochs and batch_size must be >= 1, holdout in [0, 1) and min_std > 0, got {epochs}, "
+                         f"{batch_size}, {holdout}, {min_std}")
     if policy.action_space.shape != (data.actions.shape[-1],):
         raise ValueError(f"the policy's actions have shape {policy.action_space.shape}, the data's "
                          f"{data.actions.shape[-1:]}")
@@ -182,7 +185,7 @@ def fit_policy(policy, normalizer, data: ExpertSteps, gamma: float, epochs: int 
     held = order[:int(round(holdout * len(labels)))]
     train = order[len(held):]
     with torch.no_grad():
-        policy.log_std.fill_(math.log(max(data.noise, 1e-3)))
+        policy.log_std.copy_(torch.as_tensor(np.log(np.maximum(data.noise, min_std)), dtype=policy.log_std.dtype))
     params = [p for name, p in policy.named_parameters() if name != "log_std"]
     optimiser = torch.optim.Adam(params, lr=learning_rate)
 
