@@ -430,6 +430,10 @@ def save_run(model, curve: LearningCurve, out: pathlib.Path, title: str) -> None
 RECORDED_SINCE = {"learning_rate": 3e-4}
 
 
+#: Settings of how a run started (``clone``, ``policy_std``): recorded, not repeated by a resume.
+START_SETTINGS = ("clone_expert", "policy_std")
+
+
 def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
     """The curve rows of the run saved in ``folder`` if its settings (``run.json``; a key it lacks
     reads as ``RECORDED_SINCE`` gives) are ``settings`` (the simulation device may differ); else
@@ -439,8 +443,8 @@ def check_resume(folder: pathlib.Path, settings: dict) -> list[dict]:
         raise FileNotFoundError(f"--resume {folder}: no run.json there (the settings save_run writes)")
     saved = {**RECORDED_SINCE, **json.loads(path.read_text())}
     settings = json.loads(json.dumps(settings))  # as saved: tuples become lists
-    # the devices may differ; a resumed run is never cloned again (its clone is in its weights)
-    keys = [k for k in sorted(set(saved) | set(settings)) if k not in ("device", "shard_devices", "clone_expert")]
+    # the devices may differ; a resumed run is not started again (its start is in its weights)
+    keys = [k for k in sorted(set(saved) | set(settings)) if k not in ("device", "shard_devices") + START_SETTINGS]
     differ = [f"{k}: saved {saved.get(k)!r}, given {settings.get(k)!r}"
               for k in keys if saved.get(k) != settings.get(k)]
     if differ:
@@ -535,12 +539,24 @@ def clone_expert(model, venv, actions: str, clone: ExpertClone, seed: int) -> di
     return record
 
 
+def set_policy_std(policy, std: float) -> float:
+    """Set the std of SB3 ``policy``'s Gaussian (its ``log_std``) to ``std`` on every component; returns it."""
+    import torch
+
+    if not 0.0 < std < 10.0:
+        raise ValueError(f"policy std must be in (0, 10), got {std}")
+    with torch.no_grad():
+        policy.log_std.fill_(float(np.log(std)))
+    return float(std)
+
+
 def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minibatches: int = 32,
           torch_device: str = "cpu", verbose: int = 0, max_seconds: float = float("inf"), actions: str = "full",
           gamma: float = 0.8, gae_lambda: float = 0.9, n_epochs: int = 8, learning_rate: float = 3e-4,
           resume: pathlib.Path | None = None, init_from: pathlib.Path | None = None,
           fixed_world_objects: bool = False, stagger_episodes: bool = False, best: BestPolicy | None = None,
-          shard_devices: list[str] | None = None, clone: ExpertClone | None = None, **env_kwargs):
+          shard_devices: list[str] | None = None, clone: ExpertClone | None = None,
+          policy_std: float | None = None, **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
     ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples)
@@ -554,7 +570,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     cut at a random step (``SB3VectorEnv(stagger_first_episodes=True)``). ``best``: keeps the policy of the best cohort rate.
     ``shard_devices``: see ``make_vec_env``. ``clone``: a new run (neither ``resume`` nor
     ``init_from``) starts from the scripted expert (``clone_expert``); its options and outcome go to
-    the run's settings as ``clone_expert``."""
+    the run's settings as ``clone_expert``. ``policy_std``: a new run's policy starts with this
+    std on every action component (after ``init_from`` or ``clone``, which otherwise set it)."""
     from stable_baselines3 import PPO
 
     from defgrasp_env import PickupConfig
@@ -566,6 +583,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                             shard_devices=shard_devices, **env_kwargs)
     if clone is not None and (resume is not None or init_from is not None):
         raise ValueError("clone starts a new run: not with resume or init_from")
+    if policy_std is not None and resume is not None:
+        raise ValueError("policy_std sets a new run's start: not with resume (the run's std goes on)")
     config = PickupConfig(**env_kwargs)
     tolerance = config.success_tolerance
     episode_steps = config.max_episode_steps
@@ -576,9 +595,10 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     if resume is not None:
         resume = pathlib.Path(resume)
         rows = check_resume(resume, settings)
-        cloned = json.loads((resume / "run.json").read_text()).get("clone_expert")
-        if cloned is not None:  # the run's start, kept in its record
-            settings["clone_expert"] = cloned
+        saved = json.loads((resume / "run.json").read_text())
+        for key in START_SETTINGS:  # the run's start, kept in its record
+            if key in saved:
+                settings[key] = saved[key]
         env_seed = seed + (rows[-1]["env_steps"] if rows else 0)
         venv = make_vec_env(num_envs, env_seed, actions=actions, gamma=gamma,
                             fixed_world_objects=fixed_world_objects, stagger_episodes=stagger_episodes,
@@ -604,6 +624,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                                                      model.policy.state_dict(), actions, LOG_STD_INIT))
     if clone is not None:
         settings["clone_expert"] = clone_expert(model, venv, actions, clone, seed)
+    if policy_std is not None:
+        settings["policy_std"] = set_policy_std(model.policy, policy_std)
     curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps,
                           best=best, task_goal=task_goal, holding_steps=holding)
     model.learn(timesteps, callback=curve)
@@ -711,6 +733,9 @@ def main(argv=None) -> int:
                     help="std of the expert's action noise while cloning: one for all components, or one per "
                          "component of --actions (e.g. 0.1 0.1 0.1 0.1 0 for position-yaw-jaw: no jaw noise)")
     ap.add_argument("--clone-epochs", type=int, default=20, help="passes over the expert's steps")
+    ap.add_argument("--policy-std", type=float, default=None,
+                    help="a new run's policy starts with this std on every action component (default: 0.61 for a "
+                         "fresh policy, --init-from's, or the clone's noise)")
     ap.add_argument("--best-min-episodes", type=int, default=256,
                     help="keep the policy of the best cohort success rate over at least this many episodes in "
                          "--out/best (0: do not keep it)")
@@ -740,7 +765,7 @@ def main(argv=None) -> int:
                          shard_devices=devices if len(devices) > 1 else None, best=best,
                          clone=ExpertClone(args.clone_expert_steps, args.clone_noise[0] if len(args.clone_noise) == 1
                                            else tuple(args.clone_noise), args.clone_epochs)
-                         if args.clone_expert_steps else None, **goals)
+                         if args.clone_expert_steps else None, policy_std=args.policy_std, **goals)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {', '.join(f'{e:g}' for e in args.youngs_modulus)} Pa, "
              f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "

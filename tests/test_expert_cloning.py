@@ -139,3 +139,27 @@ def test_train_ppo_starts_from_the_clone_records_it_and_resumes_without_cloning_
     assert resumed.num_timesteps == 16 + 32 and curve2.settings["clone_expert"] == record
     with pytest.raises(ValueError, match="not with resume or init_from"):
         train(timesteps=8, init_from=tmp_path, clone=ExpertClone(steps=4), **kw)
+    with pytest.raises(ValueError, match="policy_std sets a new run's start: not with resume"):
+        train(timesteps=8, resume=tmp_path, policy_std=0.3, **kw)
+
+
+def test_policy_std_sets_a_new_runs_std_after_its_init_and_is_kept_by_a_resume(tmp_path):
+    """``train(init_from=..., policy_std=0.4)``: every component's std starts at 0.4 (the source's
+    are 0.2 and 0.05 here), the other weights are the source's; a resume keeps the record."""
+    import torch
+    from train_ppo import ExpertClone, save_run, train
+
+    kw = dict(num_envs=2, n_steps=8, minibatches=1, episode_seconds=0.5, actions="position-yaw-jaw", object="cuboid",
+              youngs_modulus=1e6, seed=3)
+    source, curve = train(timesteps=0, clone=ExpertClone(steps=4, noise=(0.2, 0.2, 0.2, 0.2, 0.0), epochs=1), **kw)
+    save_run(source, curve, tmp_path / "clone", "clone")
+    np.testing.assert_allclose(source.policy.log_std.detach().numpy(), np.log([0.2] * 4 + [0.05]), rtol=1e-6)
+    model, curve2 = train(timesteps=0, init_from=tmp_path / "clone", policy_std=0.4, **kw)
+    np.testing.assert_allclose(model.policy.log_std.detach().numpy(), np.log(0.4), rtol=1e-6)
+    torch.testing.assert_close(model.policy.action_net.weight, source.policy.action_net.weight)
+    assert curve2.settings["policy_std"] == 0.4
+    save_run(model, curve2, tmp_path / "ft", "ft")
+    _, curve3 = train(timesteps=16, resume=tmp_path / "ft", init_from=tmp_path / "clone", **kw)
+    assert curve3.settings["policy_std"] == 0.4
+    with pytest.raises(ValueError, match=r"policy std must be in \(0, 10\), got 0.0"):
+        train(timesteps=0, policy_std=0.0, **kw)
