@@ -515,24 +515,28 @@ class ExpertClone:
                              f"{self.epochs}, {self.noise}")
 
 
-def clone_expert(model, venv, actions: str, clone: ExpertClone, seed: int) -> dict:
-    """Fit ``model``'s policy to the scripted expert in ``venv`` (``clone``); returns the record
-    ``run.json`` keeps: the options, the samples, the noisy expert's success rate over the episodes
-    that ended, the largest expert action outside the action set, the times and the last epoch's
+def clone_expert(model, venv, actions: str, clone: ExpertClone, seed: int, dagger: bool = False) -> dict:
+    """Fit ``model``'s policy to the scripted expert in ``venv`` (``clone``); ``dagger``: the model's
+    own policy (its mean, plus the clone's noise) drives the worlds while the expert labels them,
+    and the fit goes on from its weights. Returns the record ``run.json`` keeps: the options, the
+    samples, the success rate of the episodes that ended (the noisy expert's, or the driving
+    policy's), the largest expert action outside the action set, the times and the last epoch's
     losses (printed per epoch too)."""
     from defgrasp_env.rl.action_subset import ACTION_SETS
     from defgrasp_env.rl.expert_cloning import collect_expert_steps, fit_policy
 
     t0 = time.perf_counter()
+    driver = (lambda obs: model.predict(obs, deterministic=True)[0]) if dagger else None
     data = collect_expert_steps(venv, ACTION_SETS[actions], clone.steps, clone.noise,
-                                np.random.default_rng([seed, 0xC10E]))
+                                np.random.default_rng([seed, 0xC10E]), driver=driver)
     t1 = time.perf_counter()
     history = fit_policy(model.policy, venv, data, model.gamma, epochs=clone.epochs, rng=np.random.default_rng(seed))
     t2 = time.perf_counter()
     for i, row in enumerate(history):
         print(f"clone epoch {i + 1}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
     record = dict(steps=clone.steps, noise=np.asarray(clone.noise).tolist(), epochs=clone.epochs, samples=data.num_samples,
-                  expert_episodes=int(len(data.successes)), expert_successes=int(data.successes.sum()),
+                  driver="policy" if dagger else "expert",
+                  driven_episodes=int(len(data.successes)), driven_successes=int(data.successes.sum()),
                   dropped_action_max=round(data.dropped_max, 4), collect_s=round(t1 - t0, 1), fit_s=round(t2 - t1, 1),
                   **{k: round(v, 5) for k, v in history[-1].items()})
     print("clone: " + json.dumps(record), flush=True)
@@ -568,9 +572,9 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
     ``fixed_world_objects``: see ``make_vec_env``. ``stagger_episodes``: each world's first episode
     cut at a random step (``SB3VectorEnv(stagger_first_episodes=True)``). ``best``: keeps the policy of the best cohort rate.
-    ``shard_devices``: see ``make_vec_env``. ``clone``: a new run (neither ``resume`` nor
-    ``init_from``) starts from the scripted expert (``clone_expert``); its options and outcome go to
-    the run's settings as ``clone_expert``. ``policy_std``: a new run's policy starts with this
+    ``shard_devices``: see ``make_vec_env``. ``clone``: a new run starts from the scripted expert
+    (``clone_expert``; with ``init_from``, that policy drives the collection and its weights start
+    the fit: a DAgger round); its options and outcome go to the run's settings as ``clone_expert``. ``policy_std``: a new run's policy starts with this
     std on every action component (after ``init_from`` or ``clone``, which otherwise set it)."""
     from stable_baselines3 import PPO
 
@@ -581,8 +585,8 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                             n_epochs=n_epochs, learning_rate=learning_rate, seed=seed, init_from=init_from,
                             fixed_world_objects=fixed_world_objects, stagger_episodes=stagger_episodes,
                             shard_devices=shard_devices, **env_kwargs)
-    if clone is not None and (resume is not None or init_from is not None):
-        raise ValueError("clone starts a new run: not with resume or init_from")
+    if clone is not None and resume is not None:
+        raise ValueError("clone starts a new run: not with resume")
     if policy_std is not None and resume is not None:
         raise ValueError("policy_std sets a new run's start: not with resume (the run's std goes on)")
     config = PickupConfig(**env_kwargs)
@@ -623,7 +627,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model.policy.load_state_dict(transfer_policy(trained.policy.state_dict(), source_actions,
                                                      model.policy.state_dict(), actions, LOG_STD_INIT))
     if clone is not None:
-        settings["clone_expert"] = clone_expert(model, venv, actions, clone, seed)
+        settings["clone_expert"] = clone_expert(model, venv, actions, clone, seed, dagger=init_from is not None)
     if policy_std is not None:
         settings["policy_std"] = set_policy_std(model.policy, policy_std)
     curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps,
@@ -728,7 +732,8 @@ def main(argv=None) -> int:
     ap.add_argument("--clone-expert-steps", type=int, default=0,
                     help="start the new run's policy as a clone of the scripted expert: this many vector steps of "
                          "the expert with action noise in the run's env, then behaviour cloning (0: off; "
-                         "--timesteps 0 saves the clone alone)")
+                         "--timesteps 0 saves the clone alone); with --init-from, that policy drives the worlds, "
+                         "the expert labels their states and the fit goes on from its weights (a DAgger round)")
     ap.add_argument("--clone-noise", type=float, nargs="+", default=[0.05],
                     help="std of the expert's action noise while cloning: one for all components, or one per "
                          "component of --actions (e.g. 0.1 0.1 0.1 0.1 0 for position-yaw-jaw: no jaw noise)")

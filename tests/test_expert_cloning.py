@@ -123,22 +123,27 @@ def test_collect_and_fit_reject_bad_inputs():
 def test_train_ppo_starts_from_the_clone_records_it_and_resumes_without_cloning_again(tmp_path):
     """``train(clone=...)``: the clone's record in the run's settings (the noisy expert's episodes
     counted as they ended); PPO then trains from the fitted policy; ``resume`` goes on without
-    repeating the clone (its record kept), and a clone with ``init_from`` is refused."""
+    repeating the clone (its record kept) and refuses a clone; a clone with ``init_from`` is a DAgger
+    round."""
     from train_ppo import ExpertClone, save_run, train
 
     kw = dict(num_envs=2, n_steps=8, minibatches=1, episode_seconds=0.5, actions="position-yaw-jaw", object="cuboid",
               youngs_modulus=1e6, seed=3)
     model, curve = train(timesteps=16, clone=ExpertClone(steps=12, noise=0.2, epochs=2), **kw)
     record = curve.settings["clone_expert"]
-    assert record["samples"] == 24 and record["expert_episodes"] == 2 and record["noise"] == 0.2  # 10-step episodes
+    assert record["samples"] == 24 and record["driven_episodes"] == 2 and record["noise"] == 0.2  # 10-step episodes
+    assert record["driver"] == "expert"
     assert np.isclose(model.policy.log_std.detach().cpu().numpy(), np.log(0.2), atol=0.05).all()  # 2 PPO updates on
     assert model.num_timesteps == 16
     save_run(model, curve, tmp_path, "clone")
     assert json.loads((tmp_path / "run.json").read_text())["clone_expert"]["steps"] == 12
     resumed, curve2 = train(timesteps=32, resume=tmp_path, **kw)
     assert resumed.num_timesteps == 16 + 32 and curve2.settings["clone_expert"] == record
-    with pytest.raises(ValueError, match="not with resume or init_from"):
-        train(timesteps=8, init_from=tmp_path, clone=ExpertClone(steps=4), **kw)
+    with pytest.raises(ValueError, match="clone starts a new run: not with resume"):
+        train(timesteps=8, resume=tmp_path, clone=ExpertClone(steps=4), **kw)
+    # with init_from: a DAgger round, the saved policy driving, the fit going on from its weights
+    dagger, curve3 = train(timesteps=0, init_from=tmp_path, clone=ExpertClone(steps=6, noise=0.0, epochs=1), **kw)
+    assert curve3.settings["clone_expert"]["driver"] == "policy" and curve3.settings["init_from"] == str(tmp_path)
     with pytest.raises(ValueError, match="policy_std sets a new run's start: not with resume"):
         train(timesteps=8, resume=tmp_path, policy_std=0.3, **kw)
 
@@ -163,3 +168,30 @@ def test_policy_std_sets_a_new_runs_std_after_its_init_and_is_kept_by_a_resume(t
     assert curve3.settings["policy_std"] == 0.4
     with pytest.raises(ValueError, match=r"policy std must be in \(0, 10\), got 0.0"):
         train(timesteps=0, policy_std=0.0, **kw)
+
+
+def test_a_driver_steps_the_worlds_while_the_expert_labels_its_states():
+    """DAgger: with ``driver`` (here a still wrist with the jaw open, then one closing it), the worlds
+    step with the driver's actions, not the expert's: the executed actions are the driver's and the
+    flange never moves, while the labels are a fresh expert's on those states (it keeps asking to
+    move toward the object)."""
+    venv = _venv(n=2, object="cuboid", episode_seconds=1.0)
+    calls = []
+
+    def driver(obs):
+        calls.append({k: v.copy() for k, v in obs.items()})
+        return np.tile(np.array([0, 0, 0, 0, -1.0], np.float32), (2, 1))
+
+    data = collect_expert_steps(venv, POSITION_YAW_JAW, 12, 0.0, np.random.default_rng(0), driver=driver)
+    assert len(calls) == 12
+    np.testing.assert_array_equal(data.executed, np.tile(np.array([0, 0, 0, 0, -1.0], np.float32), (12, 2, 1)))
+    flange = data.obs["agent_pos"][..., :3]
+    assert np.abs(flange - flange[0]).max() < 1e-4  # m: the driver's still wrist
+    assert np.abs(data.actions[..., :3]).max() > 0.5  # the expert asks to move to its grasp
+    # the driver saw the normalised observations venv returned (clipped at 10 std), not the raw ones
+    assert all(np.abs(c["agent_pos"]).max() <= 10.0 for c in calls)
+    assert not np.allclose(calls[1]["agent_pos"], data.obs["agent_pos"][1], atol=1e-3)
+    with pytest.raises(ValueError, match=r"driver actions must have shape \(2, 5\)"):
+        collect_expert_steps(venv, POSITION_YAW_JAW, 2, 0.0, np.random.default_rng(0),
+                             driver=lambda obs: np.zeros((2, 4), np.float32))
+    venv.close()

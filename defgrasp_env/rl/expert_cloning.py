@@ -27,7 +27,7 @@ five are what a policy of the same action set can start from.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,11 +45,12 @@ class ExpertSteps:
     Attributes:
         obs: observation dict, each key [T, N, ...] float32 (the env's units: m, N, xyzw).
         actions: [T, N, A] float32 clean expert actions of ``components`` (the labels), in [-1, 1].
-        executed: [T, N, A] float32 actions the worlds stepped with (labels + clipped noise).
+        executed: [T, N, A] float32 actions the worlds stepped with (the expert's or the driver's,
+            plus the noise, clipped).
         rewards: [T, N] float64 env rewards of each step (unnormalised).
         dones: [T, N] bool: the world's episode ended at this step (terminated, truncated or cut).
         successes: [E] bool: some step of the episode read ``is_success``, for every episode that
-            ended during the collection (where a success does not end the episode, its last step
+            ended during the collection (under the noisy expert, or the driver where one drove) (where a success does not end the episode, its last step
             need not be one).
         dropped_max: max |action| over the collection of the expert's ``DELTA_ACTION`` components
             outside ``components`` (the policy cannot reproduce them; ~0 for a top-down expert).
@@ -82,11 +83,14 @@ def _native_env(venv):
 
 
 def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: float | Sequence[float],
-                         rng: np.random.Generator) -> ExpertSteps:
+                         rng: np.random.Generator, driver: Callable[[dict], np.ndarray] | None = None) -> ExpertSteps:
     """Run ``steps`` vector steps of the noise-injected scripted expert in ``venv`` (see the module
     docstring) from a fresh ``reset()``; ``components``: the ``DELTA_ACTION`` names ``venv``'s action
     space holds, in its order; ``noise``: the std of the actions' noise, one for all or one per
-    component."""
+    component. ``driver``: where given, the worlds step with ``driver(obs)`` (plus the noise) instead
+    of the expert's actions, ``obs`` the normalised observations ``venv`` returns, and the expert
+    labels the states the driver reaches (DAgger: a cloned policy's own states relabelled; the
+    expert's phases follow the observations, and it retreats and retries a lost grasp)."""
     from stable_baselines3.common.vec_env import VecNormalize
 
     if not isinstance(venv, VecNormalize):
@@ -108,7 +112,7 @@ def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: flo
     dropped = np.setdiff1d(np.arange(DELTA_ACTION.size), columns)
     expert = ScriptedPickupExpert.from_env(_native_env(venv))
     n = venv.num_envs
-    venv.reset()
+    seen = venv.reset()
     raw = venv.get_original_obs()
     expert.reset()
     obs = {k: np.empty((steps,) + v.shape, np.float32) for k, v in raw.items()}
@@ -126,8 +130,11 @@ def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: flo
         for k, v in raw.items():
             obs[k][t] = v
         labels[t] = full[:, columns]
-        executed[t] = np.clip(labels[t] + rng.normal(0.0, std, labels[t].shape), -1.0, 1.0) if std.any() else labels[t]
-        _, _, done, infos = venv.step(executed[t])
+        base = labels[t] if driver is None else np.asarray(driver(seen), np.float32)
+        if base.shape != labels[t].shape:
+            raise ValueError(f"driver actions must have shape {labels[t].shape}, got {base.shape}")
+        executed[t] = np.clip(base + rng.normal(0.0, std, base.shape), -1.0, 1.0) if std.any() else base
+        seen, _, done, infos = venv.step(executed[t])
         rewards[t] = venv.get_original_reward()
         dones[t] = done
         succeeded |= [bool(info.get("is_success", False)) for info in infos]
