@@ -7,13 +7,15 @@ policy, not the torus (lifted by the rim, its feature point off the grasp) nor t
 (the jaw closing beside it); the scripted expert picks all five objects, and its actions on the
 five are what a policy of the same action set can start from.
 
-* ``collect_expert_steps(venv, components, steps, noise, rng)``: ``venv`` is the SB3 stack
+* ``collect_expert_steps(venv, components, steps, noise, rng, driver=None)``: ``venv`` is the SB3 stack
   ``train_ppo.make_vec_env`` builds (``VecNormalize`` around ``VecMonitor`` around an optional
   ``ActionSubset`` around ``SB3VectorEnv``); the expert (``ScriptedPickupExpert.from_env`` of the
   native vector env) reads the unnormalised observations; the worlds execute its actions with
   Gaussian noise of std ``noise`` (clipped to [-1, 1]: the DART recipe, so that the data covers the
   states a policy's own errors lead to), the labels are its clean actions (the ``components`` of
   ``DELTA_ACTION`` the policy controls). The ``VecNormalize`` statistics are updated as in training.
+  ``driver=``: a policy (e.g. the clone) steps the worlds instead and the expert labels the states
+  it reaches (a DAgger round: the states a cloned policy's own errors lead to, relabelled).
 * ``discounted_returns(rewards, dones, gamma)``: per world, within episodes (an episode cut by the
   end of the data is not bootstrapped: at the training discount 0.8 a step's return is 99 % set by
   its next 20 steps).
