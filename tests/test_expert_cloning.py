@@ -195,3 +195,19 @@ def test_a_driver_steps_the_worlds_while_the_expert_labels_its_states():
         collect_expert_steps(venv, POSITION_YAW_JAW, 2, 0.0, np.random.default_rng(0),
                              driver=lambda obs: np.zeros((2, 4), np.float32))
     venv.close()
+
+
+def test_collection_over_cpu_shards_equals_one_vector_env():
+    """``train_ppo.py --device cpu,cpu``: the expert configures itself from a ``ShardedVectorEnv``
+    (its ``config``) and the collected steps are those of one vector env, bit for bit."""
+    kw = dict(object=("cuboid", "torus", "rope"), fixed_world_objects=True, episode_seconds=0.75)
+    one = collect_expert_steps(_venv(n=3, **kw), POSITION_YAW_JAW, 20, 0.1, np.random.default_rng(4))
+    sharded = _venv(n=3, shard_devices=["cpu", "cpu"], **kw)
+    assert sharded.unwrapped.env.config.youngs_modulus == 1e6
+    two = collect_expert_steps(sharded, POSITION_YAW_JAW, 20, 0.1, np.random.default_rng(4))
+    for k in one.obs:
+        np.testing.assert_array_equal(one.obs[k], two.obs[k])
+    np.testing.assert_array_equal(one.actions, two.actions)
+    np.testing.assert_array_equal(one.rewards, two.rewards)
+    np.testing.assert_array_equal(one.dones, two.dones)
+    sharded.close()

@@ -107,6 +107,10 @@ def test_sharded_env_checks_its_input():
     b = gym.make_vec("DeformablePickup-v0", num_envs=1, vectorization_mode="vector_entry_point", max_episode_steps=6)
     with pytest.raises(ValueError, match="shard 1's max_episode_steps \\(6\\) differs"):
         ShardedVectorEnv([a, b])
+    c = gym.make_vec("DeformablePickup-v0", num_envs=1, vectorization_mode="vector_entry_point", max_episode_steps=5,
+                     youngs_modulus=1e6)
+    with pytest.raises(ValueError, match="shard 1's PickupConfig differs from shard 0's other than in its device"):
+        ShardedVectorEnv([a, c])
     env = make_sharded_vec(3, ["cpu", "cpu"], object="cuboid", world_objects=["cuboid"] * 3)
     env.reset(seed=0)
     with pytest.raises(ValueError, match="3 rows.*\\(2, 7\\)"):

@@ -21,6 +21,7 @@ arrays on the host (``torch_outputs`` is not supported: the shards' devices diff
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 
@@ -95,7 +96,12 @@ class ShardedVectorEnv(VectorEnv):
                 if getattr(env, name) != getattr(first, name):
                     raise ValueError(f"shard {k}'s {name} ({getattr(env, name)!r}) differs from shard 0's "
                                      f"({getattr(first, name)!r})")
+            if dataclasses.replace(env.config, device=first.config.device) != first.config:
+                raise ValueError(f"shard {k}'s PickupConfig differs from shard 0's other than in its device")
         self.shards = shards
+        #: the shards' ``PickupConfig`` (shard 0's: the others differ at most in ``device``), read by
+        #: what configures itself from an env (``ScriptedPickupExpert.from_env``, ``SB3VectorEnv``)
+        self.config = first.config
         sizes = [s.num_envs for s in shards]
         #: [K + 1] world offsets: shard k holds worlds offsets[k] .. offsets[k + 1] - 1 of the whole
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
