@@ -560,7 +560,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
           resume: pathlib.Path | None = None, init_from: pathlib.Path | None = None,
           fixed_world_objects: bool = False, stagger_episodes: bool = False, best: BestPolicy | None = None,
           shard_devices: list[str] | None = None, clone: ExpertClone | None = None,
-          policy_std: float | None = None, **env_kwargs):
+          policy_std: float | None = None, freeze_obs_normalisation: bool = False, **env_kwargs):
     """Train PPO for ``timesteps`` env steps or ``max_seconds`` of wall time, whichever comes first;
     returns (model, LearningCurve). A rollout of ``n_steps`` per world is learned from in
     ``n_epochs`` passes of ``minibatches`` minibatches (fewer where one would hold under 64 samples)
@@ -575,16 +575,22 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     ``shard_devices``: see ``make_vec_env``. ``clone``: a new run starts from the scripted expert
     (``clone_expert``; with ``init_from``, that policy drives the collection and its weights start
     the fit: a DAgger round); its options and outcome go to the run's settings as ``clone_expert``. ``policy_std``: a new run's policy starts with this
-    std on every action component (after ``init_from`` or ``clone``, which otherwise set it)."""
+    std on every action component (after ``init_from`` or ``clone``, which otherwise set it).
+    ``freeze_obs_normalisation``: the observation statistics stay those the run starts with (after
+    ``init_from`` / ``clone``; ``rl.normalisation``), for a fine-tune of a policy fitted under them;
+    otherwise they are updated as the run goes (a frozen ``init_from`` run's thawed)."""
     from stable_baselines3 import PPO
 
     from defgrasp_env import PickupConfig
+    from defgrasp_env.rl.normalisation import set_observation_statistics_frozen
     from defgrasp_env.rl.policy_transfer import transfer_policy
 
     settings = run_settings(num_envs=num_envs, n_steps=n_steps, actions=actions, gamma=gamma, gae_lambda=gae_lambda,
                             n_epochs=n_epochs, learning_rate=learning_rate, seed=seed, init_from=init_from,
                             fixed_world_objects=fixed_world_objects, stagger_episodes=stagger_episodes,
                             shard_devices=shard_devices, **env_kwargs)
+    if freeze_obs_normalisation:  # only when set: the run.json of earlier runs lacks it
+        settings["freeze_obs_normalisation"] = True
     if clone is not None and resume is not None:
         raise ValueError("clone starts a new run: not with resume")
     if policy_std is not None and resume is not None:
@@ -608,6 +614,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                             fixed_world_objects=fixed_world_objects, stagger_episodes=stagger_episodes,
                             shard_devices=shard_devices, **env_kwargs)
         venv = load_normalisation(resume, venv)
+        set_observation_statistics_frozen(venv, freeze_obs_normalisation)  # as saved (check_resume)
         model = PPO.load(resume / "ppo.zip", env=venv, device=torch_device)
         model.set_random_seed(env_seed)  # PPO.load re-seeds the env with the saved run's seed
         curve = LearningCurve(settings, env_seed, max_seconds, rows=rows, success_tolerance=tolerance,
@@ -630,6 +637,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         settings["clone_expert"] = clone_expert(model, venv, actions, clone, seed, dagger=init_from is not None)
     if policy_std is not None:
         settings["policy_std"] = set_policy_std(model.policy, policy_std)
+    set_observation_statistics_frozen(venv, freeze_obs_normalisation)
     curve = LearningCurve(settings, seed, max_seconds, success_tolerance=tolerance, episode_steps=episode_steps,
                           best=best, task_goal=task_goal, holding_steps=holding)
     model.learn(timesteps, callback=curve)
@@ -741,6 +749,10 @@ def main(argv=None) -> int:
     ap.add_argument("--policy-std", type=float, default=None,
                     help="a new run's policy starts with this std on every action component (default: 0.61 for a "
                          "fresh policy, --init-from's, or the clone's noise)")
+    ap.add_argument("--freeze-obs-normalisation", action="store_true",
+                    help="keep the observation normalisation statistics the run starts with (--init-from's or the "
+                         "clone's): a policy fitted under them reads other inputs for the same state once they drift "
+                         "(PPO from the expert clone then held every object 0.1 m below the goal, RESULTS.md)")
     ap.add_argument("--best-min-episodes", type=int, default=256,
                     help="keep the policy of the best cohort success rate over at least this many episodes in "
                          "--out/best (0: do not keep it)")
@@ -770,7 +782,8 @@ def main(argv=None) -> int:
                          shard_devices=devices if len(devices) > 1 else None, best=best,
                          clone=ExpertClone(args.clone_expert_steps, args.clone_noise[0] if len(args.clone_noise) == 1
                                            else tuple(args.clone_noise), args.clone_epochs)
-                         if args.clone_expert_steps else None, policy_std=args.policy_std, **goals)
+                         if args.clone_expert_steps else None, policy_std=args.policy_std,
+                         freeze_obs_normalisation=args.freeze_obs_normalisation, **goals)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {', '.join(f'{e:g}' for e in args.youngs_modulus)} Pa, "
              f"{args.num_envs} worlds on {args.device}, actions {args.actions}; {model.num_timesteps} env steps "

@@ -211,3 +211,52 @@ def test_collection_over_cpu_shards_equals_one_vector_env():
     np.testing.assert_array_equal(one.rewards, two.rewards)
     np.testing.assert_array_equal(one.dones, two.dones)
     sharded.close()
+
+
+def test_frozen_observation_statistics_stay_while_rewards_are_still_normalised(tmp_path):
+    """``rl.normalisation``: frozen, a VecNormalize's observation means, variances and counts stay
+    bit for bit over steps while its return statistics move; thawed they move again; a saved and
+    loaded VecNormalize stays frozen. ``train(freeze_obs_normalisation=True)`` from a saved run keeps
+    that run's statistics through PPO's steps (without it they change), and records the option."""
+    from stable_baselines3.common.vec_env import VecNormalize
+    from train_ppo import ExpertClone, save_run, train
+
+    from defgrasp_env.rl.normalisation import observation_statistics_frozen, set_observation_statistics_frozen
+
+    def stats(v):
+        return {k: (r.mean.copy(), r.var.copy(), r.count) for k, r in v.obs_rms.items()}
+
+    def same(a, b):
+        return all(np.array_equal(a[k][0], b[k][0]) and np.array_equal(a[k][1], b[k][1]) and a[k][2] == b[k][2]
+                   for k in a)
+
+    venv = _venv(n=2, object="cuboid", episode_seconds=0.5)
+    venv.reset()
+    step = np.full((2, 5), 0.5, np.float32)
+    venv.step(step)
+    set_observation_statistics_frozen(venv, True)
+    assert observation_statistics_frozen(venv)
+    before, ret = stats(venv), venv.ret_rms.count
+    for _ in range(3):
+        venv.step(step)
+    assert same(before, stats(venv)) and venv.ret_rms.count == ret + 3 * 2  # a count per world-step
+    venv.save(str(tmp_path / "v.pkl"))
+    loaded = VecNormalize.load(str(tmp_path / "v.pkl"), venv.venv)
+    assert observation_statistics_frozen(loaded) and same(before, stats(loaded))
+    set_observation_statistics_frozen(venv, False)
+    assert not observation_statistics_frozen(venv) and same(before, stats(venv))  # thawed with its values
+    venv.step(step)
+    assert not same(before, stats(venv))
+    with pytest.raises(TypeError, match="VecNormalize"):
+        set_observation_statistics_frozen(venv.venv, True)
+    venv.close()
+
+    kw = dict(num_envs=2, n_steps=8, minibatches=1, episode_seconds=0.5, actions="position-yaw-jaw", object="cuboid",
+              youngs_modulus=1e6, seed=3)
+    source, curve = train(timesteps=0, clone=ExpertClone(steps=6, epochs=1), **kw)
+    save_run(source, curve, tmp_path / "clone", "clone")
+    start = stats(source.get_vec_normalize_env())
+    frozen, curve2 = train(timesteps=16, init_from=tmp_path / "clone", freeze_obs_normalisation=True, **kw)
+    assert same(start, stats(frozen.get_vec_normalize_env())) and curve2.settings["freeze_obs_normalisation"]
+    moving, curve3 = train(timesteps=16, init_from=tmp_path / "clone", **kw)
+    assert not same(start, stats(moving.get_vec_normalize_env())) and "freeze_obs_normalisation" not in curve3.settings
