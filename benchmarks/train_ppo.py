@@ -430,7 +430,7 @@ def save_run(model, curve: LearningCurve, out: pathlib.Path, title: str) -> None
 RECORDED_SINCE = {"learning_rate": 3e-4}
 
 
-#: Settings of how a run started (``clone``, ``policy_std``): recorded, not repeated by a resume.
+#: Settings of how a run started (``train``'s ``clone`` and ``policy_std``): recorded, not repeated by a resume.
 START_SETTINGS = ("clone_expert", "policy_std")
 
 
@@ -515,28 +515,32 @@ class ExpertClone:
                              f"{self.epochs}, {self.noise}")
 
 
-def clone_expert(model, venv, actions: str, clone: ExpertClone, seed: int, dagger: bool = False) -> dict:
-    """Fit ``model``'s policy to the scripted expert in ``venv`` (``clone``); ``dagger``: the model's
-    own policy (its mean, plus the clone's noise) drives the worlds while the expert labels them,
-    and the fit goes on from its weights. Returns the record ``run.json`` keeps: the options, the
-    samples, the success rate of the episodes that ended (the noisy expert's, or the driving
-    policy's), the largest expert action outside the action set, the times and the last epoch's
-    losses (printed per epoch too)."""
+def clone_options(args) -> ExpertClone:
+    """``ExpertClone`` of the command line (``--clone-*``; the dataclass's defaults where not given)."""
+    kw = {} if args.clone_epochs is None else {"epochs": args.clone_epochs}
+    if args.clone_noise is not None:
+        kw["noise"] = args.clone_noise[0] if len(args.clone_noise) == 1 else tuple(args.clone_noise)
+    return ExpertClone(args.clone_expert_steps, **kw)
+
+
+def clone_expert(model, venv, actions: str, clone: ExpertClone, seed: int) -> dict:
+    """Fit ``model``'s policy to the scripted expert in ``venv`` (``clone``); returns the record
+    ``run.json`` keeps: the options, the samples, the noisy expert's episodes that ended (the
+    staggered first ones left out) and its successes among them, the largest expert action outside
+    the action set, the times and the last epoch's losses (printed per epoch too)."""
     from defgrasp_env.rl.action_subset import ACTION_SETS
     from defgrasp_env.rl.expert_cloning import collect_expert_steps, fit_policy
 
     t0 = time.perf_counter()
-    driver = (lambda obs: model.predict(obs, deterministic=True)[0]) if dagger else None
     data = collect_expert_steps(venv, ACTION_SETS[actions], clone.steps, clone.noise,
-                                np.random.default_rng([seed, 0xC10E]), driver=driver)
+                                np.random.default_rng([seed, 0xC10E]))
     t1 = time.perf_counter()
     history = fit_policy(model.policy, venv, data, model.gamma, epochs=clone.epochs, rng=np.random.default_rng(seed))
     t2 = time.perf_counter()
     for i, row in enumerate(history):
         print(f"clone epoch {i + 1}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
     record = dict(steps=clone.steps, noise=np.asarray(clone.noise).tolist(), epochs=clone.epochs, samples=data.num_samples,
-                  driver="policy" if dagger else "expert",
-                  driven_episodes=int(len(data.successes)), driven_successes=int(data.successes.sum()),
+                  expert_episodes=int(len(data.successes)), expert_successes=int(data.successes.sum()),
                   dropped_action_max=round(data.dropped_max, 4), collect_s=round(t1 - t0, 1), fit_s=round(t2 - t1, 1),
                   **{k: round(v, 5) for k, v in history[-1].items()})
     print("clone: " + json.dumps(record), flush=True)
@@ -572,9 +576,9 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
     settings may differ (another ``actions`` set too: ``transfer_policy``); the curve starts afresh.
     ``fixed_world_objects``: see ``make_vec_env``. ``stagger_episodes``: each world's first episode
     cut at a random step (``SB3VectorEnv(stagger_first_episodes=True)``). ``best``: keeps the policy of the best cohort rate.
-    ``shard_devices``: see ``make_vec_env``. ``clone``: a new run starts from the scripted expert
-    (``clone_expert``; with ``init_from``, that policy drives the collection and its weights start
-    the fit: a DAgger round); its options and outcome go to the run's settings as ``clone_expert``. ``policy_std``: a new run's policy starts with this
+    ``shard_devices``: see ``make_vec_env``. ``clone``: a new run (neither ``resume`` nor
+    ``init_from``) starts from the scripted expert (``clone_expert``); its options and outcome go to
+    the run's settings as ``clone_expert``. ``policy_std``: a new run's policy starts with this
     std on every action component (after ``init_from`` or ``clone``, which otherwise set it).
     ``freeze_obs_normalisation``: the observation statistics stay those the run starts with (after
     ``init_from`` / ``clone``; ``rl.normalisation``), for a fine-tune of a policy fitted under them;
@@ -591,10 +595,11 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
                             shard_devices=shard_devices, **env_kwargs)
     if freeze_obs_normalisation:  # only when set: the run.json of earlier runs lacks it
         settings["freeze_obs_normalisation"] = True
-    if clone is not None and resume is not None:
-        raise ValueError("clone starts a new run: not with resume")
+    if clone is not None and (resume is not None or init_from is not None):
+        raise ValueError("a clone of the expert (--clone-expert-steps) starts a new run from random weights: "
+                         "not with --resume or --init-from")
     if policy_std is not None and resume is not None:
-        raise ValueError("policy_std sets a new run's start: not with resume (the run's std goes on)")
+        raise ValueError("--policy-std sets a new run's start: not with --resume (the run's std goes on)")
     config = PickupConfig(**env_kwargs)
     tolerance = config.success_tolerance
     episode_steps = config.max_episode_steps
@@ -634,7 +639,7 @@ def train(num_envs: int, timesteps: int, seed: int = 0, n_steps: int = 16, minib
         model.policy.load_state_dict(transfer_policy(trained.policy.state_dict(), source_actions,
                                                      model.policy.state_dict(), actions, LOG_STD_INIT))
     if clone is not None:
-        settings["clone_expert"] = clone_expert(model, venv, actions, clone, seed, dagger=init_from is not None)
+        settings["clone_expert"] = clone_expert(model, venv, actions, clone, seed)
     if policy_std is not None:
         settings["policy_std"] = set_policy_std(model.policy, policy_std)
     set_observation_statistics_frozen(venv, freeze_obs_normalisation)
@@ -740,12 +745,11 @@ def main(argv=None) -> int:
     ap.add_argument("--clone-expert-steps", type=int, default=0,
                     help="start the new run's policy as a clone of the scripted expert: this many vector steps of "
                          "the expert with action noise in the run's env, then behaviour cloning (0: off; "
-                         "--timesteps 0 saves the clone alone); with --init-from, that policy drives the worlds, "
-                         "the expert labels their states and the fit goes on from its weights (a DAgger round)")
-    ap.add_argument("--clone-noise", type=float, nargs="+", default=[0.05],
+                         "--timesteps 0 saves the clone alone)")
+    ap.add_argument("--clone-noise", type=float, nargs="+", default=None,
                     help="std of the expert's action noise while cloning: one for all components, or one per "
                          "component of --actions (e.g. 0.1 0.1 0.1 0.1 0 for position-yaw-jaw: no jaw noise)")
-    ap.add_argument("--clone-epochs", type=int, default=20, help="passes over the expert's steps")
+    ap.add_argument("--clone-epochs", type=int, default=None, help="passes over the expert's steps (default 20)")
     ap.add_argument("--policy-std", type=float, default=None,
                     help="a new run's policy starts with this std on every action component (default: 0.61 for a "
                          "fresh policy, --init-from's, or the clone's noise)")
@@ -757,6 +761,8 @@ def main(argv=None) -> int:
                     help="keep the policy of the best cohort success rate over at least this many episodes in "
                          "--out/best (0: do not keep it)")
     args = ap.parse_args(argv)
+    if not args.clone_expert_steps and (args.clone_noise is not None or args.clone_epochs is not None):
+        ap.error("--clone-noise and --clone-epochs need --clone-expert-steps")
     devices = [d.strip() for d in args.device.split(",")]
     if len(devices) > args.num_envs or not all(devices):
         ap.error(f"--device must name 1 to --num-envs ({args.num_envs}) devices separated by commas, got {args.device!r}")
@@ -780,9 +786,7 @@ def main(argv=None) -> int:
                          object=parse_object(args.object), youngs_modulus=moduli,
                          episode_seconds=args.episode_seconds, edge_contact=args.edge_contact, device=devices[0],
                          shard_devices=devices if len(devices) > 1 else None, best=best,
-                         clone=ExpertClone(args.clone_expert_steps, args.clone_noise[0] if len(args.clone_noise) == 1
-                                           else tuple(args.clone_noise), args.clone_epochs)
-                         if args.clone_expert_steps else None, policy_std=args.policy_std,
+                         clone=clone_options(args) if args.clone_expert_steps else None, policy_std=args.policy_std,
                          freeze_obs_normalisation=args.freeze_obs_normalisation, **goals)
     wall = curve.rows[-1]["wall_s"] if curve.rows else time.perf_counter() - t0  # resumed runs included
     title = (f"PPO (SB3) on DeformablePickup-v0 vector env: {args.object}, E = {', '.join(f'{e:g}' for e in args.youngs_modulus)} Pa, "

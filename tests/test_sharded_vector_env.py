@@ -109,7 +109,7 @@ def test_sharded_env_checks_its_input():
         ShardedVectorEnv([a, b])
     c = gym.make_vec("DeformablePickup-v0", num_envs=1, vectorization_mode="vector_entry_point", max_episode_steps=5,
                      youngs_modulus=1e6)
-    with pytest.raises(ValueError, match="shard 1's PickupConfig differs from shard 0's other than in its device"):
+    with pytest.raises(ValueError, match="shard 1's PickupConfig differs from shard 0's other than in its device: youngs_modulus 1000000.0 vs"):
         ShardedVectorEnv([a, c])
     env = make_sharded_vec(3, ["cpu", "cpu"], object="cuboid", world_objects=["cuboid"] * 3)
     env.reset(seed=0)

@@ -96,8 +96,11 @@ class ShardedVectorEnv(VectorEnv):
                 if getattr(env, name) != getattr(first, name):
                     raise ValueError(f"shard {k}'s {name} ({getattr(env, name)!r}) differs from shard 0's "
                                      f"({getattr(first, name)!r})")
-            if dataclasses.replace(env.config, device=first.config.device) != first.config:
-                raise ValueError(f"shard {k}'s PickupConfig differs from shard 0's other than in its device")
+            mine, theirs = dataclasses.asdict(env.config), dataclasses.asdict(first.config)
+            differ = sorted(key for key in mine if key != "device" and mine[key] != theirs[key])
+            if differ:
+                raise ValueError(f"shard {k}'s PickupConfig differs from shard 0's other than in its device: "
+                                 + ", ".join(f"{key} {mine[key]!r} vs {theirs[key]!r}" for key in differ))
         self.shards = shards
         #: the shards' ``PickupConfig`` (shard 0's: the others differ at most in ``device``), read by
         #: what configures itself from an env (``ScriptedPickupExpert.from_env``, ``SB3VectorEnv``)

@@ -29,6 +29,12 @@ class FrozenRunningMeanStd(RunningMeanStd):
     def update(self, arr: np.ndarray) -> None:
         return None
 
+    def copy(self) -> FrozenRunningMeanStd:
+        """A frozen copy (SB3's ``RunningMeanStd.copy`` would return an updating one)."""
+        out = FrozenRunningMeanStd(shape=self.mean.shape)
+        out.mean, out.var, out.count = self.mean.copy(), self.var.copy(), float(self.count)
+        return out
+
 
 def _swap(rms: RunningMeanStd, frozen: bool) -> RunningMeanStd:
     cls = FrozenRunningMeanStd if frozen else RunningMeanStd
