@@ -28,7 +28,7 @@ from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from ..layout import DELTA_ACTION
 
-__all__ = ["ACTION_SETS", "ActionSubset", "POSITION_JAW", "POSITION_YAW_JAW"]
+__all__ = ["ACTION_SETS", "ActionSubset", "POSITION_JAW", "POSITION_YAW_JAW", "action_columns"]
 
 #: Wrist position and jaw (``DELTA_ACTION`` component names, in the policy's order).
 POSITION_JAW = ("vx", "vy", "vz", "jaw")
@@ -38,6 +38,16 @@ POSITION_YAW_JAW = ("vx", "vy", "vz", "wy", "jaw")
 #: ("full": all of ``DELTA_ACTION``, no wrapper needed). A saved run names its set; changing a set's
 #: components would change what the saved policies' outputs mean.
 ACTION_SETS = {"full": DELTA_ACTION.names, "position-jaw": POSITION_JAW, "position-yaw-jaw": POSITION_YAW_JAW}
+
+
+def action_columns(components: Sequence[str]) -> np.ndarray:
+    """[len(components)] int: the ``DELTA_ACTION`` column of each component name, in order;
+    ValueError unless they are distinct names of ``DELTA_ACTION.names`` (one at least)."""
+    names = DELTA_ACTION.names
+    unknown = [c for c in components if c not in names]
+    if unknown or len(set(components)) != len(components) or not components:
+        raise ValueError(f"components must be distinct names of {list(names)}, got {list(components)}")
+    return np.array([names.index(c) for c in components])
 
 
 class ActionSubset(VecEnvWrapper):
@@ -51,12 +61,8 @@ class ActionSubset(VecEnvWrapper):
         if not isinstance(inner, spaces.Box) or inner.shape != (DELTA_ACTION.size,):
             raise ValueError(f"the wrapped env must take DELTA_ACTION [{DELTA_ACTION.size}] actions "
                              f"(action_mode='delta'), got {inner}")
-        names = DELTA_ACTION.names
-        unknown = [c for c in components if c not in names]
-        if unknown or len(set(components)) != len(components) or not components:
-            raise ValueError(f"components must be distinct names of {list(names)}, got {list(components)}")
+        self._columns = action_columns(components)
         self.components = tuple(components)
-        self._columns = np.array([names.index(c) for c in self.components])
         super().__init__(venv, action_space=spaces.Box(-1.0, 1.0, (len(self._columns),), np.float32))
 
     def full_actions(self, actions: np.ndarray) -> np.ndarray:

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..layout import DELTA_ACTION
 from ..policies.scripted_expert import ScriptedPickupExpert
+from .action_subset import action_columns
 
 __all__ = ["ExpertSteps", "collect_expert_steps", "complete_returns", "discounted_returns", "fit_policy"]
 
@@ -98,10 +99,7 @@ def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: flo
 
     if not isinstance(venv, VecNormalize):
         raise TypeError(f"venv must be the VecNormalize of train_ppo.make_vec_env, got {type(venv).__name__}")
-    names = DELTA_ACTION.names
-    unknown = [c for c in components if c not in names]
-    if unknown or not components or len(set(components)) != len(components):
-        raise ValueError(f"components must be distinct names of {list(names)}, got {list(components)}")
+    columns = action_columns(components)
     if venv.action_space.shape != (len(components),):
         raise ValueError(f"venv's actions have shape {venv.action_space.shape}, components {list(components)} "
                          f"have {len(components)}")
@@ -111,7 +109,6 @@ def collect_expert_steps(venv, components: Sequence[str], steps: int, noise: flo
         else np.asarray(noise, np.float64)
     if std.shape != (len(components),) or not np.all(np.isfinite(std) & (std >= 0.0)):
         raise ValueError(f"noise must be one finite std >= 0 or one per component ({len(components)}), got {noise}")
-    columns = np.array([names.index(c) for c in components])
     dropped = np.setdiff1d(np.arange(DELTA_ACTION.size), columns)
     expert = ScriptedPickupExpert.from_env(_native_env(venv))
     n = venv.num_envs

@@ -26,7 +26,7 @@ import numpy as np
 from ..envs.config import PickupConfig
 from ..layout import AGENT_POS, DELTA_ACTION, ENV_STATE
 from ..recording.config_io import RECORDED_BEFORE_DEFAULT
-from .action_subset import ACTION_SETS
+from .action_subset import ACTION_SETS, action_columns
 
 __all__ = ["PPOPolicy", "RUN_ENV_OPTIONS", "run_env_options"]
 
@@ -66,17 +66,14 @@ class PPOPolicy:
     no state between steps; ``reset`` exists for the expert's interface."""
 
     def __init__(self, model, normalizer, components, settings: dict | None = None):
-        names = DELTA_ACTION.names
-        unknown = [c for c in components if c not in names]
-        if unknown or not components or len(set(components)) != len(components):
-            raise ValueError(f"components must be distinct names of {list(names)}, got {list(components)}")
+        columns = action_columns(components)
         if model.action_space.shape != (len(components),):
             raise ValueError(f"the model's actions have shape {model.action_space.shape}, the action set "
                              f"{list(components)} has {len(components)} components")
         self.model = model
         self.normalizer = normalizer  # read only: ``normalize_obs`` never updates its statistics
         self.components = tuple(components)
-        self._columns = np.array([names.index(c) for c in self.components])
+        self._columns = columns
         self.settings = dict(settings or {})
 
     @classmethod
