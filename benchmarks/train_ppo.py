@@ -51,7 +51,13 @@ plus the success tolerance (~0.07 m for the cuboid) succeed on a grasp without a
 curriculum's first step. ``--out/best`` is then chosen by the success rate at the task's goal, pooled
 over the latest rollouts' cohorts back to 256 such episodes (``TASK_GOAL_RANKING``). A run ``--init-from`` one
 trained at a fixed goal starts with the normalisation statistics of a constant goal: its goal
-inputs saturate until the running variance catches up. The PPO
+inputs saturate until the running variance catches up. ``--clone-expert-steps T`` starts a new run from the scripted expert instead of random weights
+(``ExpertClone``, ``defgrasp_env.rl.expert_cloning``: T vector steps of the noise-injected expert
+in this run's env, the policy's mean fitted to its actions and its value to the complete returns;
+``--timesteps 0`` saves the clone alone). A fine-tune of such a policy wants
+``--freeze-obs-normalisation``: with the statistics updating, PPO from the clone held every object
+0.1 m below the goal (the object height's running mean had fallen 0.09 m; RESULTS.md, 2026-12-06);
+``--policy-std`` sets the start's std (a clone's is its data's small noise). The PPO
 settings default to those ManiSkill's PPO baseline uses for its pick tasks with dense rewards (gamma 0.8, GAE lambda 0.9,
 8 epochs of 32 minibatches per rollout, 3 x 256 networks, initial log std -0.5, target KL 0.1);
 fewer minibatches where a rollout is too small for 64 samples in each (small CPU runs).
