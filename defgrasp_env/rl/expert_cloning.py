@@ -56,8 +56,8 @@ class ExpertSteps:
         truncated: [T, N] bool: it ended by the time limit or a staggered start's cut
             (``TimeLimit.truncated``: its return goes on beyond the data, which SB3's PPO bootstraps).
         successes: [E] bool: some step of the episode read ``is_success``, for every episode that
-            ended during the collection but the staggered first ones (where a success does not end the episode, its last step
-            need not be one).
+            ended during the collection but the staggered first ones (where a success does not end
+            the episode, its last step need not be one).
         dropped_max: max |action| over the collection of the expert's ``DELTA_ACTION`` components
             outside ``components`` (the policy cannot reproduce them; ~0 for a top-down expert).
         components: the ``DELTA_ACTION`` names of the A action columns.
