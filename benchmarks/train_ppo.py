@@ -509,21 +509,38 @@ class ExpertClone:
     """``--clone-expert-steps``: a new run's policy starts as a clone of the scripted expert
     (``defgrasp_env.rl.expert_cloning``): ``steps`` vector steps of the expert with Gaussian action
     noise of std ``noise`` (one for all components or one per component of the action set) in the
-    run's own env, then ``epochs`` passes of behaviour cloning (actor) and return regression (critic)."""
+    run's own env, then ``epochs`` passes of behaviour cloning (actor) and return regression (critic).
+    The expert's jaw labels keep a margin a regression's errors do not cross: its slow close and
+    squeeze lead the observed gap by ``close_lead`` periods (``ExpertConfig.delta_close_lead``; at
+    1 the clone commanded about the gap it saw and stalled 2 mm above the stiff rope) and its hold
+    stays ``grip_overtravel`` m inside the gap at first contact (``ExpertConfig.grip_overtravel``; at
+    4 mm the clone's hold of the stiff cube slipped at the goal): the clone's jaw error was 0.08 RMS
+    (3.4 mm; RESULTS.md, 2026-12-06)."""
 
     steps: int
     noise: float | tuple[float, ...] = 0.03  # the expert picked 10 / 10 so (0.1 on all: 2 / 10; RESULTS.md)
     epochs: int = 20
+    close_lead: int = 3
+    grip_overtravel: float = 0.008
 
     def __post_init__(self):
         if self.steps < 1 or self.epochs < 1 or not all(0.0 <= n < 1.0 for n in np.atleast_1d(self.noise)):
             raise ValueError(f"clone steps and epochs must be >= 1 and noise in [0, 1), got {self.steps}, "
                              f"{self.epochs}, {self.noise}")
+        from defgrasp_env.policies import ExpertConfig
+
+        ExpertConfig(**self.expert_options)  # validated as the expert's own settings
+
+    @property
+    def expert_options(self) -> dict:
+        """The ``ExpertConfig`` fields the cloned expert runs with."""
+        return {"delta_close_lead": self.close_lead, "grip_overtravel": self.grip_overtravel}
 
 
 def clone_options(args) -> ExpertClone:
     """``ExpertClone`` of the command line (``--clone-*``; the dataclass's defaults where not given)."""
-    kw = {} if args.clone_epochs is None else {"epochs": args.clone_epochs}
+    kw = {name: value for name, value in (("epochs", args.clone_epochs), ("close_lead", args.clone_close_lead),
+                                           ("grip_overtravel", args.clone_grip_overtravel)) if value is not None}
     if args.clone_noise is not None:
         kw["noise"] = args.clone_noise[0] if len(args.clone_noise) == 1 else tuple(args.clone_noise)
     return ExpertClone(args.clone_expert_steps, **kw)
@@ -539,13 +556,14 @@ def clone_expert(model, venv, actions: str, clone: ExpertClone, seed: int) -> di
 
     t0 = time.perf_counter()
     data = collect_expert_steps(venv, ACTION_SETS[actions], clone.steps, clone.noise,
-                                np.random.default_rng([seed, 0xC10E]))
+                                np.random.default_rng([seed, 0xC10E]), clone.expert_options)
     t1 = time.perf_counter()
     history = fit_policy(model.policy, venv, data, model.gamma, epochs=clone.epochs, rng=np.random.default_rng(seed))
     t2 = time.perf_counter()
     for i, row in enumerate(history):
         print(f"clone epoch {i + 1}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
-    record = dict(steps=clone.steps, noise=np.asarray(clone.noise).tolist(), epochs=clone.epochs, samples=data.num_samples,
+    record = dict(steps=clone.steps, noise=np.asarray(clone.noise).tolist(), epochs=clone.epochs,
+                  expert_options=clone.expert_options, samples=data.num_samples,
                   expert_episodes=int(len(data.successes)), expert_successes=int(data.successes.sum()),
                   dropped_action_max=round(data.dropped_max, 4), collect_s=round(t1 - t0, 1), fit_s=round(t2 - t1, 1),
                   **{k: round(v, 5) for k, v in history[-1].items()})
@@ -757,6 +775,10 @@ def main(argv=None) -> int:
                          "or one per component of --actions (e.g. 0.1 0.1 0.1 0.1 0 for position-yaw-jaw: no jaw "
                          "noise, as the shipped clone)")
     ap.add_argument("--clone-epochs", type=int, default=None, help="passes over the expert's steps (default 20)")
+    ap.add_argument("--clone-close-lead", type=int, default=None,
+                    help="control periods by which the cloned expert's closing jaw command leads the gap (default 3)")
+    ap.add_argument("--clone-grip-overtravel", type=float, default=None,
+                    help="m the cloned expert's hold command stays inside the gap at first contact (default 0.008)")
     ap.add_argument("--policy-std", type=float, default=None,
                     help="a new run's policy starts with this std on every action component (default: 0.61 for a "
                          "fresh policy, --init-from's, or the clone's noise)")
@@ -768,8 +790,10 @@ def main(argv=None) -> int:
                     help="keep the policy of the best cohort success rate over at least this many episodes in "
                          "--out/best (0: do not keep it)")
     args = ap.parse_args(argv)
-    if not args.clone_expert_steps and (args.clone_noise is not None or args.clone_epochs is not None):
-        ap.error("--clone-noise and --clone-epochs need --clone-expert-steps")
+    clone_flags = {"--clone-noise": args.clone_noise, "--clone-epochs": args.clone_epochs,
+                   "--clone-close-lead": args.clone_close_lead, "--clone-grip-overtravel": args.clone_grip_overtravel}
+    if not args.clone_expert_steps and any(v is not None for v in clone_flags.values()):
+        ap.error(f"{[k for k, v in clone_flags.items() if v is not None]} need --clone-expert-steps")
     devices = [d.strip() for d in args.device.split(",")]
     if len(devices) > args.num_envs or not all(devices):
         ap.error(f"--device must name 1 to --num-envs ({args.num_envs}) devices separated by commas, got {args.device!r}")

@@ -345,6 +345,41 @@ def test_expert_absolute_close_lead(name, youngs_modulus):
         obs, *_ = delta_env.step(actions[0])
 
 
+@pytest.mark.parametrize("youngs_modulus", [1e4, 1e6])
+def test_expert_delta_close_lead(youngs_modulus):
+    """``delta_close_lead`` (default 1) does for delta actions what ``absolute_close_lead`` does for
+    absolute ones: the jaw command of the slow close and the squeeze is the gap 3 x 20 mm/s x 50 ms
+    = 3 mm inside the observed gap (``jaw_command_to_gap`` of the delta jaw command; float32: 1 um),
+    1 mm at the default; the rope (16 mm, the object a clone of the 1-period expert stalled above at
+    E = 1e6) is picked either way, the soft one not crushed (median held force below 6 N, the gap
+    above 2 mm at the end), as in absolute actions."""
+    from defgrasp_env.layout import jaw_command_to_gap
+
+    for lead in (1, 3):
+        env = gym.make("DeformablePickup-v0", object="rope", youngs_modulus=youngs_modulus)
+        expert = ScriptedPickupExpert.from_env(env, **({} if lead == 1 else {"delta_close_lead": lead}))
+        assert expert.config.delta_close_lead == lead
+        obs, _ = env.reset(seed=0)
+        leads, held_forces = [], []
+        for _ in range(200):
+            action = expert(obs)
+            led = obs["agent_pos"][7] - jaw_command_to_gap(DELTA_ACTION.get(action[None], "jaw")[0, 0])
+            if 1e-4 < led < 0.01:  # closing slowly or squeezing (fast closing moves tens of mm)
+                leads.append(led)
+            obs, _, term, trunc, info = env.step(action)
+            if info["grasped"]:
+                held_forces.append(float(obs["agent_pos"][8:10].max()))
+            if term or trunc:
+                break
+        assert info["is_success"], lead
+        assert np.sum(np.abs(np.array(leads) - lead * 0.02 / 20.0) < 2e-6) >= 2, (lead, leads)
+        if youngs_modulus < 1e5:
+            assert np.median(held_forces) < 6.0 and obs["agent_pos"][7] > 2e-3
+    for bad in (0, 1.5, False):
+        with pytest.raises(ValueError, match="delta_close_lead must be an integer >= 1"):
+            ScriptedPickupExpert(delta_close_lead=bad)
+
+
 def test_topdown_action_packs_the_planned_yaw_wrapped_to_its_bounds():
     """The top-down packer turns the expert's target yaw (about +y; the plan may reach +-3 pi / 2
     from a wrist already turned) into the yaw in [-pi, pi] of the same rotation, not a clipped one;

@@ -108,9 +108,20 @@ def test_noise_free_collection_executes_the_labels_and_the_fit_learns_a_known_ma
     from train_ppo import new_ppo
 
     venv = _venv(n=4, object="cuboid", episode_seconds=3.0)  # 60 steps: the first 39 have complete returns
-    data = collect_expert_steps(venv, POSITION_YAW_JAW, 60, 0.0, np.random.default_rng(0))
+    options = {"delta_close_lead": 3, "grip_overtravel": 0.008}
+    data = collect_expert_steps(venv, POSITION_YAW_JAW, 60, 0.0, np.random.default_rng(0), options)
     assert complete_returns(data.dones, data.truncated, 0.8).sum() == 39 * 4
     np.testing.assert_array_equal(data.executed, data.actions)
+    # the labels are those of the expert built with the options (its closing jaw command 3 periods
+    # ahead of the gap), not the default expert's on the same observations
+    columns = [DELTA_ACTION.names.index(c) for c in POSITION_YAW_JAW]
+    experts = [ScriptedPickupExpert.from_env(venv.unwrapped.env, **kw) for kw in (options, {})]
+    replays = []
+    for expert in experts:
+        expert.reset()
+        replays.append(np.stack([expert({k: v[t] for k, v in data.obs.items()})[:, columns] for t in range(60)]))
+    np.testing.assert_array_equal(replays[0], data.actions)
+    assert np.abs(replays[1] - data.actions)[..., 4].max() > 0.04  # 2 mm of jaw command at least
     rng = np.random.default_rng(5)
     weights = rng.normal(size=(10, 5))
     pos = data.obs["agent_pos"].astype(np.float64)
@@ -147,6 +158,10 @@ def test_collect_and_fit_reject_bad_inputs():
         collect_expert_steps(venv.venv, POSITION_YAW_JAW, 2, 0.1, rng)
     with pytest.raises(ValueError, match="clone steps and epochs"):
         ExpertClone(steps=10, noise=1.5)
+    with pytest.raises(ValueError, match="delta_close_lead must be an integer >= 1"):
+        ExpertClone(steps=10, close_lead=0)
+    with pytest.raises(ValueError, match="grip_overtravel must be a finite number"):
+        ExpertClone(steps=10, grip_overtravel=-0.001)
     venv.close()
 
 

@@ -9,7 +9,8 @@ it never touches the simulator. Works on one observation (``agent_pos`` [10], ``
 (speed- and acceleration-limited) path, the orientation it is turning to (the planned grasp yaw,
 held for the whole turn: the env turns toward it at ``max_angular_speed``, as the delta action's
 saturated rate does) and the jaw gap command (leading the gap by ``absolute_close_lead``
-periods of its closing rate while it closes slowly or squeezes). Both move the wrist alike: the
+periods of its closing rate while it closes slowly or squeezes; ``delta_close_lead`` in delta and top-down
+actions, 1 by default). Both move the wrist alike: the
 expert's velocity is limited in norm to ``max_linear_speed``, which is what an absolute move
 allows (a delta action limits each component, so other delta policies may move diagonally up to
 sqrt 3 faster). For an env with ``action_mode="topdown"`` it returns ``TOPDOWN_ACTION`` [5] or
@@ -108,6 +109,11 @@ class ExpertConfig:
     # Near the jaw's minimum the command may fall below 0; the absolute action clips it to 0 (shut).
     # The lift's slow re-grip (0.5 mm a step) is not led.
     absolute_close_lead: int = 3
+    # the same lead in delta and top-down actions (their jaw command is a gap too): 1 by default (the
+    # rate above). A policy cloned from the expert into PPO's network (an MLP on one observation)
+    # learnt to command about the gap it saw and stalled 2 mm above the stiff rope with 1 period
+    # (benchmarks/RESULTS.md, 2026-12-06); ``ExpertClone`` collects with 3.
+    delta_close_lead: int = 1
     hover_clearance: float = 0.02        # m, pad bottoms above the object's top before descending
     descend_speed: float = 0.2           # m/s
     lift_speed: float = 0.25             # m/s
@@ -120,10 +126,10 @@ class ExpertConfig:
     max_retries: int = 2
 
     def __post_init__(self) -> None:
-        if isinstance(self.absolute_close_lead, bool) or not isinstance(self.absolute_close_lead, int) \
-                or self.absolute_close_lead < 1:
-            raise ValueError(f"absolute_close_lead must be an integer >= 1 (control periods), got "
-                             f"{self.absolute_close_lead!r}")
+        for name in ("absolute_close_lead", "delta_close_lead"):
+            lead = getattr(self, name)
+            if isinstance(lead, bool) or not isinstance(lead, int) or lead < 1:
+                raise ValueError(f"{name} must be an integer >= 1 (control periods), got {lead!r}")
         for f in fields(self):
             v = getattr(self, f.name)
             if f.type in ("int", int):
@@ -407,7 +413,7 @@ class ScriptedPickupExpert:
         self._contact_gap[first] = gap[first]
         fast = ph & outside & ~touching
         gap_cmd[fast] = np.maximum(self._plan_width[fast] + c.approach_margin, JAW_GAP_MIN)
-        lead = c.absolute_close_lead if self.action_mode == "absolute" else 1
+        lead = c.absolute_close_lead if self.action_mode == "absolute" else c.delta_close_lead
         slow = ph & ~outside & ~touching
         gap_cmd[slow] = gap[slow] - c.slow_close_speed * dt * lead
         squeeze = ph & touching & (f_min < c.grip_force)
