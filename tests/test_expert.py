@@ -300,6 +300,26 @@ def test_expert_in_absolute_and_topdown_actions_picks_as_in_delta_actions(name, 
         ScriptedPickupExpert.from_env(env, action_mode="delta")
 
 
+def _closing_episode(env, expert, commanded_gap):
+    """Run ``expert`` in ``env`` from seed 0 (200 steps at most): the last info and observation, the
+    leads (m) of its jaw command inside the observed gap while it closes slowly or squeezes
+    (``commanded_gap(action)``: the commanded gap, m; fast closing moves tens of mm), and the largest
+    tip force (N) of each grasped step."""
+    obs, _ = env.reset(seed=0)
+    leads, held_forces = [], []
+    for _ in range(200):
+        action = expert(obs)
+        lead = obs["agent_pos"][7] - commanded_gap(action)
+        if 1e-4 < lead < 0.01:
+            leads.append(lead)
+        obs, _, term, trunc, info = env.step(action)
+        if info["grasped"]:
+            held_forces.append(float(obs["agent_pos"][8:10].max()))
+        if term or trunc:
+            break
+    return info, obs, np.array(leads), held_forces
+
+
 @pytest.mark.parametrize("name, youngs_modulus", [("rope", 1e4), ("cuboid", 1e7)])
 def test_expert_absolute_close_lead(name, youngs_modulus):
     """In absolute actions the jaw command of the slow close and the squeeze leads the observed gap
@@ -313,24 +333,12 @@ def test_expert_absolute_close_lead(name, youngs_modulus):
     env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=youngs_modulus, action_mode="absolute")
     expert = ScriptedPickupExpert.from_env(env)
     assert expert.config.absolute_close_lead == 3
-    obs, _ = env.reset(seed=0)
-    leads, held_forces = [], []
-    for _ in range(200):
-        action = expert(obs)
-        gap = obs["agent_pos"][7]
-        lead = gap - ABSOLUTE_ACTION.get(action[None], "gap")[0, 0]
-        if 1e-4 < lead < 0.01:  # closing slowly or squeezing (fast closing moves tens of mm)
-            leads.append(lead)
-        obs, _, term, trunc, info = env.step(action)
-        if info["grasped"]:
-            held_forces.append(float(obs["agent_pos"][8:10].max()))
-        if term or trunc:
-            break
+    info, obs, leads, held_forces = _closing_episode(env, expert,
+                                                     lambda a: ABSOLUTE_ACTION.get(a[None], "gap")[0, 0])
     assert info["is_success"]
     if name == "rope":
         # the slow close and squeeze commands 3 x 20 mm/s x 50 ms inside the gap (float32 observation
         # and action: 1 um), none at the delta rate's 1 mm (the other leads: the fast close's end, the hold)
-        leads = np.array(leads)
         assert np.sum(np.abs(leads - 3 * 0.02 / 20.0) < 1e-6) >= 3
         assert not np.any(np.abs(leads - 0.02 / 20.0) < 1e-4)
         assert 0.5 < np.median(held_forces) < 6.0 and obs["agent_pos"][7] > 2e-3
@@ -359,20 +367,10 @@ def test_expert_delta_close_lead(youngs_modulus):
         env = gym.make("DeformablePickup-v0", object="rope", youngs_modulus=youngs_modulus)
         expert = ScriptedPickupExpert.from_env(env, **({} if lead == 1 else {"delta_close_lead": lead}))
         assert expert.config.delta_close_lead == lead
-        obs, _ = env.reset(seed=0)
-        leads, held_forces = [], []
-        for _ in range(200):
-            action = expert(obs)
-            led = obs["agent_pos"][7] - jaw_command_to_gap(DELTA_ACTION.get(action[None], "jaw")[0, 0])
-            if 1e-4 < led < 0.01:  # closing slowly or squeezing (fast closing moves tens of mm)
-                leads.append(led)
-            obs, _, term, trunc, info = env.step(action)
-            if info["grasped"]:
-                held_forces.append(float(obs["agent_pos"][8:10].max()))
-            if term or trunc:
-                break
+        info, obs, leads, held_forces = _closing_episode(
+            env, expert, lambda a: jaw_command_to_gap(DELTA_ACTION.get(a[None], "jaw")[0, 0]))
         assert info["is_success"], lead
-        assert np.sum(np.abs(np.array(leads) - lead * 0.02 / 20.0) < 2e-6) >= 2, (lead, leads)
+        assert np.sum(np.abs(leads - lead * 0.02 / 20.0) < 2e-6) >= 2, (lead, leads)
         if youngs_modulus < 1e5:
             assert np.median(held_forces) < 6.0 and obs["agent_pos"][7] > 2e-3
     for bad in (0, 1.5, False):
