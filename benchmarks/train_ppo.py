@@ -510,18 +510,18 @@ class ExpertClone:
     (``defgrasp_env.rl.expert_cloning``): ``steps`` vector steps of the expert with Gaussian action
     noise of std ``noise`` (one for all components or one per component of the action set) in the
     run's own env, then ``epochs`` passes of behaviour cloning (actor) and return regression (critic).
-    The expert's jaw labels keep a margin a regression's errors do not cross: its slow close and
+    The expert's jaw labels keep wider margins against a regression's errors: its slow close and
     squeeze lead the observed gap by ``close_lead`` periods (``ExpertConfig.delta_close_lead``; at
     1 the clone commanded about the gap it saw and stalled 2 mm above the stiff rope) and its hold
     stays ``grip_overtravel`` m inside the gap at first contact (``ExpertConfig.grip_overtravel``; at
-    4 mm the clone's hold of the stiff cube slipped at the goal): the clone's jaw error was 0.08 RMS
-    (3.4 mm; RESULTS.md, 2026-12-06)."""
+    4 mm the clone's hold of the stiff cube slipped at the goal): the clone's jaw error is 0.078 RMS
+    (3.3 mm; RESULTS.md, 2026-12-06), so a 3 mm lead still stalls some clones (the rope: 6 / 50)."""
 
     steps: int
     noise: float | tuple[float, ...] = 0.03  # the expert picked 10 / 10 so (0.1 on all: 2 / 10; RESULTS.md)
     epochs: int = 20
-    close_lead: int = 3
-    grip_overtravel: float = 0.008
+    close_lead: int = 3               # control periods
+    grip_overtravel: float = 0.008    # m
 
     def __post_init__(self):
         if self.steps < 1 or self.epochs < 1 or not all(0.0 <= n < 1.0 for n in np.atleast_1d(self.noise)):
@@ -529,7 +529,10 @@ class ExpertClone:
                              f"{self.epochs}, {self.noise}")
         from defgrasp_env.policies import ExpertConfig
 
-        ExpertConfig(**self.expert_options)  # validated as the expert's own settings
+        try:  # validated as the expert's own settings
+            ExpertConfig(**self.expert_options)
+        except ValueError as e:
+            raise ValueError(f"clone close_lead / grip_overtravel (--clone-close-lead, --clone-grip-overtravel): {e}") from e
 
     @property
     def expert_options(self) -> dict:

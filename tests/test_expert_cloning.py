@@ -121,7 +121,7 @@ def test_noise_free_collection_executes_the_labels_and_the_fit_learns_a_known_ma
         expert.reset()
         replays.append(np.stack([expert({k: v[t] for k, v in data.obs.items()})[:, columns] for t in range(60)]))
     np.testing.assert_array_equal(replays[0], data.actions)
-    assert np.abs(replays[1] - data.actions)[..., 4].max() > 0.04  # 2 mm of jaw command at least
+    assert np.abs(replays[1] - data.actions)[..., 4].max() > 0.047  # 2 mm of jaw gap (0.048): 3 periods, not 1
     rng = np.random.default_rng(5)
     weights = rng.normal(size=(10, 5))
     pos = data.obs["agent_pos"].astype(np.float64)
@@ -134,6 +134,9 @@ def test_noise_free_collection_executes_the_labels_and_the_fit_learns_a_known_ma
                          holdout=0.25, rng=np.random.default_rng(2))  # one world of four held out
     variance = float(known.actions.var())
     assert history[-1]["holdout_action_mse"] < 0.1 * variance < history[0]["holdout_action_mse"]
+    # the per-component held-out RMS: one per action component, their mean square the held-out MSE
+    rms = np.array([history[-1][f"holdout_rms_{c}"] for c in POSITION_YAW_JAW])
+    assert np.mean(rms ** 2) == pytest.approx(history[-1]["holdout_action_mse"], rel=1e-5)
     assert history[-1]["value_mse"] < 0.5 * history[0]["value_mse"]
     np.testing.assert_allclose(model.policy.log_std.detach().cpu().numpy(), np.log([0.25] * 4 + [0.05]), rtol=1e-6)
     venv.close()

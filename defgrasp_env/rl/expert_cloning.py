@@ -232,7 +232,8 @@ def fit_policy(policy, normalizer, data: ExpertSteps, gamma: float, epochs: int 
         mean = policy.get_distribution(batch).distribution.mean
         value = policy.predict_values(batch).squeeze(-1)
         mask = value_mask[idx]
-        return ((mean - target_a[idx]) ** 2).mean(), (mask * (value - target_v[idx]) ** 2).sum() / mask.sum().clamp(min=1.0)
+        squared = (mean - target_a[idx]) ** 2
+        return squared, (mask * (value - target_v[idx]) ** 2).sum() / mask.sum().clamp(min=1.0)
 
     history = []
     policy.set_training_mode(True)
@@ -241,7 +242,8 @@ def fit_policy(policy, normalizer, data: ExpertSteps, gamma: float, epochs: int 
         rng.shuffle(train)
         for start in range(0, len(train), batch_size):
             idx = torch.as_tensor(train[start:start + batch_size], device=device)
-            a_loss, v_loss = losses(idx)
+            squared, v_loss = losses(idx)
+            a_loss = squared.mean()
             optimiser.zero_grad()
             (a_loss + value_weight * v_loss).backward()
             optimiser.step()
@@ -249,11 +251,9 @@ def fit_policy(policy, normalizer, data: ExpertSteps, gamma: float, epochs: int 
         row = {"action_mse": sums[0] / len(train), "value_mse": sums[1] / len(train)}
         if len(held):
             with torch.no_grad():
-                idx = torch.as_tensor(held, device=device)
-                a_loss, v_loss = losses(idx)
-                mean = policy.get_distribution({k: v[idx] for k, v in tensors.items()}).distribution.mean
-                rms = ((mean - target_a[idx]) ** 2).mean(dim=0).sqrt().cpu().numpy()
-            row |= {"holdout_action_mse": a_loss.item(), "holdout_value_mse": v_loss.item()}
+                squared, v_loss = losses(torch.as_tensor(held, device=device))
+                rms = squared.mean(dim=0).sqrt().cpu().numpy()
+            row |= {"holdout_action_mse": squared.mean().item(), "holdout_value_mse": v_loss.item()}
             row |= {f"holdout_rms_{name}": float(r) for name, r in zip(data.components, rms)}
         history.append(row)
     policy.set_training_mode(False)
