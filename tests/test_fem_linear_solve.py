@@ -159,7 +159,7 @@ def held_rope_steps(mode: str, steps: int = 6, config: SolverConfig = SolverConf
     if mode == "launches":
         for phase in (run.lag, run.evaluate, run.evaluate_first, run.cg, run.cg_world, run.step_world,
                       run.step_world_first, run.coarse_post, run.energy0, run.trial, run.apply,
-                      run.outputs, *run.pads):
+                      *run.finish, *run.pads):
             for seq in phase:
                 seq.graph = None
     reports = [solver.step(state, state, control, dt=DT, patient=patient) for _ in range(steps)]

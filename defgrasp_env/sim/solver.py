@@ -378,16 +378,8 @@ class ImplicitSolver:
             for cmd in run.lag:
                 cmd.launch()
             self._newton(run, cfg.patient_iterations if patient_any else 0)
-            run.clamp.launch()
-            run.end.launch()
-            if k == cfg.substeps - 1:
-                self._evaluate_outputs(run)
-            self._launch(ksub.copy_world_rows, m.num_nodes, s.v_new, m.node_world, s.solve_worlds,
-                         state_out.velocities)
-        if m.pads_per_world:
-            self._launch(ksub.copy_pad_poses, m.num_worlds * m.pads_per_world, control.pad_target_positions,
-                         control.pad_target_orientations, m.pads_per_world, s.solve_worlds,
-                         state_out.pad_positions, state_out.pad_orientations)
+            for cmd in run.finish[k]:  # clamp, velocities, outputs after the last substep
+                cmd.launch()
 
     def _newton(self, run: SubstepLaunches, patient_iterations: int = 0) -> None:
         """The regular Newton iterations while a world iterates (all of them without checks), then
@@ -457,13 +449,6 @@ class ImplicitSolver:
                 cmd.launch()
 
         self.loops.do_while("search", trial, trial)
-
-    def _evaluate_outputs(self, run: SubstepLaunches) -> None:
-        """Forces, stresses and pad loads at the returned positions, and the final residual
-        (evaluated with the last substep's start velocities, so the inertia term is included)."""
-        for cmd in run.outputs:
-            cmd.launch()
-        self.scratch.rz.zero_()
 
     def _substep_launches(self, h: float, state_in: State, state_out: State, control: Control) -> tuple:
         """Recorded launches for substeps of length ``h`` (s) from ``state_in`` into ``state_out``

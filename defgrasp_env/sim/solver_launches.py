@@ -36,8 +36,10 @@ from .kernels import line_search as kls
 from .kernels import linear_solve as klin
 from .kernels import substep as ksub
 from .kernels import world_cg as kwcg
+from .kernels import world_lag as kwlag
 from .kernels import world_evaluate as kwev
 from .kernels import world_newton_step as kwns
+from .kernels import world_finish as kwfin
 from .launch_lock import scoped_capture
 from .model import Model
 from .solver_scratch import SolverScratch
@@ -91,9 +93,7 @@ class SubstepLaunches:
     step_world_first: list  # the same in a substep's first Newton iteration (with the nodes' part of ``energy0``)
     apply: list
     depth: list         # launches: the iterate's deepest contact per world (extra iterations)
-    clamp: object
-    end: object
-    outputs: list
+    finish: list        # [substeps] lists: clamp, end (velocities), outputs at the last, the velocities' copy
     cg_block: int       # CG iterations per launch of ``cg``
 
 
@@ -272,6 +272,20 @@ def _lag(c: _Context) -> list:
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
 
 
+def _lag_world(c: _Context, threads: int) -> list:
+    """``_lag``'s launches as one: each world's substep start in a block of ``threads`` threads
+    (``kernels/world_lag.py``)."""
+    m, s, e, wc = c.model, c.scratch, c.scratch.edges, c.compaction
+    return [c.blocks(kwlag.lag_world_blocks, threads,
+                     threads, wc.nodes.start, wc.tets.start, s.solve_worlds, s.x_start, c.work.positions,
+                     m.node_world, m.free_axes, *s.pads, m.pad_half_extents, m.pads_per_world,
+                     m.node_contact_stiffness, m.contact.stiffening_depth, s.lag_normal_force, s.lag_normal,
+                     e.triangles, e.triangle_world, e.triangle_first, e.points, e.point_first, e.point_pad,
+                     e.point_share, e.points_per_world if e.active else 0, e.best_dist, e.best_tri, e.point_tri,
+                     e.point_bary, e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction, e.push,
+                     e.push_normal, m.tets, m.tet_rest_inv, s.tet_rotation)]
+
+
 def _evaluate(c: _Context, config, start_energy: bool = False) -> list:
     """A Newton iteration's evaluation; ``start_energy``: the substep's first, which also sums the
     tets' part of the line search's start energy (``energy0``, cleared here; the nodes' part
@@ -418,6 +432,43 @@ def _outputs(c: _Context) -> list:
                      s.tet_start, s.tet_end, s.solve_worlds, m.world_volume, s.stress_partial, work.mean_von_mises)]
 
 
+def _finish(c: _Context, config, last: bool) -> list:
+    """A substep's end: nodes left too deep put back within the penetration bound, the velocities,
+    after the last substep the outputs pass (``_outputs``; then CG's ``rz`` cleared) and the pad
+    poses into the output state, and the velocities into it."""
+    m, s, work, ctl, x = c.model, c.scratch, c.work, c.control, c.work.positions
+    cmds = [c.rec(kc.clamp_depth, m.num_nodes, m.node_world, s.solve_worlds, m.free_axes, s.pad_pos1, s.pad_rot1,
+                  m.pad_half_extents, m.pads_per_world, s.lag_normal, config.penetration_bound,
+                  0.9 * config.penetration_bound, x, s.clamped),
+            c.rec(ksub.end_substep, m.num_nodes, s.x_start, m.node_world, s.solve_worlds, s.diverged, 1.0 / c.h, x,
+                  s.v_new)]
+    if last:
+        cmds += [*_outputs(c), c.rec(ksub.clear_values, m.num_worlds, s.rz)]
+        if m.pads_per_world:
+            cmds.append(c.rec(ksub.copy_pad_poses, m.num_worlds * m.pads_per_world, ctl.pad_target_positions,
+                              ctl.pad_target_orientations, m.pads_per_world, s.solve_worlds, work.pad_positions,
+                              work.pad_orientations))
+    return cmds + [c.rec(ksub.copy_world_rows, m.num_nodes, s.v_new, m.node_world, s.solve_worlds, work.velocities)]
+
+
+def _finish_world(c: _Context, config, threads: int, last: bool) -> list:
+    """``_finish``'s launches as one: each solved world's substep end in a block of ``threads``
+    threads (``kernels/world_finish.py``)."""
+    m, s, e, wc, work, ctl = c.model, c.scratch, c.scratch.edges, c.compaction, c.work, c.control
+    return [c.blocks(kwfin.finish_world_blocks, threads,
+                     threads, wc.nodes.start, wc.tets.start, s.solve_worlds, int(last), work.positions,
+                     config.penetration_bound, 0.9 * config.penetration_bound, s.clamped, s.diverged, 1.0 / c.h,
+                     s.v_new, *_world_node_terms(c),
+                     s.residual, s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force,
+                     work.pad_normal_force, work.pad_force, s.penetration,
+                     *_world_edge_terms(c), e.triangle_first, e.point_block,
+                     *_world_tet_terms(c), s.cofactor, work.von_mises, s.tet_r, s.tet_twist, s.energy0,
+                     m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm,
+                     s.tet_start, s.tet_end, m.world_volume, s.stress_partial, work.mean_von_mises,
+                     ctl.pad_target_positions, ctl.pad_target_orientations, work.pad_positions,
+                     work.pad_orientations)]
+
+
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
                             h: float, start_pads: tuple, step_start: wp.array, compaction: WorldCompaction,
                             listed_cg: bool = False, phase_graphs: bool = True,
@@ -431,7 +482,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world
     (``evaluate``, ``evaluate_first``), and also its whole CG (``cg_world``, in blocks of
     ``cg_block_threads``, default ``world_block_threads``) and the rest of its Newton iteration
-    (``step_world``, ``step_world_first``)."""
+    (``step_world``, ``step_world_first``), its substep start (``lag``) and end (``finish``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
                  max(world_block_threads, 1))
     if scratch.stress_partial.shape[0] < model.num_worlds * c.block_threads:
@@ -450,7 +501,8 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         return _evaluate(c, config, start_energy)
 
     return SubstepLaunches(
-        pads=[seq(p) for p in _pads(c)], begin=_begin(c), lag=seq(_lag(c)),
+        pads=[seq(p) for p in _pads(c)], begin=_begin(c),
+        lag=seq(_lag_world(c, world_block_threads) if world_block_threads else _lag(c)),
         evaluate=seq(evaluate(c, config)),
         evaluate_first=seq(evaluate(c, config, start_energy=config.line_search_steps > 0)),
         cg=seq(_cg(c, config) * block),
@@ -465,10 +517,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         step_world=seq(_newton_step_world(c, config, world_block_threads, False)) if world_block_threads else [],
         step_world_first=seq(_newton_step_world(c, config, world_block_threads, True)) if world_block_threads else [],
         apply=seq(_apply(c, config)), depth=_depth(c),
-        clamp=c.rec(kc.clamp_depth, model.num_nodes, model.node_world, s.solve_worlds, model.free_axes, s.pad_pos1,
-                    s.pad_rot1, model.pad_half_extents, model.pads_per_world, s.lag_normal, config.penetration_bound,
-                    0.9 * config.penetration_bound, x, s.clamped),
-        end=c.rec(ksub.end_substep, model.num_nodes, s.x_start, model.node_world, s.solve_worlds, s.diverged, 1.0 / h,
-                  x, s.v_new),
-        outputs=seq(_outputs(c)), cg_block=block,
+        finish=[seq(_finish_world(c, config, world_block_threads, k == c.substeps - 1) if world_block_threads
+                    else _finish(c, config, k == c.substeps - 1)) for k in range(c.substeps)],
+        cg_block=block,
     )

@@ -169,8 +169,9 @@ def interpolate_pads(
     rot1[i] = wp.quat_slerp(qa, qb, s1)
 
 
-@wp.kernel
-def lag_contacts(
+@wp.func
+def lag_contact_node(
+    i: int,
     x_start: wp.array(dtype=wp.vec3),
     x_guess: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
@@ -188,8 +189,8 @@ def lag_contacts(
     """Contact face of every node with every pad for the substep (``contact_face``: CCD of the
     node's motion relative to the pad), and the normal force (N) and normal at the substep start,
     which the friction law holds fixed during the substep's Newton solve (slot 0: ground; slot
-    1 + k: pad k, normal in the pad's frame; the contact terms use that face all substep long)."""
-    i = wp.tid()
+    1 + k: pad k, normal in the pad's frame; the contact terms use that face all substep long):
+    node ``i``'s row of ``lag_contacts``."""
     w = node_world[i]
     slots = pads_per_world + 1
     xi = x_start[i]
@@ -204,6 +205,27 @@ def lag_contacts(
         depth = face_penetration(local, pad_half[pad], n_local)
         lag_normal_force[i * slots + 1 + k] = penalty_force(k_i, wp.max(depth, 0.0), knee)
         lag_normal[i * slots + 1 + k] = n_local
+
+
+@wp.kernel
+def lag_contacts(
+    x_start: wp.array(dtype=wp.vec3),
+    x_guess: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    stiffness: wp.array(dtype=float),
+    knee: float,
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+):
+    """``lag_contact_node`` for every node."""
+    lag_contact_node(wp.tid(), x_start, x_guess, node_world, pad_pos0, pad_rot0, pad_pos1, pad_rot1, pad_half,
+                     pads_per_world, stiffness, knee, lag_normal_force, lag_normal)
 
 
 @wp.func
@@ -362,8 +384,9 @@ def evaluate_nodes(
                   contact_hessian, contact_force, elastic_force, pad_normal_force, pad_force, penetration)
 
 
-@wp.kernel
-def keep_pad_depth(
+@wp.func
+def keep_pad_depth_node(
+    i: int,
     x_start: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     solve: wp.array(dtype=int),
@@ -389,8 +412,7 @@ def keep_pad_depth(
     The plain guess lets a node of a squeezed object that a turn or slide of the pad moves by
     micrometres start outside the pad; Newton sees no contact stiffness there, sends the node
     millimetres into the pad, and the line search shortens the whole world's step to ~1 %.
-    Only the nodes of worlds with ``solve`` set are moved."""
-    i = wp.tid()
+    Only the nodes of worlds with ``solve`` set are moved. Node ``i``'s row of ``keep_pad_depth``."""
     w = node_world[i]
     if solve[w] == 0:
         return
@@ -419,6 +441,27 @@ def keep_pad_depth(
 
 
 @wp.kernel
+def keep_pad_depth(
+    x_start: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
+    free: wp.array(dtype=wp.vec3),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=wp.vec3),
+):
+    """``keep_pad_depth_node`` for every node."""
+    keep_pad_depth_node(wp.tid(), x_start, node_world, solve, free, pad_pos0, pad_rot0, pad_pos1, pad_rot1, pad_half,
+                        pads_per_world, lag_normal_force, lag_normal, x)
+
+
+@wp.kernel
 def deepest_contact(
     x: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
@@ -444,8 +487,9 @@ def deepest_contact(
         wp.atomic_max(depth_out, w, depth)
 
 
-@wp.kernel
-def clamp_depth(
+@wp.func
+def clamp_depth_node(
+    i: int,
     node_world: wp.array(dtype=int),
     solve: wp.array(dtype=int),
     free: wp.array(dtype=wp.vec3),
@@ -464,8 +508,7 @@ def clamp_depth(
     position stays within the bound) along that face's normal (free axes only),
     and flag its world: a solve that did not resolve a violent contact returns a state within the
     bound, reported (``SolveStats.penetrated``) rather than silently penetrated. Only the worlds
-    with ``solve`` set are touched."""
-    i = wp.tid()
+    with ``solve`` set are touched. Node ``i``'s row of ``clamp_depth``."""
     w = node_world[i]
     if solve[w] == 0:
         return
@@ -485,3 +528,23 @@ def clamp_depth(
     if xi[1] < -bound and fr[1] > 0.0:
         x[i] = wp.vec3(xi[0], -target, xi[2])
         clamped[w] = 1
+
+
+@wp.kernel
+def clamp_depth(
+    node_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
+    free: wp.array(dtype=wp.vec3),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    lag_normal: wp.array(dtype=wp.vec3),
+    bound: float,
+    target: float,
+    x: wp.array(dtype=wp.vec3),
+    clamped: wp.array(dtype=int),
+):
+    """``clamp_depth_node`` for every node."""
+    clamp_depth_node(wp.tid(), node_world, solve, free, pad_pos1, pad_rot1, pad_half, pads_per_world, lag_normal,
+                     bound, target, x, clamped)

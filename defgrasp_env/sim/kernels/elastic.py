@@ -325,6 +325,21 @@ def hessian_product_tets(
                         world_active, product, tet_r, tet_twist)
 
 
+@wp.func
+def seed_rotation_tet(
+    t: int,
+    x: wp.array(dtype=wp.vec3),
+    tets: wp.array(dtype=wp.vec4i),
+    rest_inv: wp.array(dtype=wp.mat33),
+    tet_rotation: wp.array(dtype=wp.quat),
+):
+    """Tet ``t``'s row of ``seed_rotations``."""
+    idx = tets[t]
+    if spare_tet(idx):
+        return
+    tet_rotation[t] = svd_rotation(deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t]))
+
+
 @wp.kernel
 def seed_rotations(
     x: wp.array(dtype=wp.vec3),
@@ -334,8 +349,4 @@ def seed_rotations(
 ):
     """Polar rotation of every tet by the SVD: the warm start of ``polar_rotation`` for a substep,
     so that results depend on the state only, not on the solver's history."""
-    t = wp.tid()
-    idx = tets[t]
-    if spare_tet(idx):
-        return
-    tet_rotation[t] = svd_rotation(deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t]))
+    seed_rotation_tet(wp.tid(), x, tets, rest_inv, tet_rotation)

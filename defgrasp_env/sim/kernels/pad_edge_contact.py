@@ -95,8 +95,9 @@ def edge_point_end(q: int, w: int, pads_per_world: int, points: wp.array(dtype=w
     return pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], wp.cw_mul(points[q], pad_half[pad]))
 
 
-@wp.kernel
-def lag_edge_points(
+@wp.func
+def lag_edge_point(
+    slot: int,
     x_start: wp.array(dtype=wp.vec3),
     x_guess: wp.array(dtype=wp.vec3),
     triangles: wp.array(dtype=wp.vec3i),
@@ -141,8 +142,8 @@ def lag_edge_points(
     substep (a learner's pad hanging past a cube's edge, 7-12 mm behind the top face's plane). Also the
     normal force (N) its friction is lagged on: the penalty force of its start depth beyond the
     depth it may keep (a held point's load: its start depth is its kept depth plus its load depth;
-    at most a knee's worth, so less than the load of a point deeper than that, pushed back out)."""
-    slot = wp.tid()
+    at most a knee's worth, so less than the load of a point deeper than that, pushed back out).
+    Slot ``slot`` (world ``slot // points_per_world``) of ``lag_edge_points``."""
     w = slot // points_per_world
     q = slot % points_per_world
     t = best_tri[slot]
@@ -202,13 +203,49 @@ def lag_edge_points(
 
 
 @wp.kernel
+def lag_edge_points(
+    x_start: wp.array(dtype=wp.vec3),
+    x_guess: wp.array(dtype=wp.vec3),
+    triangles: wp.array(dtype=wp.vec3i),
+    triangle_first: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    points: wp.array(dtype=wp.vec3),
+    point_pad: wp.array(dtype=int),
+    point_share: wp.array(dtype=float),
+    points_per_world: int,
+    stiffness: wp.array(dtype=float),
+    lag_normal_force: wp.array(dtype=float),
+    lag_normal: wp.array(dtype=wp.vec3),
+    best_tri: wp.array(dtype=int),
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_normal: wp.array(dtype=wp.vec3),
+    point_stiffness: wp.array(dtype=float),
+    point_allowed: wp.array(dtype=float),
+    point_friction: wp.array(dtype=float),
+    knee: float,
+):
+    """``lag_edge_point`` for every (world, point) slot."""
+    lag_edge_point(wp.tid(), x_start, x_guess, triangles, triangle_first, pad_pos0, pad_rot0, pad_pos1, pad_rot1,
+                   pad_half, pads_per_world, points, point_pad, point_share, points_per_world, stiffness,
+                   lag_normal_force, lag_normal, best_tri, point_tri, point_bary, point_normal, point_stiffness,
+                   point_allowed, point_friction, knee)
+
+
+@wp.kernel
 def clear_triangle_push(push: wp.array(dtype=float)):
     """Start the initial guess's fix: no triangle needs a push yet."""
     push[wp.tid()] = 0.0
 
 
-@wp.kernel
-def edge_point_push(
+@wp.func
+def edge_point_push_slot(
+    slot: int,
     x_start: wp.array(dtype=wp.vec3),
     triangles: wp.array(dtype=wp.vec3i),
     solve: wp.array(dtype=int),
@@ -236,8 +273,7 @@ def edge_point_push(
     point of a triangle holds the same one). A point pressed at the start keeps its depth, as a
     node touching a pad does (``keep_pad_depth``): pushed out to its kept depth, a held grasp's
     triangles were pushed out by their points' load depth in every substep and Newton needed four
-    iterations to press them back."""
-    slot = wp.tid()
+    iterations to press them back. Slot ``slot`` of ``edge_point_push``."""
     w = slot // points_per_world
     t = point_tri[slot]
     if t < 0 or solve[w] == 0:
@@ -257,7 +293,36 @@ def edge_point_push(
 
 
 @wp.kernel
-def push_triangles(
+def edge_point_push(
+    x_start: wp.array(dtype=wp.vec3),
+    triangles: wp.array(dtype=wp.vec3i),
+    solve: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    points: wp.array(dtype=wp.vec3),
+    point_pad: wp.array(dtype=int),
+    points_per_world: int,
+    point_tri: wp.array(dtype=int),
+    point_bary: wp.array(dtype=wp.vec3),
+    point_normal: wp.array(dtype=wp.vec3),
+    point_allowed: wp.array(dtype=float),
+    x: wp.array(dtype=wp.vec3),
+    push: wp.array(dtype=float),
+    push_normal: wp.array(dtype=wp.vec3),
+):
+    """``edge_point_push_slot`` for every (world, point) slot."""
+    edge_point_push_slot(wp.tid(), x_start, triangles, solve, pad_pos0, pad_rot0, pad_pos1, pad_rot1, pad_half,
+                         pads_per_world, points, point_pad, points_per_world, point_tri, point_bary, point_normal,
+                         point_allowed, x, push, push_normal)
+
+
+@wp.func
+def push_triangle(
+    t: int,
     triangles: wp.array(dtype=wp.vec3i),
     triangle_world: wp.array(dtype=int),
     solve: wp.array(dtype=int),
@@ -273,8 +338,7 @@ def push_triangles(
     at the substep start stays where ``contact.keep_pad_depth`` put it. Without this a pad corner
     driven at 2 m/s into a stiff cuboid starts Newton ~6 mm deep and the cubic penalty's force
     throws the object. A node shared by pushed triangles moves by the sum of their pushes (the
-    same on every device: a guess only)."""
-    t = wp.tid()
+    same on every device: a guess only). Triangle ``t``'s row of ``push_triangles``."""
     d = push[t]
     if d <= 0.0 or solve[triangle_world[t]] == 0:
         return
@@ -287,6 +351,23 @@ def push_triangles(
                 touching = 1
         if touching == 0:
             wp.atomic_add(x, ids[j], -d * wp.cw_mul(free[ids[j]], push_normal[t]))
+
+
+@wp.kernel
+def push_triangles(
+    triangles: wp.array(dtype=wp.vec3i),
+    triangle_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
+    free: wp.array(dtype=wp.vec3),
+    lag_normal_force: wp.array(dtype=float),
+    pads_per_world: int,
+    push: wp.array(dtype=float),
+    push_normal: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=wp.vec3),
+):
+    """``push_triangle`` for every surface triangle."""
+    push_triangle(wp.tid(), triangles, triangle_world, solve, free, lag_normal_force, pads_per_world, push,
+                  push_normal, x)
 
 
 @wp.func

@@ -62,8 +62,9 @@ def clear_edge_search(best_dist: wp.array(dtype=float), best_tri: wp.array(dtype
     best_tri[i] = NO_TRIANGLE
 
 
-@wp.kernel
-def nearest_surface_triangles(
+@wp.func
+def nearest_surface_triangle_pair(
+    tid: int,
     x_start: wp.array(dtype=wp.vec3),
     x_guess: wp.array(dtype=wp.vec3),
     triangles: wp.array(dtype=wp.vec3i),
@@ -94,8 +95,8 @@ def nearest_surface_triangles(
 
     Where the point and the triangle will be, not where they start: a pad moving up to 13 mm per
     substep (2 m/s, 2 pi rad/s) carries a point past the triangle nearest to it at the start, whose
-    plane then reads millimetres of depth where the point passes beside the object."""
-    tid = wp.tid()
+    plane then reads millimetres of depth where the point passes beside the object. Pair ``tid``
+    (triangle ``tid // pads_per_world``, pad ``tid % pads_per_world``) of ``nearest_surface_triangles``."""
     t = tid // pads_per_world
     k = tid % pads_per_world
     w = triangle_world[t]
@@ -137,3 +138,28 @@ def nearest_surface_triangles(
                     wp.atomic_min(best_dist, slot, d)
                 elif d == best_dist[slot]:
                     wp.atomic_min(best_tri, slot, t)
+
+
+@wp.kernel
+def nearest_surface_triangles(
+    x_start: wp.array(dtype=wp.vec3),
+    x_guess: wp.array(dtype=wp.vec3),
+    triangles: wp.array(dtype=wp.vec3i),
+    triangle_world: wp.array(dtype=int),
+    pad_pos0: wp.array(dtype=wp.vec3),
+    pad_rot0: wp.array(dtype=wp.quat),
+    pad_pos1: wp.array(dtype=wp.vec3),
+    pad_rot1: wp.array(dtype=wp.quat),
+    pad_half: wp.array(dtype=wp.vec3),
+    pads_per_world: int,
+    points: wp.array(dtype=wp.vec3),
+    point_first: wp.array(dtype=int),
+    points_per_world: int,
+    choose: int,
+    best_dist: wp.array(dtype=float),
+    best_tri: wp.array(dtype=int),
+):
+    """``nearest_surface_triangle_pair`` for every (triangle, pad) pair."""
+    nearest_surface_triangle_pair(wp.tid(), x_start, x_guess, triangles, triangle_world, pad_pos0, pad_rot0, pad_pos1,
+                                  pad_rot1, pad_half, pads_per_world, points, point_first, points_per_world, choose,
+                                  best_dist, best_tri)

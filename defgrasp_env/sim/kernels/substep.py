@@ -135,6 +135,27 @@ def end_newton_iteration(
                      newton_active, rz, residual_norm, cg_iterations, last_dx_norm, unconverged)
 
 
+@wp.func
+def end_substep_node(
+    i: int,
+    x_start: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
+    diverged: wp.array(dtype=int),
+    inv_dt: float,
+    x: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+):
+    """Node ``i``'s row of ``end_substep``."""
+    if solve[node_world[i]] == 0:
+        return
+    if diverged[node_world[i]] != 0:
+        x[i] = x_start[i]
+        v[i] = wp.vec3(0.0)
+        return
+    v[i] = (x[i] - x_start[i]) * inv_dt
+
+
 @wp.kernel
 def end_substep(
     x_start: wp.array(dtype=wp.vec3),
@@ -146,14 +167,7 @@ def end_substep(
     v: wp.array(dtype=wp.vec3),
 ):
     """v = (x - x_start) / dt; a diverged world is put back to its start positions at rest."""
-    i = wp.tid()
-    if solve[node_world[i]] == 0:
-        return
-    if diverged[node_world[i]] != 0:
-        x[i] = x_start[i]
-        v[i] = wp.vec3(0.0)
-        return
-    v[i] = (x[i] - x_start[i]) * inv_dt
+    end_substep_node(wp.tid(), x_start, node_world, solve, diverged, inv_dt, x, v)
 
 
 @wp.kernel
@@ -224,6 +238,12 @@ def clear_solve_report(solve: wp.array(dtype=int), newton_it: wp.array(dtype=int
     unconverged[w] = 0
     clamped[w] = 0
     penetration[w] = 0.0
+
+
+@wp.kernel
+def clear_values(values: wp.array(dtype=float)):
+    """values[i] = 0 (CG's ``rz`` [W] after the outputs pass)."""
+    values[wp.tid()] = 0.0
 
 
 @wp.kernel

@@ -1,0 +1,108 @@
+"""Where a CUDA vector step's GPU time goes, kernel by kernel (a diagnosis, not a benchmark of record).
+
+    python benchmarks/profile_kernels.py --device cuda:0 --worlds 1 [--object cuboid] [--steps 20]
+
+The native vector env (``bench_env_step.py``'s defaults: cuboid, E = 1e5 Pa, 20 Hz, 4 substeps,
+seeded uniform random delta actions) is stepped twice from the same seed: first with every graph on
+(the shipped path; wall ms per step, each step bracketed by ``wp.synchronize_device``), then with the
+solver's graphs and the scene's period graphs off, under ``wp.timing_begin(wp.TIMING_KERNEL)``, so
+that each kernel launch is timed on the GPU with CUDA events. Printed: per kernel, launches per step,
+median us per launch and ms per step, largest first, and the totals (kernel time and launches per
+step). With graphs on the same launches run as graph nodes, so the launch count is what a step's
+graphs replay, and their sum of kernel times is a lower bound of the graph-on step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import os
+import pathlib
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+import warp as wp  # noqa: E402
+
+import defgrasp_env  # noqa: E402,F401
+from bench_env_step import solver_config  # noqa: E402
+
+
+def make(device: str, worlds: int, obj: str, modulus: float, graphs: bool):
+    env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
+                       device=device, object=obj, youngs_modulus=modulus,
+                       solver=solver_config("on" if graphs else "off", None))
+    env.reset(seed=0)
+    env.unwrapped.scene.period_graphs = graphs
+    return env
+
+
+def step_times(device: str, worlds: int, obj: str, modulus: float, warmup: int, steps: int) -> np.ndarray:
+    """Wall seconds of ``steps`` graph-on steps after ``warmup``."""
+    env = make(device, worlds, obj, modulus, graphs=True)
+    rng = np.random.default_rng(0)
+    times = []
+    for k in range(warmup + steps):
+        action = rng.uniform(-1, 1, (worlds, 7)).astype(np.float32)
+        wp.synchronize_device(device)
+        t0 = time.perf_counter()
+        env.step(action)
+        wp.synchronize_device(device)
+        if k >= warmup:
+            times.append(time.perf_counter() - t0)
+    env.close()
+    return np.array(times)
+
+
+def kernel_times(device: str, worlds: int, obj: str, modulus: float, warmup: int, steps: int) -> list:
+    """``wp.timing_end()``'s results over ``steps`` graph-off steps after ``warmup``."""
+    env = make(device, worlds, obj, modulus, graphs=False)
+    rng = np.random.default_rng(0)
+    for k in range(warmup + steps):
+        action = rng.uniform(-1, 1, (worlds, 7)).astype(np.float32)
+        if k == warmup:
+            wp.synchronize_device(device)
+            wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
+        env.step(action)
+    wp.synchronize_device(device)
+    results = wp.timing_end()
+    env.close()
+    return results
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--device", default="cuda:0")
+    ap.add_argument("--worlds", type=int, default=1)
+    ap.add_argument("--object", default="cuboid")
+    ap.add_argument("--youngs-modulus", type=float, default=1e5)
+    ap.add_argument("--warmup", type=int, default=10)
+    ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--top", type=int, default=40)
+    args = ap.parse_args(argv)
+    wall = step_times(args.device, args.worlds, args.object, args.youngs_modulus, args.warmup, args.steps)
+    print(f"W = {args.worlds}, {args.object}, E = {args.youngs_modulus:g}, graphs on: step median "
+          f"{1e3 * np.median(wall):.3f} ms, p95 {1e3 * np.percentile(wall, 95):.3f} ms, "
+          f"{args.worlds / np.median(wall):,.0f} world-steps/s")
+    per_kernel = collections.defaultdict(list)
+    for r in kernel_times(args.device, args.worlds, args.object, args.youngs_modulus, args.warmup, args.steps):
+        per_kernel[r.name.split("_cuda_kernel_forward")[0]].append(1e3 * r.elapsed)
+    rows = sorted(per_kernel.items(), key=lambda kv: -sum(kv[1]))
+    total_us = sum(sum(v) for v in per_kernel.values())
+    total_launches = sum(len(v) for v in per_kernel.values())
+    print(f"graphs off: {total_launches / args.steps:.1f} kernel launches a step, "
+          f"{total_us / args.steps / 1e3:.3f} ms of kernel time a step")
+    print("| kernel | launches / step | us per launch, median | ms / step |")
+    print("|---|---|---|---|")
+    for name, us in rows[: args.top]:
+        print(f"| `{name}` | {len(us) / args.steps:.1f} | {np.median(us):.1f} | {sum(us) / args.steps / 1e3:.3f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
