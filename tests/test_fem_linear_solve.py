@@ -157,9 +157,9 @@ def held_rope_steps(mode: str, steps: int = 6, config: SolverConfig = SolverConf
     solver = ImplicitSolver(model, dataclasses.replace(config, graphs={"step": True, "fallback": None}.get(mode, False)))
     run, graphs = solver._substep_launches(DT / config.substeps, state, state, control)  # what ``step`` replays
     if mode == "launches":
-        for phase in (run.lag, run.evaluate, run.evaluate_first, run.cg, run.cg_world, run.step_world,
+        for phase in (run.evaluate, run.evaluate_first, run.cg, run.cg_world, run.step_world,
                       run.step_world_first, run.coarse_post, run.energy0, run.trial, run.apply,
-                      *run.finish, *run.pads):
+                      *run.finish, *run.start):
             for seq in phase:
                 seq.graph = None
     reports = [solver.step(state, state, control, dt=DT, patient=patient) for _ in range(steps)]

@@ -372,10 +372,7 @@ class ImplicitSolver:
         self._launch(ksub.clear_solve_report, m.num_worlds, s.solve_worlds, s.newton_it, s.cg_total, s.diverged,
                      s.unconverged, s.clamped, s.penetration)
         for k in range(cfg.substeps):
-            for cmd in run.pads[k]:
-                cmd.launch()
-            run.begin[k].launch()
-            for cmd in run.lag:
+            for cmd in run.start[k]:  # pad poses, start and guess, lag, Newton's flags
                 cmd.launch()
             self._newton(run, cfg.patient_iterations if patient_any else 0)
             for cmd in run.finish[k]:  # clamp, velocities, outputs after the last substep
@@ -384,9 +381,6 @@ class ImplicitSolver:
     def _newton(self, run: SubstepLaunches, patient_iterations: int = 0) -> None:
         """The regular Newton iterations while a world iterates (all of them without checks), then
         the extra ones (``DeviceLoops.extra_iterations``) in the worlds that ran all regular ones."""
-        s = self.scratch
-        wp.copy(s.newton_active, s.solve_worlds)
-        s.substep_newton_it.zero_()
         self.loops.do_while("newton", lambda: self._newton_iteration(run, first=True),
                             lambda: self._newton_iteration(run, first=False))
         self.loops.extra_iterations(run.depth, lambda: self._newton_iteration(run, first=False), patient_iterations)

@@ -36,7 +36,7 @@ from .kernels import line_search as kls
 from .kernels import linear_solve as klin
 from .kernels import substep as ksub
 from .kernels import world_cg as kwcg
-from .kernels import world_lag as kwlag
+from .kernels import world_start as kwstart
 from .kernels import world_evaluate as kwev
 from .kernels import world_newton_step as kwns
 from .kernels import world_finish as kwfin
@@ -76,9 +76,8 @@ class LaunchSequence:
 class SubstepLaunches:
     """Launches of each phase (lists are launched in order; see the module docstring)."""
 
-    pads: list          # [substeps] lists: pad poses at fractions k/K and (k+1)/K of the step
-    begin: list         # [substeps] launches: substep start, initial guess (prescribed axes at (k+1)/K)
-    lag: list
+    start: list         # [substeps] lists: pad poses at fractions k/K and (k+1)/K of the step, substep start,
+                        # initial guess (prescribed axes at (k+1)/K), lag, Newton's flags
     evaluate: list      # a Newton iteration's evaluation (one launch of world blocks where ``world_block_threads``)
     evaluate_first: list  # the substep's first evaluation: also the tets' part of ``energy0``
     cg: list
@@ -243,21 +242,21 @@ def _coarse_after(c: _Context, active) -> list:
             c.rec(kcs.coarse_correct, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx)]
 
 
-def _pads(c: _Context) -> list:
+def _pads(c: _Context, k: int) -> list:
+    """Pad poses at fractions k/K and (k+1)/K of the step (none without pads)."""
     m, s, ctl, k_sub = c.model, c.scratch, c.control, c.substeps
     if not m.pads_per_world:
-        return [[] for _ in range(k_sub)]
-    return [[c.rec(kc.interpolate_pads, m.num_worlds * m.pads_per_world, *c.start_pads,
-                   ctl.pad_target_positions, ctl.pad_target_orientations, k / k_sub, (k + 1) / k_sub, *s.pads)]
-            for k in range(k_sub)]
+        return []
+    return [c.rec(kc.interpolate_pads, m.num_worlds * m.pads_per_world, *c.start_pads, ctl.pad_target_positions,
+                  ctl.pad_target_orientations, k / k_sub, (k + 1) / k_sub, *s.pads)]
 
 
-def _begin(c: _Context) -> list:
+def _begin(c: _Context, k: int):
+    """Substep ``k``'s start positions and initial guess (prescribed axes at (k+1)/K)."""
     m, s, work = c.model, c.scratch, c.work
-    return [c.rec(ksub.begin_substep, m.num_nodes, work.positions, work.velocities, c.step_start,
-                  c.control.prescribed_positions, m.free_axes, m.node_world, s.solve_worlds, (k + 1) / c.substeps,
-                  c.h, s.x_start)
-            for k in range(c.substeps)]
+    return c.rec(ksub.begin_substep, m.num_nodes, work.positions, work.velocities, c.step_start,
+                 c.control.prescribed_positions, m.free_axes, m.node_world, s.solve_worlds, (k + 1) / c.substeps,
+                 c.h, s.x_start)
 
 
 def _lag(c: _Context) -> list:
@@ -272,18 +271,28 @@ def _lag(c: _Context) -> list:
             c.rec(ke.seed_rotations, m.num_tets, x, m.tets, m.tet_rest_inv, s.tet_rotation)]
 
 
-def _lag_world(c: _Context, threads: int) -> list:
-    """``_lag``'s launches as one: each world's substep start in a block of ``threads`` threads
-    (``kernels/world_lag.py``)."""
-    m, s, e, wc = c.model, c.scratch, c.scratch.edges, c.compaction
-    return [c.blocks(kwlag.lag_world_blocks, threads,
-                     threads, wc.nodes.start, wc.tets.start, s.solve_worlds, s.x_start, c.work.positions,
+def _start(c: _Context, k: int) -> list:
+    """The start of substep ``k``: pad poses (``_pads``), start and guess (``_begin``), lag
+    (``_lag``), Newton's flags."""
+    m, s = c.model, c.scratch
+    return [*_pads(c, k), _begin(c, k), *_lag(c),
+            c.rec(ksub.begin_newton, m.num_worlds, s.solve_worlds, s.newton_active, s.substep_newton_it)]
+
+
+def _start_world(c: _Context, threads: int, k: int) -> list:
+    """``_start``'s launches as one: each world's start of substep ``k`` in a block of ``threads``
+    threads (``kernels/world_start.py``)."""
+    m, s, e, wc, ctl = c.model, c.scratch, c.scratch.edges, c.compaction, c.control
+    return [c.blocks(kwstart.start_world_blocks, threads,
+                     threads, wc.nodes.start, wc.tets.start, s.solve_worlds, *c.start_pads,
+                     ctl.pad_target_positions, ctl.pad_target_orientations, k / c.substeps, (k + 1) / c.substeps,
+                     c.work.velocities, c.step_start, ctl.prescribed_positions, c.h, s.x_start, c.work.positions,
                      m.node_world, m.free_axes, *s.pads, m.pad_half_extents, m.pads_per_world,
                      m.node_contact_stiffness, m.contact.stiffening_depth, s.lag_normal_force, s.lag_normal,
                      e.triangles, e.triangle_world, e.triangle_first, e.points, e.point_first, e.point_pad,
                      e.point_share, e.points_per_world if e.active else 0, e.best_dist, e.best_tri, e.point_tri,
                      e.point_bary, e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction, e.push,
-                     e.push_normal, m.tets, m.tet_rest_inv, s.tet_rotation)]
+                     e.push_normal, m.tets, m.tet_rest_inv, s.tet_rotation, s.newton_active, s.substep_newton_it)]
 
 
 def _evaluate(c: _Context, config, start_energy: bool = False) -> list:
@@ -482,7 +491,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world
     (``evaluate``, ``evaluate_first``), and also its whole CG (``cg_world``, in blocks of
     ``cg_block_threads``, default ``world_block_threads``) and the rest of its Newton iteration
-    (``step_world``, ``step_world_first``), its substep start (``lag``) and end (``finish``)."""
+    (``step_world``, ``step_world_first``), its substep start (``start``) and end (``finish``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
                  max(world_block_threads, 1))
     if scratch.stress_partial.shape[0] < model.num_worlds * c.block_threads:
@@ -501,8 +510,8 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         return _evaluate(c, config, start_energy)
 
     return SubstepLaunches(
-        pads=[seq(p) for p in _pads(c)], begin=_begin(c),
-        lag=seq(_lag_world(c, world_block_threads) if world_block_threads else _lag(c)),
+        start=[seq(_start_world(c, world_block_threads, k) if world_block_threads else _start(c, k))
+               for k in range(c.substeps)],
         evaluate=seq(evaluate(c, config)),
         evaluate_first=seq(evaluate(c, config, start_energy=config.line_search_steps > 0)),
         cg=seq(_cg(c, config) * block),

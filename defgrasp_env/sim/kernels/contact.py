@@ -146,6 +146,29 @@ def face_penetration(local: wp.vec3, half: wp.vec3, n: wp.vec3):
     return depth
 
 
+@wp.func
+def interpolate_pad(
+    i: int,
+    start_pos: wp.array(dtype=wp.vec3),
+    start_rot: wp.array(dtype=wp.quat),
+    end_pos: wp.array(dtype=wp.vec3),
+    end_rot: wp.array(dtype=wp.quat),
+    s0: float,
+    s1: float,
+    pos0: wp.array(dtype=wp.vec3),
+    rot0: wp.array(dtype=wp.quat),
+    pos1: wp.array(dtype=wp.vec3),
+    rot1: wp.array(dtype=wp.quat),
+):
+    """Pad ``i``'s poses at fractions s0 and s1 of the step (linear position, slerp orientation)."""
+    qa = wp.normalize(start_rot[i])
+    qb = wp.normalize(end_rot[i])
+    pos0[i] = wp.lerp(start_pos[i], end_pos[i], s0)
+    pos1[i] = wp.lerp(start_pos[i], end_pos[i], s1)
+    rot0[i] = wp.quat_slerp(qa, qb, s0)
+    rot1[i] = wp.quat_slerp(qa, qb, s1)
+
+
 @wp.kernel
 def interpolate_pads(
     start_pos: wp.array(dtype=wp.vec3),
@@ -160,13 +183,7 @@ def interpolate_pads(
     rot1: wp.array(dtype=wp.quat),
 ):
     """Pad poses at fractions s0 and s1 of the step (linear position, slerp orientation)."""
-    i = wp.tid()
-    qa = wp.normalize(start_rot[i])
-    qb = wp.normalize(end_rot[i])
-    pos0[i] = wp.lerp(start_pos[i], end_pos[i], s0)
-    pos1[i] = wp.lerp(start_pos[i], end_pos[i], s1)
-    rot0[i] = wp.quat_slerp(qa, qb, s0)
-    rot1[i] = wp.quat_slerp(qa, qb, s1)
+    interpolate_pad(wp.tid(), start_pos, start_rot, end_pos, end_rot, s0, s1, pos0, rot0, pos1, rot1)
 
 
 @wp.func

@@ -11,6 +11,32 @@ from .block_sync import block_barrier
 wp.set_module_options({"enable_backward": False})
 
 
+@wp.func
+def begin_substep_node(
+    i: int,
+    x: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+    step_start: wp.array(dtype=wp.vec3),
+    prescribed: wp.array(dtype=wp.vec3),
+    free: wp.array(dtype=wp.vec3),
+    node_world: wp.array(dtype=int),
+    solve: wp.array(dtype=int),
+    s1: float,
+    dt: float,
+    x_start: wp.array(dtype=wp.vec3),
+):
+    """Save the substep's start positions and move x to the initial guess x + dt v; prescribed axes
+    go to their target interpolated at fraction s1 of the step: node ``i``'s row of ``begin_substep``."""
+    if solve[node_world[i]] == 0:
+        return
+    xi = x[i]
+    x_start[i] = xi
+    target = wp.lerp(step_start[i], prescribed[i], s1)
+    fr = free[i]
+    guess = xi + dt * v[i]
+    x[i] = wp.cw_mul(fr, guess) + wp.cw_mul(wp.vec3(1.0) - fr, target)
+
+
 @wp.kernel
 def begin_substep(
     x: wp.array(dtype=wp.vec3),
@@ -24,17 +50,17 @@ def begin_substep(
     dt: float,
     x_start: wp.array(dtype=wp.vec3),
 ):
-    """Save the substep's start positions and move x to the initial guess x + dt v; prescribed axes
-    go to their target interpolated at fraction s1 of the step."""
-    i = wp.tid()
-    if solve[node_world[i]] == 0:
-        return
-    xi = x[i]
-    x_start[i] = xi
-    target = wp.lerp(step_start[i], prescribed[i], s1)
-    fr = free[i]
-    guess = xi + dt * v[i]
-    x[i] = wp.cw_mul(fr, guess) + wp.cw_mul(wp.vec3(1.0) - fr, target)
+    """``begin_substep_node`` for every node."""
+    begin_substep_node(wp.tid(), x, v, step_start, prescribed, free, node_world, solve, s1, dt, x_start)
+
+
+@wp.kernel
+def begin_newton(solve: wp.array(dtype=int), newton_active: wp.array(dtype=int),
+                 substep_newton_it: wp.array(dtype=int)):
+    """Before a substep's Newton iterations: each world iterates if it is solved, none has yet."""
+    w = wp.tid()
+    newton_active[w] = solve[w]
+    substep_newton_it[w] = 0
 
 
 @wp.func

@@ -1,16 +1,18 @@
-"""Each world's substep start ("lag") in one launch: a block of threads per world lags its nodes' pad
-contacts, searches its pad edge points' triangles and lags them, fixes the initial guess (nodes
-kept at their pad depth, pushed edge triangles) and seeds its tets' rotations, with a block
+"""Each world's substep start in one launch: a block of threads per world interpolates its pad poses,
+saves its start positions and moves its nodes to the initial guess, lags its nodes' pad contacts,
+searches its pad edge points' triangles and lags them, fixes the initial guess (nodes kept at their
+pad depth, pushed edge triangles), seeds its tets' rotations and sets its Newton flags, with a block
 barrier (``block_sync.py``) wherever a phase reads what other threads wrote.
 
-Phase by phase this is ten launches over the rows of every world (``contact.lag_contacts``,
-``pad_edge_search.clear_edge_search``, ``nearest_surface_triangles`` twice,
-``pad_edge_contact.lag_edge_points``, ``contact.keep_pad_depth``, ``pad_edge_contact.clear_triangle_push``,
-``edge_point_push``, ``push_triangles``, ``elastic.seed_rotations``): a lone world on a GPU pays a
-launch's latency for each, in every substep. ``lag_world_blocks`` calls the same row functions in
-the same order per world (the push's clear moved before the search: nothing reads it in between):
-bit-identical on the CPU (one thread per world). Like the phase kernels it runs in every world,
-solved or not, moving only the guesses of the solved ones (``solve``).
+Phase by phase this is thirteen launches over the rows of every world (``contact.interpolate_pads``,
+``substep.begin_substep``, ``contact.lag_contacts``, ``pad_edge_search.clear_edge_search``,
+``nearest_surface_triangles`` twice, ``pad_edge_contact.lag_edge_points``, ``contact.keep_pad_depth``,
+``pad_edge_contact.clear_triangle_push``, ``edge_point_push``, ``push_triangles``,
+``elastic.seed_rotations``, ``substep.begin_newton``): a lone world on a GPU pays a launch's latency
+for each, in every substep. ``start_world_blocks`` calls the same row functions in the same order per
+world (the push's clear moved before the search: nothing reads it in between): bit-identical on the
+CPU (one thread per world). Like the phase kernels it runs in every world, solved or not, moving
+only the nodes of the solved ones (``solve``).
 """
 
 import warp as wp
@@ -18,18 +20,31 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})  # forward only, as ``world_evaluate``
 
 from .block_sync import block_barrier
-from .contact import keep_pad_depth_node, lag_contact_node
+from .contact import interpolate_pad, keep_pad_depth_node, lag_contact_node
 from .elastic import seed_rotation_tet
 from .pad_edge_contact import edge_point_push_slot, lag_edge_point, push_triangle
 from .pad_edge_search import NO_TRIANGLE, nearest_surface_triangle_pair
+from .substep import begin_substep_node
 
 
 @wp.kernel
-def lag_world_blocks(
+def start_world_blocks(
     threads: int,
     node_start: wp.array(dtype=int),
     tet_start: wp.array(dtype=int),
     solve: wp.array(dtype=int),
+    # pad poses (contact.interpolate_pad)
+    step_pad_pos: wp.array(dtype=wp.vec3),
+    step_pad_rot: wp.array(dtype=wp.quat),
+    target_pad_pos: wp.array(dtype=wp.vec3),
+    target_pad_rot: wp.array(dtype=wp.quat),
+    s0: float,
+    s1: float,
+    # start and guess (substep.begin_substep_node)
+    v: wp.array(dtype=wp.vec3),
+    step_start: wp.array(dtype=wp.vec3),
+    prescribed: wp.array(dtype=wp.vec3),
+    dt: float,
     x_start: wp.array(dtype=wp.vec3),
     x: wp.array(dtype=wp.vec3),
     # nodes (contact.lag_contact_node, keep_pad_depth_node)
@@ -68,9 +83,15 @@ def lag_world_blocks(
     tets: wp.array(dtype=wp.vec4i),
     rest_inv: wp.array(dtype=wp.mat33),
     tet_rotation: wp.array(dtype=wp.quat),
+    # Newton's flags (substep.begin_newton)
+    newton_active: wp.array(dtype=int),
+    substep_newton_it: wp.array(dtype=int),
 ):
-    """The substep start of world ``tid // threads`` (thread ``tid % threads`` of its block):
-    ``x`` holds its initial guess on entry and the fixed guess on exit. ``node_start`` /
+    """The start of the substep from fraction ``s0`` to ``s1`` of the step for world
+    ``tid // threads`` (thread ``tid % threads`` of its block): its pad poses (``pad_pos0`` ...
+    ``pad_rot1``) between the step's start (``step_pad_*``) and target (``target_pad_*``) poses,
+    ``x_start`` = ``x`` (m) and ``x`` the initial guess x + ``dt`` v (prescribed axes: between
+    ``step_start`` and ``prescribed``), the contacts lagged and the guess fixed. ``node_start`` /
     ``tet_start`` / ``triangle_first`` [W+1]: each world's rows."""
     tid = wp.tid()
     w = tid // threads
@@ -81,6 +102,12 @@ def lag_world_blocks(
     e1 = e0 + points_per_world
     f0 = triangle_first[w]
     f1 = triangle_first[w + 1]
+    for k in range(lane, pads_per_world, threads):
+        interpolate_pad(w * pads_per_world + k, step_pad_pos, step_pad_rot, target_pad_pos, target_pad_rot, s0, s1,
+                        pad_pos0, pad_rot0, pad_pos1, pad_rot1)
+    for i in range(n0 + lane, n1, threads):
+        begin_substep_node(i, x, v, step_start, prescribed, free, node_world, solve, s1, dt, x_start)
+    block_barrier()
     for i in range(n0 + lane, n1, threads):
         lag_contact_node(i, x_start, x, node_world, pad_pos0, pad_rot0, pad_pos1, pad_rot1, pad_half, pads_per_world,
                          stiffness, knee, lag_normal_force, lag_normal)
@@ -119,3 +146,6 @@ def lag_world_blocks(
     block_barrier()
     for t in range(tet_start[w] + lane, tet_start[w + 1], threads):
         seed_rotation_tet(t, x, tets, rest_inv, tet_rotation)
+    if lane == 0:  # substep.begin_newton
+        newton_active[w] = solve[w]
+        substep_newton_it[w] = 0
