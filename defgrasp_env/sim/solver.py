@@ -20,7 +20,6 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .kernels import substep as ksub
 from .launch_lock import scoped_capture
 from .materials import check_range
 from .model import Model
@@ -357,22 +356,14 @@ class ImplicitSolver:
         self._solving_all = bool(worlds.all())
         return True
 
-    def _launch(self, kernel, dim: int, *inputs) -> None:
-        wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device)
-
     def _advance(self, run: SubstepLaunches, state_in: State, state_out: State, control: Control,
                  patient_any: bool) -> None:
-        cfg, s, m = self.config, self.scratch, self.model
-        if state_in is not state_out:
-            for a in ("positions", "velocities"):
-                self._launch(ksub.copy_world_rows, m.num_nodes, getattr(state_in, a), m.node_world, s.solve_worlds,
-                             getattr(state_out, a))
-        else:  # the start positions are overwritten: keep them for the prescribed axes
+        cfg, s = self.config, self.scratch
+        if state_in is state_out:  # the start positions are overwritten: keep them for the prescribed axes
             wp.copy(s.step_start, state_in.positions)
-        self._launch(ksub.clear_solve_report, m.num_worlds, s.solve_worlds, s.newton_it, s.cg_total, s.diverged,
-                     s.unconverged, s.clamped, s.penetration)
         for k in range(cfg.substeps):
-            for cmd in run.start[k]:  # pad poses, start and guess, lag, Newton's flags
+            # the input's rows and a clear report (k = 0), pad poses, start and guess, lag, Newton's flags
+            for cmd in run.start[k]:
                 cmd.launch()
             self._newton(run, cfg.patient_iterations if patient_any else 0)
             for cmd in run.finish[k]:  # clamp, velocities, outputs after the last substep
@@ -458,7 +449,8 @@ class ImplicitSolver:
                                              step_start=step_start, compaction=self.compaction,
                                              listed_cg=self._listed_cg, phase_graphs=not self.graphs,
                                              world_block_threads=self.world_block_threads,
-                                             cg_block_threads=self.cg_block_threads), {})
+                                             cg_block_threads=self.cg_block_threads,
+                                             copy_from=None if state_in is state_out else state_in), {})
         self._launches[key] = entry  # most recently used last
         while len(self._launches) > _LAUNCH_SETS:
             self._launches.pop(next(iter(self._launches)))

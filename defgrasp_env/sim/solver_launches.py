@@ -108,6 +108,7 @@ class _Context:
     step_start: object  # [N] vec3: node positions at the step's start (prescribed-axis lerp)
     compaction: WorldCompaction
     block_threads: int  # threads of a world's block in the mean stress (``world_block_threads``, at least 1)
+    copy_from: State | None  # the step's input state where it is not ``work`` (its rows copied at the start)
 
     def rec(self, kernel, dim, *inputs):
         return wp.launch(kernel, dim=dim, inputs=list(inputs), device=self.model.device, record_cmd=True)
@@ -272,19 +273,29 @@ def _lag(c: _Context) -> list:
 
 
 def _start(c: _Context, k: int) -> list:
-    """The start of substep ``k``: pad poses (``_pads``), start and guess (``_begin``), lag
-    (``_lag``), Newton's flags."""
+    """The start of substep ``k``: at the step's start the input state's rows copied into ``work``
+    (``copy_from``) and the report cleared, then pad poses (``_pads``), start and guess (``_begin``),
+    lag (``_lag``), Newton's flags."""
     m, s = c.model, c.scratch
-    return [*_pads(c, k), _begin(c, k), *_lag(c),
+    step = []
+    if k == 0:
+        step = [c.rec(ksub.copy_world_rows, m.num_nodes, getattr(c.copy_from, a), m.node_world, s.solve_worlds,
+                      getattr(c.work, a)) for a in ("positions", "velocities") if c.copy_from is not None]
+        step.append(c.rec(ksub.clear_solve_report, m.num_worlds, s.solve_worlds, s.newton_it, s.cg_total, s.diverged,
+                          s.unconverged, s.clamped, s.penetration))
+    return [*step, *_pads(c, k), _begin(c, k), *_lag(c),
             c.rec(ksub.begin_newton, m.num_worlds, s.solve_worlds, s.newton_active, s.substep_newton_it)]
 
 
 def _start_world(c: _Context, threads: int, k: int) -> list:
     """``_start``'s launches as one: each world's start of substep ``k`` in a block of ``threads``
     threads (``kernels/world_start.py``)."""
-    m, s, e, wc, ctl = c.model, c.scratch, c.scratch.edges, c.compaction, c.control
+    m, s, e, wc, ctl, work = c.model, c.scratch, c.scratch.edges, c.compaction, c.control, c.work
+    source = c.copy_from if k == 0 and c.copy_from is not None else work
     return [c.blocks(kwstart.start_world_blocks, threads,
-                     threads, wc.nodes.start, wc.tets.start, s.solve_worlds, *c.start_pads,
+                     threads, wc.nodes.start, wc.tets.start, s.solve_worlds,
+                     int(k == 0 and c.copy_from is not None), source.positions, source.velocities, int(k == 0),
+                     s.newton_it, s.cg_total, s.diverged, s.unconverged, s.clamped, s.penetration, *c.start_pads,
                      ctl.pad_target_positions, ctl.pad_target_orientations, k / c.substeps, (k + 1) / c.substeps,
                      c.work.velocities, c.step_start, ctl.prescribed_positions, c.h, s.x_start, c.work.positions,
                      m.node_world, m.free_axes, *s.pads, m.pad_half_extents, m.pads_per_world,
@@ -481,11 +492,13 @@ def _finish_world(c: _Context, config, threads: int, last: bool) -> list:
 def record_substep_launches(model: Model, config, scratch: SolverScratch, work: State, control: Control,
                             h: float, start_pads: tuple, step_start: wp.array, compaction: WorldCompaction,
                             listed_cg: bool = False, phase_graphs: bool = True,
-                            world_block_threads: int = 0, cg_block_threads: int | None = None) -> SubstepLaunches:
+                            world_block_threads: int = 0, cg_block_threads: int | None = None,
+                            copy_from: State | None = None) -> SubstepLaunches:
     """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step,
     iterating in ``work`` (the output state: positions and velocities hold the step's start when
     it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
-    ``step_start`` at the step's start, toward ``control``. ``phase_graphs``: capture each phase
+    ``step_start`` at the step's start, toward ``control``; ``copy_from``: the step's input state
+    where it is not ``work`` (the solved worlds' positions and velocities are copied from it first). ``phase_graphs``: capture each phase
     as a CPU graph (False where the caller captures the whole substep). ``compaction``: the row maps;
     ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
     ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world
@@ -493,7 +506,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     ``cg_block_threads``, default ``world_block_threads``) and the rest of its Newton iteration
     (``step_world``, ``step_world_first``), its substep start (``start``) and end (``finish``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
-                 max(world_block_threads, 1))
+                 max(world_block_threads, 1), copy_from)
     if scratch.stress_partial.shape[0] < model.num_worlds * c.block_threads:
         raise ValueError(f"world_block_threads={world_block_threads} needs a scratch made with block_threads >= it "
                          f"(SolverScratch.from_model); its stress_partial holds {scratch.stress_partial.shape[0]} "

@@ -250,20 +250,27 @@ def copy_pad_poses(src_pos: wp.array(dtype=wp.vec3), src_rot: wp.array(dtype=wp.
         dst_rot[i] = src_rot[i]
 
 
-@wp.kernel
-def clear_solve_report(solve: wp.array(dtype=int), newton_it: wp.array(dtype=int), cg_total: wp.array(dtype=int),
+@wp.func
+def clear_report_world(w: int, newton_it: wp.array(dtype=int), cg_total: wp.array(dtype=int),
                        diverged: wp.array(dtype=int), unconverged: wp.array(dtype=int), clamped: wp.array(dtype=int),
                        penetration: wp.array(dtype=float)):
-    """Zero the per-world report (counters, flags, penetration, m) of each solved world."""
-    w = wp.tid()
-    if solve[w] == 0:
-        return
+    """Zero world ``w``'s report (counters, flags, penetration, m)."""
     newton_it[w] = 0
     cg_total[w] = 0
     diverged[w] = 0
     unconverged[w] = 0
     clamped[w] = 0
     penetration[w] = 0.0
+
+
+@wp.kernel
+def clear_solve_report(solve: wp.array(dtype=int), newton_it: wp.array(dtype=int), cg_total: wp.array(dtype=int),
+                       diverged: wp.array(dtype=int), unconverged: wp.array(dtype=int), clamped: wp.array(dtype=int),
+                       penetration: wp.array(dtype=float)):
+    """Zero the per-world report of each solved world (``clear_report_world``)."""
+    w = wp.tid()
+    if solve[w] != 0:
+        clear_report_world(w, newton_it, cg_total, diverged, unconverged, clamped, penetration)
 
 
 @wp.kernel

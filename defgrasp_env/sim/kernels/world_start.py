@@ -4,13 +4,15 @@ searches its pad edge points' triangles and lags them, fixes the initial guess (
 pad depth, pushed edge triangles), seeds its tets' rotations and sets its Newton flags, with a block
 barrier (``block_sync.py``) wherever a phase reads what other threads wrote.
 
-Phase by phase this is thirteen launches over the rows of every world (``contact.interpolate_pads``,
+Phase by phase this is thirteen launches (sixteen at a step's start) over the rows of every world (``contact.interpolate_pads``,
 ``substep.begin_substep``, ``contact.lag_contacts``, ``pad_edge_search.clear_edge_search``,
 ``nearest_surface_triangles`` twice, ``pad_edge_contact.lag_edge_points``, ``contact.keep_pad_depth``,
 ``pad_edge_contact.clear_triangle_push``, ``edge_point_push``, ``push_triangles``,
 ``elastic.seed_rotations``, ``substep.begin_newton``): a lone world on a GPU pays a launch's latency
 for each, in every substep. ``start_world_blocks`` calls the same row functions in the same order per
-world (the push's clear moved before the search: nothing reads it in between): bit-identical on the
+world (the push's clear moved before the search: nothing reads it in between), after, at a step's
+start, its rows of the input state copied (``substep.copy_world_rows``) and its report cleared
+(``substep.clear_solve_report``): bit-identical on the
 CPU (one thread per world). Like the phase kernels it runs in every world, solved or not, moving
 only the nodes of the solved ones (``solve``).
 """
@@ -24,7 +26,7 @@ from .contact import interpolate_pad, keep_pad_depth_node, lag_contact_node
 from .elastic import seed_rotation_tet
 from .pad_edge_contact import edge_point_push_slot, lag_edge_point, push_triangle
 from .pad_edge_search import NO_TRIANGLE, nearest_surface_triangle_pair
-from .substep import begin_substep_node
+from .substep import begin_substep_node, clear_report_world
 
 
 @wp.kernel
@@ -33,6 +35,17 @@ def start_world_blocks(
     node_start: wp.array(dtype=int),
     tet_start: wp.array(dtype=int),
     solve: wp.array(dtype=int),
+    # the step's start (substep.copy_world_rows, substep.clear_solve_report)
+    copy_rows: int,
+    in_positions: wp.array(dtype=wp.vec3),
+    in_velocities: wp.array(dtype=wp.vec3),
+    clear_report: int,
+    newton_it: wp.array(dtype=int),
+    cg_total: wp.array(dtype=int),
+    diverged: wp.array(dtype=int),
+    unconverged: wp.array(dtype=int),
+    clamped: wp.array(dtype=int),
+    penetration: wp.array(dtype=float),
     # pad poses (contact.interpolate_pad)
     step_pad_pos: wp.array(dtype=wp.vec3),
     step_pad_rot: wp.array(dtype=wp.quat),
@@ -88,7 +101,9 @@ def start_world_blocks(
     substep_newton_it: wp.array(dtype=int),
 ):
     """The start of the substep from fraction ``s0`` to ``s1`` of the step for world
-    ``tid // threads`` (thread ``tid % threads`` of its block): its pad poses (``pad_pos0`` ...
+    ``tid // threads`` (thread ``tid % threads`` of its block): if solved, at the step's start its rows
+    of ``in_positions`` / ``in_velocities`` copied into ``x`` / ``v`` (``copy_rows``) and its report
+    cleared (``clear_report``); its pad poses (``pad_pos0`` ...
     ``pad_rot1``) between the step's start (``step_pad_*``) and target (``target_pad_*``) poses,
     ``x_start`` = ``x`` (m) and ``x`` the initial guess x + ``dt`` v (prescribed axes: between
     ``step_start`` and ``prescribed``), the contacts lagged and the guess fixed. ``node_start`` /
@@ -102,6 +117,13 @@ def start_world_blocks(
     e1 = e0 + points_per_world
     f0 = triangle_first[w]
     f1 = triangle_first[w + 1]
+    if solve[w] != 0:
+        if copy_rows != 0:
+            for i in range(n0 + lane, n1, threads):
+                x[i] = in_positions[i]
+                v[i] = in_velocities[i]
+        if clear_report != 0 and lane == 0:
+            clear_report_world(w, newton_it, cg_total, diverged, unconverged, clamped, penetration)
     for k in range(lane, pads_per_world, threads):
         interpolate_pad(w * pads_per_world + k, step_pad_pos, step_pad_rot, target_pad_pos, target_pad_rot, s0, s1,
                         pad_pos0, pad_rot0, pad_pos1, pad_rot1)
