@@ -1,15 +1,19 @@
 """Recorded kernel launches of one implicit-solver substep, one builder per phase.
 
-A substep of length h: ``pads`` (pad poses at the substep's start and end), ``begin`` (save the start,
-initial guess), ``lag`` (contact faces, lagged friction, guess fixes, rotation seeds), then Newton
+A substep of length h: ``start`` (at a step's first substep the input state's rows copied and the
+report cleared; pad poses at the substep's start and end, save the start, initial guess, contact faces,
+lagged friction, guess fixes, rotation seeds, Newton's flags), then Newton
 iterations of ``evaluate`` (residual and diagonal blocks, CG start with the coarse correction),
 ``cg`` (a block of CG iterations, repeated; or ``cg_world``: each world's whole CG in one launch,
 ``SolverConfig.world_block_threads``), ``coarse_post``, the line search (``energy0`` once,
 ``begin_search``, ``trial`` repeated) and ``apply`` (or ``step_world``: each world's coarse correction,
 line search and update in one launch); ``depth`` (the iterate's deepest contact) decides
 the extra iterations (with the loop control of ``solver_loops``);
-``clamp`` (nodes left deeper than the penetration bound put back to it), ``end`` (velocities) and,
-after the last substep, ``outputs`` (forces, stresses, residual).
+``finish`` (nodes left deeper than the penetration bound put back to it, velocities and, after the
+last substep, the outputs: forces, stresses, residual, pad poses). With
+``SolverConfig.world_block_threads`` ``start``, ``evaluate``, ``cg_world``, ``step_world`` and
+``finish`` are one launch each (``kernels/world_*.py``: a block of threads per world), so a
+substep's solver work is 5 + 3 per extra Newton iteration launches plus the loops' control.
 Launches are recorded once per substep length and (state in, state out, control) set
 (``wp.launch(record_cmd=True)``; ``ImplicitSolver`` keeps the 8 sets used last). Each phase is a list
 holding one ``LaunchSequence`` of its launches: on the CPU a Warp graph (``wp.ScopedCapture``)

@@ -29,127 +29,6 @@ from .pad_edge_contact import evaluate_edge_point
 from .substep import end_substep_node
 
 
-@wp.func
-def world_outputs(
-    w: int,
-    lane: int,
-    threads: int,
-    n0: int,
-    n1: int,
-    t0: int,
-    t1: int,
-    solve: wp.array(dtype=int),
-    x: wp.array(dtype=wp.vec3),
-    x_start: wp.array(dtype=wp.vec3),
-    v_start: wp.array(dtype=wp.vec3),
-    mass: wp.array(dtype=float),
-    node_world: wp.array(dtype=int),
-    external_force: wp.array(dtype=wp.vec3),
-    gravity: wp.vec3,
-    dt: float,
-    pad_pos0: wp.array(dtype=wp.vec3),
-    pad_rot0: wp.array(dtype=wp.quat),
-    pad_pos1: wp.array(dtype=wp.vec3),
-    pad_rot1: wp.array(dtype=wp.quat),
-    pad_half: wp.array(dtype=wp.vec3),
-    pads_per_world: int,
-    lag_normal_force: wp.array(dtype=float),
-    lag_normal: wp.array(dtype=wp.vec3),
-    stiffness: wp.array(dtype=float),
-    knee: float,
-    ground_mu: float,
-    pad_mu: float,
-    stick_velocity: float,
-    residual: wp.array(dtype=wp.vec3),
-    diag_block: wp.array(dtype=wp.mat33),
-    contact_hessian: wp.array(dtype=wp.mat33),
-    contact_force: wp.array(dtype=wp.vec3),
-    elastic_force: wp.array(dtype=wp.vec3),
-    pad_normal_force: wp.array(dtype=float),
-    pad_force: wp.array(dtype=wp.vec3),
-    penetration: wp.array(dtype=float),
-    triangles: wp.array(dtype=wp.vec3i),
-    points: wp.array(dtype=wp.vec3),
-    point_pad: wp.array(dtype=int),
-    points_per_world: int,
-    point_tri: wp.array(dtype=int),
-    point_bary: wp.array(dtype=wp.vec3),
-    point_normal: wp.array(dtype=wp.vec3),
-    point_stiffness: wp.array(dtype=float),
-    point_allowed: wp.array(dtype=float),
-    point_friction: wp.array(dtype=float),
-    slip_eps: float,
-    triangle_first: wp.array(dtype=int),
-    point_block: wp.array(dtype=wp.mat33),
-    tets: wp.array(dtype=wp.vec4i),
-    rest_inv: wp.array(dtype=wp.mat33),
-    rest_volume: wp.array(dtype=float),
-    tet_mu: wp.array(dtype=float),
-    tet_lambda: wp.array(dtype=float),
-    tet_world: wp.array(dtype=int),
-    tet_rotation: wp.array(dtype=wp.quat),
-    tet_cof: wp.array(dtype=wp.mat33),
-    von_mises: wp.array(dtype=float),
-    tet_r: wp.array(dtype=wp.mat33),
-    tet_twist: wp.array(dtype=float),
-    energy: wp.array(dtype=wp.float64),
-    free: wp.array(dtype=wp.vec3),
-    precond: wp.array(dtype=wp.mat33),
-    z: wp.array(dtype=wp.vec3),
-    p: wp.array(dtype=wp.vec3),
-    dx: wp.array(dtype=wp.vec3),
-    ap: wp.array(dtype=wp.vec3),
-    rz: wp.array(dtype=float),
-    residual_norm: wp.array(dtype=float),
-    stress_first: wp.array(dtype=int),
-    stress_end: wp.array(dtype=int),
-    world_volume: wp.array(dtype=float),
-    partial: wp.array(dtype=float),
-    mean_von_mises: wp.array(dtype=float),
-):
-    """The outputs pass of solved world ``w`` by thread ``lane`` of its block of ``threads``
-    (nodes ``n0:n1``, tets ``t0:t1``), ending with ``rz[w]`` = 0."""
-    tid = w * threads + lane
-    if lane == 0:  # substep.clear_outputs
-        for k in range(pads_per_world):
-            pad_normal_force[w * pads_per_world + k] = 0.0
-            pad_force[w * pads_per_world + k] = wp.vec3(0.0)
-        residual_norm[w] = 0.0
-    e0 = w * points_per_world
-    e1 = e0 + points_per_world
-    block_barrier()
-    for i in range(n0 + lane, n1, threads):
-        evaluate_node(i, x, x_start, v_start, mass, node_world, solve, external_force, gravity, dt, pad_pos0,
-                      pad_rot0, pad_pos1, pad_rot1, pad_half, pads_per_world, lag_normal_force, lag_normal,
-                      stiffness, knee, ground_mu, pad_mu, stick_velocity, 1, residual, diag_block, contact_hessian,
-                      contact_force, elastic_force, pad_normal_force, pad_force, penetration)
-    block_barrier()
-    for e in range(e0 + lane, e1, threads):
-        evaluate_edge_point(e, x, x_start, triangles, solve, pad_pos0, pad_rot0, pad_pos1, pad_rot1, pad_half,
-                            pads_per_world, points, point_pad, points_per_world, point_tri, point_bary, point_normal,
-                            point_stiffness, point_allowed, point_friction, knee, pad_mu, slip_eps, triangle_first, 1,
-                            residual, diag_block, point_block, contact_force, pad_normal_force, pad_force, penetration)
-    block_barrier()
-    for t in range(t0 + lane, t1, threads):
-        evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, solve, tet_rotation, residual,
-                     diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, 1, 0, energy)
-    block_barrier()
-    for i in range(n0 + lane, n1, threads):
-        begin_node_solve(i, residual, diag_block, free, node_world, solve, precond, z, p, dx, ap, rz, residual_norm)
-    total = float(0.0)
-    volume = world_volume[w]
-    for t in range(stress_first[w] + lane, stress_end[w], threads):
-        total = total + von_mises[t] * rest_volume[t] / volume
-    partial[tid] = total
-    block_barrier()
-    if lane == 0:
-        mean_w = float(0.0)
-        for k in range(threads):
-            mean_w = mean_w + partial[w * threads + k]
-        mean_von_mises[w] = mean_w
-        rz[w] = 0.0
-
-
 @wp.kernel
 def finish_world_blocks(
     threads: int,
@@ -264,15 +143,47 @@ def finish_world_blocks(
                          target, x, clamped)
         end_substep_node(i, x_start, node_world, solve, diverged, inv_dt, x, v_new)
     if outputs != 0:
-        world_outputs(w, lane, threads, n0, n1, tet_start[w], tet_start[w + 1], solve, x, x_start, v_start, mass,
-                      node_world, external_force, gravity, dt, pad_pos0, pad_rot0, pad_pos1, pad_rot1, pad_half,
-                      pads_per_world, lag_normal_force, lag_normal, stiffness, knee, ground_mu, pad_mu,
-                      stick_velocity, residual, diag_block, contact_hessian, contact_force, elastic_force,
-                      pad_normal_force, pad_force, penetration, triangles, points, point_pad, points_per_world,
-                      point_tri, point_bary, point_normal, point_stiffness, point_allowed, point_friction, slip_eps,
-                      triangle_first, point_block, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world,
-                      tet_rotation, tet_cof, von_mises, tet_r, tet_twist, energy, free, precond, z, p, dx, ap, rz,
-                      residual_norm, stress_first, stress_end, world_volume, partial, mean_von_mises)
+        t0 = tet_start[w]
+        t1 = tet_start[w + 1]
+        if lane == 0:  # substep.clear_outputs
+            for k in range(pads_per_world):
+                pad_normal_force[w * pads_per_world + k] = 0.0
+                pad_force[w * pads_per_world + k] = wp.vec3(0.0)
+            residual_norm[w] = 0.0
+        e0 = w * points_per_world
+        e1 = e0 + points_per_world
+        block_barrier()
+        for i in range(n0 + lane, n1, threads):
+            evaluate_node(i, x, x_start, v_start, mass, node_world, solve, external_force, gravity, dt, pad_pos0,
+                          pad_rot0, pad_pos1, pad_rot1, pad_half, pads_per_world, lag_normal_force, lag_normal,
+                          stiffness, knee, ground_mu, pad_mu, stick_velocity, 1, residual, diag_block, contact_hessian,
+                          contact_force, elastic_force, pad_normal_force, pad_force, penetration)
+        block_barrier()
+        for e in range(e0 + lane, e1, threads):
+            evaluate_edge_point(e, x, x_start, triangles, solve, pad_pos0, pad_rot0, pad_pos1, pad_rot1, pad_half,
+                                pads_per_world, points, point_pad, points_per_world, point_tri, point_bary,
+                                point_normal, point_stiffness, point_allowed, point_friction, knee, pad_mu, slip_eps,
+                                triangle_first, 1, residual, diag_block, point_block, contact_force, pad_normal_force,
+                                pad_force, penetration)
+        block_barrier()
+        for t in range(t0 + lane, t1, threads):
+            evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, solve, tet_rotation,
+                         residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, 1, 0, energy)
+        block_barrier()
+        for i in range(n0 + lane, n1, threads):
+            begin_node_solve(i, residual, diag_block, free, node_world, solve, precond, z, p, dx, ap, rz, residual_norm)
+        total = float(0.0)
+        volume = world_volume[w]
+        for t in range(stress_first[w] + lane, stress_end[w], threads):
+            total = total + von_mises[t] * rest_volume[t] / volume
+        partial[tid] = total
+        block_barrier()
+        if lane == 0:
+            mean_w = float(0.0)
+            for k in range(threads):
+                mean_w = mean_w + partial[w * threads + k]
+            mean_von_mises[w] = mean_w
+            rz[w] = 0.0
         for k in range(lane, pads_per_world, threads):
             pad = w * pads_per_world + k
             state_pad_pos[pad] = pad_target_pos[pad]

@@ -4,17 +4,16 @@ searches its pad edge points' triangles and lags them, fixes the initial guess (
 pad depth, pushed edge triangles), seeds its tets' rotations and sets its Newton flags, with a block
 barrier (``block_sync.py``) wherever a phase reads what other threads wrote.
 
-Phase by phase this is thirteen launches (sixteen at a step's start) over the rows of every world (``contact.interpolate_pads``,
-``substep.begin_substep``, ``contact.lag_contacts``, ``pad_edge_search.clear_edge_search``,
-``nearest_surface_triangles`` twice, ``pad_edge_contact.lag_edge_points``, ``contact.keep_pad_depth``,
-``pad_edge_contact.clear_triangle_push``, ``edge_point_push``, ``push_triangles``,
-``elastic.seed_rotations``, ``substep.begin_newton``): a lone world on a GPU pays a launch's latency
-for each, in every substep. ``start_world_blocks`` calls the same row functions in the same order per
-world (the push's clear moved before the search: nothing reads it in between), after, at a step's
-start, its rows of the input state copied (``substep.copy_world_rows``) and its report cleared
-(``substep.clear_solve_report``): bit-identical on the
-CPU (one thread per world). Like the phase kernels it runs in every world, solved or not, moving
-only the nodes of the solved ones (``solve``).
+Phase by phase this is thirteen launches (sixteen at a step's start) over the rows of every world
+(``contact.interpolate_pads``, ``substep.begin_substep``, ``contact.lag_contacts``,
+``pad_edge_search.clear_edge_search``, ``nearest_surface_triangles`` twice,
+``pad_edge_contact.lag_edge_points``, ``contact.keep_pad_depth``, ``pad_edge_contact.clear_triangle_push``,
+``edge_point_push``, ``push_triangles``, ``elastic.seed_rotations``, ``substep.begin_newton``, and at
+a step's start ``substep.copy_world_rows`` twice and ``substep.clear_solve_report`` first): a lone
+world on a GPU pays a launch's latency for each, in every substep. ``start_world_blocks`` calls the
+same row functions in the same order per world (the push's clear moved before the search: nothing
+reads it in between): bit-identical on the CPU (one thread per world). Like the phase kernels it
+runs in every world, solved or not, moving only the nodes of the solved ones (``solve``).
 """
 
 import warp as wp
