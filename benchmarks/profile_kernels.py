@@ -85,6 +85,8 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--top", type=int, default=40)
     args = ap.parse_args(argv)
+    if not wp.get_device(args.device).is_cuda:
+        ap.error(f"--device must be a CUDA device (wp.timing_begin times CUDA kernels only), got {args.device!r}")
     wall = step_times(args.device, args.worlds, args.object, args.youngs_modulus, args.warmup, args.steps)
     print(f"W = {args.worlds}, {args.object}, E = {args.youngs_modulus:g}, graphs on: step median "
           f"{1e3 * np.median(wall):.3f} ms, p95 {1e3 * np.percentile(wall, 95):.3f} ms, "
