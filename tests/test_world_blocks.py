@@ -1,6 +1,7 @@
-"""Each world's Newton iteration in three launches of a block per world
-(``SolverConfig.world_block_threads``: ``kernels/world_evaluate.py``, ``world_cg.py``,
-``world_newton_step.py``) against the phase-by-phase launches over all rows
+"""Each world's Newton iteration in three launches of a block per world, and its substep's start and
+end in one each (``SolverConfig.world_block_threads``: ``kernels/world_evaluate.py``, ``world_cg.py``,
+``world_newton_step.py``, ``world_start.py``, ``world_finish.py``) against the phase-by-phase
+launches over all rows
 (``world_block_threads=0``): the same row functions in the same order per world, so on the CPU
 (one thread per world) every output must be equal bit for bit; on CUDA (blocks of threads with
 barriers between the phases; float atomics in another order) within the tolerances of the other

@@ -40,10 +40,10 @@ from .kernels import line_search as kls
 from .kernels import linear_solve as klin
 from .kernels import substep as ksub
 from .kernels import world_cg as kwcg
-from .kernels import world_start as kwstart
 from .kernels import world_evaluate as kwev
-from .kernels import world_newton_step as kwns
 from .kernels import world_finish as kwfin
+from .kernels import world_newton_step as kwns
+from .kernels import world_start as kwstart
 from .launch_lock import scoped_capture
 from .model import Model
 from .solver_scratch import SolverScratch
@@ -80,8 +80,9 @@ class LaunchSequence:
 class SubstepLaunches:
     """Launches of each phase (lists are launched in order; see the module docstring)."""
 
-    start: list         # [substeps] lists: pad poses at fractions k/K and (k+1)/K of the step, substep start,
-                        # initial guess (prescribed axes at (k+1)/K), lag, Newton's flags
+    start: list         # [substeps] lists: (k = 0) input rows copied, report cleared; pad poses at fractions
+                        # k/K and (k+1)/K, substep start, initial guess (prescribed axes at (k+1)/K), lag,
+                        # Newton's flags (one launch of world blocks where ``world_block_threads``)
     evaluate: list      # a Newton iteration's evaluation (one launch of world blocks where ``world_block_threads``)
     evaluate_first: list  # the substep's first evaluation: also the tets' part of ``energy0``
     cg: list
@@ -96,7 +97,8 @@ class SubstepLaunches:
     step_world_first: list  # the same in a substep's first Newton iteration (with the nodes' part of ``energy0``)
     apply: list
     depth: list         # launches: the iterate's deepest contact per world (extra iterations)
-    finish: list        # [substeps] lists: clamp, end (velocities), outputs at the last, the velocities' copy
+    finish: list        # [substeps] lists: clamp, end (velocities), at the last the outputs, CG's rz cleared
+                        # and the pad poses copied, then the velocities' copy (one launch of world blocks)
     cg_block: int       # CG iterations per launch of ``cg``
 
 
@@ -502,12 +504,12 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     iterating in ``work`` (the output state: positions and velocities hold the step's start when
     it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
     ``step_start`` at the step's start, toward ``control``; ``copy_from``: the step's input state
-    where it is not ``work`` (the solved worlds' positions and velocities are copied from it first). ``phase_graphs``: capture each phase
-    as a CPU graph (False where the caller captures the whole substep). ``compaction``: the row maps;
-    ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
-    ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world
-    (``evaluate``, ``evaluate_first``), and also its whole CG (``cg_world``, in blocks of
-    ``cg_block_threads``, default ``world_block_threads``) and the rest of its Newton iteration
+    where it is not ``work`` (the solved worlds' positions and velocities are copied from it first).
+    ``phase_graphs``: capture each phase as a CPU graph (False where the caller captures the whole substep).
+    ``compaction``: the row maps; ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
+    ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world (``evaluate``,
+    ``evaluate_first``), and also its whole CG (``cg_world``, in blocks of ``cg_block_threads``, default
+    ``world_block_threads``) and the rest of its Newton iteration
     (``step_world``, ``step_world_first``), its substep start (``start``) and end (``finish``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
                  max(world_block_threads, 1), copy_from)

@@ -8,8 +8,8 @@ what other threads wrote.
 Phase by phase this is ``contact.clamp_depth``, ``substep.end_substep``, at the last substep the six
 launches of the outputs pass (``substep.clear_outputs``, ``contact.evaluate_nodes``,
 ``pad_edge_contact.evaluate_edge_points``, ``elastic.evaluate_tets`` with ``outputs`` = 1,
-``linear_solve.begin_linear_solve``, ``substep.mean_stress``) and a clear of CG's ``rz``, then
-``substep.copy_world_rows`` of the velocities and ``substep.copy_pad_poses``: a lone world on a GPU
+``linear_solve.begin_linear_solve``, ``substep.mean_stress``), a clear of CG's ``rz`` and
+``substep.copy_pad_poses``, then ``substep.copy_world_rows`` of the velocities: a lone world on a GPU
 pays a launch's latency for each, in every substep (the scene advances the solver a substep at a
 time). ``finish_world_blocks`` calls the same row functions in the same order per world:
 bit-identical on the CPU (one thread per world). A world not solved only has its ``rz`` cleared

@@ -4,7 +4,7 @@ searches its pad edge points' triangles and lags them, fixes the initial guess (
 pad depth, pushed edge triangles), seeds its tets' rotations and sets its Newton flags, with a block
 barrier (``block_sync.py``) wherever a phase reads what other threads wrote.
 
-Phase by phase this is thirteen launches (sixteen at a step's start) over the rows of every world
+Phase by phase this is thirteen launches (up to sixteen at a step's start) over the rows of every world
 (``contact.interpolate_pads``, ``substep.begin_substep``, ``contact.lag_contacts``,
 ``pad_edge_search.clear_edge_search``, ``nearest_surface_triangles`` twice,
 ``pad_edge_contact.lag_edge_points``, ``contact.keep_pad_depth``, ``pad_edge_contact.clear_triangle_push``,
