@@ -11,6 +11,8 @@ import pytest
 import warp as wp
 
 from defgrasp_env.sim.kernels import pad_edge_contact as kpe
+from defgrasp_env.sim.kernels import pad_edge_guess as kpg
+from defgrasp_env.sim.kernels import pad_edge_lag as kpl
 from defgrasp_env.sim.kernels import pad_edge_hessian as kph
 from defgrasp_env.sim.kernels import pad_edge_search as kps
 from defgrasp_env.sim.materials import Material
@@ -109,7 +111,7 @@ def _search(model, edges, x, pos, rot, start=None, lag=None):
     for choose in (0, 1):
         wp.launch(kps.nearest_surface_triangles, edges.triangles.shape[0] * model.pads_per_world,
                   [*args, choose, edges.best_dist, edges.best_tri], device="cpu")
-    wp.launch(kpe.lag_edge_points, slots, [xw, xw, edges.triangles, edges.triangle_first, *pads,
+    wp.launch(kpl.lag_edge_points, slots, [xw, xw, edges.triangles, edges.triangle_first, *pads,
                                            model.pad_half_extents,
                                            model.pads_per_world, edges.points, edges.point_pad, edges.point_share,
                                            edges.points_per_world, model.node_contact_stiffness,
@@ -384,8 +386,8 @@ def _one_triangle_model():
 
 def _push(model, edges, x_start, pads, x):
     """``edge_point_push`` from nodes at ``x_start`` (substep start) and the guess ``x``: each triangle's push (m)."""
-    wp.launch(kpe.clear_triangle_push, edges.triangles.shape[0], [edges.push], device="cpu")
-    wp.launch(kpe.edge_point_push, model.num_worlds * edges.points_per_world,
+    wp.launch(kpg.clear_triangle_push, edges.triangles.shape[0], [edges.push], device="cpu")
+    wp.launch(kpg.edge_point_push, model.num_worlds * edges.points_per_world,
               [wp.array(x_start.astype(np.float32), dtype=wp.vec3, device="cpu"), edges.triangles,
                wp.ones(1, dtype=int, device="cpu"), *pads, model.pad_half_extents, model.pads_per_world, edges.points,
                edges.point_pad, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_normal,
@@ -436,7 +438,7 @@ def test_initial_guess_moves_a_triangle_out_of_its_points_way_but_not_nodes_touc
     push = _push(model, edges, x, pads, xw)
     np.testing.assert_allclose(push[hit], 0.0015 - 2 * KNEE, atol=2e-6)  # 1.5 mm deep, 0.5 mm kept
     assert np.all(push[np.setdiff1d(np.arange(len(tris)), hit)] == 0.0)
-    wp.launch(kpe.push_triangles, len(tris), [edges.triangles, edges.triangle_world, wp.ones(1, dtype=int, device="cpu"),
+    wp.launch(kpg.push_triangles, len(tris), [edges.triangles, edges.triangle_world, wp.ones(1, dtype=int, device="cpu"),
                                               model.free_axes, lag, model.pads_per_world, edges.push,
                                               edges.push_normal, xw], device="cpu")
     moved = xw.numpy().astype(np.float64) - x
@@ -583,7 +585,7 @@ def test_a_point_found_deep_behind_its_plane_but_outside_the_object_gets_no_cont
     edges.best_tri.assign(best)
     xw = wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu")
     contacts = model.num_nodes * (model.pads_per_world + 1)
-    wp.launch(kpe.lag_edge_points, edges.points_per_world,
+    wp.launch(kpl.lag_edge_points, edges.points_per_world,
               [xw, xw, edges.triangles, edges.triangle_first, *pads, model.pad_half_extents, model.pads_per_world,
                edges.points, edges.point_pad, edges.point_share, edges.points_per_world, model.node_contact_stiffness,
                wp.zeros(contacts, dtype=float, device="cpu"), wp.zeros(contacts, dtype=wp.vec3, device="cpu"),

@@ -102,19 +102,22 @@ class SolverConfig:
             few worlds' rows cost instead of a thread per row of every world. None (default):
             ``LISTED_CG_WORLDS_CUDA`` on CUDA, 0 on the CPU (where it measured slower: W = 48 on a
             2-core CPU, 4-19 % longer solves; benchmarks/RESULTS.md).
-        world_block_threads: each world's Newton iteration in three launches (``kernels/world_evaluate.py``,
-            ``world_cg.py``, ``world_newton_step.py``): a block of this many threads per world evaluates, runs its CG
-            iterations, and its coarse correction, line-search trials and update, each to its own stopping test, with
-            block barriers between the phases, instead of eleven to fifteen launches for the evaluation, five or six
-            per CG iteration and seven per line-search trial over the rows of all worlds while any world iterates
-            (``listed_cg_worlds`` and, inside a Newton iteration, ``check_every`` are then unused); also a substep's
-            start and end in one launch each (``world_start.py``: copies, pad poses, guess, contact lag and guess
-            fixes, up to 16 launches; ``world_finish.py``: clamp, velocities, outputs, up to 11). 0 = off. On CUDA the
-            block size (1 to 256, a multiple of 32 above 32); on the CPU, which runs a launch's threads one after
-            another, any positive value means one thread per world (as configured only where
-            ``wp.config.enable_cpu_blocks`` runs several threads per block), and the results are bit-identical to the
-            phase-by-phase launches. None (default): ``WORLD_BLOCK_THREADS`` of the device's kind (on CUDA
-            ``WORLD_BLOCK_THREADS_MANY`` beyond ``MANY_WORLDS`` worlds).
+        world_block_threads: each world's Newton iteration in three launches
+            (``kernels/world_evaluate.py``, ``world_cg.py``, ``world_newton_step.py``): a block of
+            this many threads per world evaluates, runs its CG iterations, and its coarse
+            correction, line-search trials and update, each to its own stopping test, with block
+            barriers between the phases, instead of eleven to fifteen launches for the evaluation,
+            five or six per CG iteration and seven per line-search trial over the rows of all worlds
+            while any world iterates (``listed_cg_worlds`` and, inside a Newton iteration,
+            ``check_every`` are then unused); also a substep's start and end in one launch each
+            (``world_start.py``: copies, pad poses, guess, contact lag and guess fixes, up to 16
+            launches; ``world_finish.py``: clamp, velocities, outputs, up to 11). 0 = off. On CUDA
+            the block size (1 to 256, a multiple of 32 above 32); on the CPU, which runs a launch's
+            threads one after another, any positive value means one thread per world (as configured
+            only where ``wp.config.enable_cpu_blocks`` runs several threads per block), and the
+            results are bit-identical to the phase-by-phase launches. None (default):
+            ``WORLD_BLOCK_THREADS`` of the device's kind (on CUDA ``WORLD_BLOCK_THREADS_MANY``
+            beyond ``MANY_WORLDS`` worlds).
         cg_block_threads: threads per world of the world blocks' CG launch
             (``kernels/world_cg.py``), where ``world_block_threads`` is on: up to
             ``MAX_CG_BLOCK_THREADS`` (its kernel needs fewer registers than the evaluation's and the

@@ -32,7 +32,9 @@ import warp as wp
 from .kernels import coarse_space as kcs
 from .kernels import contact as kc
 from .kernels import pad_edge_contact as kpe
+from .kernels import pad_edge_guess as kpg
 from .kernels import pad_edge_hessian as kph
+from .kernels import pad_edge_lag as kpl
 from .kernels import pad_edge_search as kps
 from .kernels import elastic as ke
 from .kernels import energy as kenergy
@@ -173,7 +175,7 @@ def _edge_search(c: _Context, x) -> list:
     return [c.rec(kps.clear_edge_search, slots, e.best_dist, e.best_tri),
             c.rec(kps.nearest_surface_triangles, pairs, *search, 0, e.best_dist, e.best_tri),
             c.rec(kps.nearest_surface_triangles, pairs, *search, 1, e.best_dist, e.best_tri),
-            c.rec(kpe.lag_edge_points, slots, s.x_start, x, e.triangles, e.triangle_first, *s.pads, m.pad_half_extents,
+            c.rec(kpl.lag_edge_points, slots, s.x_start, x, e.triangles, e.triangle_first, *s.pads, m.pad_half_extents,
                   m.pads_per_world, e.points, e.point_pad, e.point_share, e.points_per_world,
                   m.node_contact_stiffness, s.lag_normal_force, s.lag_normal, e.best_tri, e.point_tri, e.point_bary,
                   e.point_normal,
@@ -185,11 +187,11 @@ def _keep_edge_depth(c: _Context, x) -> list:
     m, s, e = c.model, c.scratch, c.scratch.edges
     if not e.active:
         return []
-    return [c.rec(kpe.clear_triangle_push, e.triangles.shape[0], e.push),
-            c.rec(kpe.edge_point_push, m.num_worlds * e.points_per_world, s.x_start, e.triangles, s.solve_worlds,
+    return [c.rec(kpg.clear_triangle_push, e.triangles.shape[0], e.push),
+            c.rec(kpg.edge_point_push, m.num_worlds * e.points_per_world, s.x_start, e.triangles, s.solve_worlds,
                   *s.pads, m.pad_half_extents, m.pads_per_world, e.points, e.point_pad, e.points_per_world,
                   e.point_tri, e.point_bary, e.point_normal, e.point_allowed, x, e.push, e.push_normal),
-            c.rec(kpe.push_triangles, e.triangles.shape[0], e.triangles, e.triangle_world, s.solve_worlds,
+            c.rec(kpg.push_triangles, e.triangles.shape[0], e.triangles, e.triangle_world, s.solve_worlds,
                   m.free_axes, s.lag_normal_force, m.pads_per_world, e.push, e.push_normal, x)]
 
 
@@ -284,9 +286,10 @@ def _start(c: _Context, k: int) -> list:
     lag (``_lag``), Newton's flags."""
     m, s = c.model, c.scratch
     step = []
+    if k == 0 and c.copy_from is not None:
+        step += [c.rec(ksub.copy_world_rows, m.num_nodes, getattr(c.copy_from, a), m.node_world, s.solve_worlds,
+                       getattr(c.work, a)) for a in ("positions", "velocities")]
     if k == 0:
-        step = [c.rec(ksub.copy_world_rows, m.num_nodes, getattr(c.copy_from, a), m.node_world, s.solve_worlds,
-                      getattr(c.work, a)) for a in ("positions", "velocities") if c.copy_from is not None]
         step.append(c.rec(ksub.clear_solve_report, m.num_worlds, s.solve_worlds, s.newton_it, s.cg_total, s.diverged,
                           s.unconverged, s.clamped, s.penetration))
     return [*step, *_pads(c, k), _begin(c, k), *_lag(c),
@@ -297,13 +300,14 @@ def _start_world(c: _Context, threads: int, k: int) -> list:
     """``_start``'s launches as one: each world's start of substep ``k`` in a block of ``threads``
     threads (``kernels/world_start.py``)."""
     m, s, e, wc, ctl, work = c.model, c.scratch, c.scratch.edges, c.compaction, c.control, c.work
-    source = c.copy_from if k == 0 and c.copy_from is not None else work
+    copy_rows = k == 0 and c.copy_from is not None
+    source = c.copy_from if copy_rows else work
     return [c.blocks(kwstart.start_world_blocks, threads,
                      threads, wc.nodes.start, wc.tets.start, s.solve_worlds,
-                     int(k == 0 and c.copy_from is not None), source.positions, source.velocities, int(k == 0),
+                     int(copy_rows), source.positions, source.velocities, int(k == 0),
                      s.newton_it, s.cg_total, s.diverged, s.unconverged, s.clamped, s.penetration, *c.start_pads,
                      ctl.pad_target_positions, ctl.pad_target_orientations, k / c.substeps, (k + 1) / c.substeps,
-                     c.work.velocities, c.step_start, ctl.prescribed_positions, c.h, s.x_start, c.work.positions,
+                     work.velocities, c.step_start, ctl.prescribed_positions, c.h, s.x_start, work.positions,
                      m.node_world, m.free_axes, *s.pads, m.pad_half_extents, m.pads_per_world,
                      m.node_contact_stiffness, m.contact.stiffening_depth, s.lag_normal_force, s.lag_normal,
                      e.triangles, e.triangle_world, e.triangle_first, e.points, e.point_first, e.point_pad,
@@ -501,16 +505,17 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
                             world_block_threads: int = 0, cg_block_threads: int | None = None,
                             copy_from: State | None = None) -> SubstepLaunches:
     """All launches of substeps of length ``h`` (s) for ``config.substeps`` substeps per step,
-    iterating in ``work`` (the output state: positions and velocities hold the step's start when
-    it begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
+    iterating in ``work`` (the output state: positions and velocities hold the step's start when it
+    begins) from the pad poses ``start_pads`` (positions, orientations) and the node positions
     ``step_start`` at the step's start, toward ``control``; ``copy_from``: the step's input state
     where it is not ``work`` (the solved worlds' positions and velocities are copied from it first).
-    ``phase_graphs``: capture each phase as a CPU graph (False where the caller captures the whole substep).
-    ``compaction``: the row maps; ``listed_cg``: also record the CG iterations over the listed worlds and the listing;
-    ``world_block_threads`` > 0: each world's evaluation in one launch of that many threads per world (``evaluate``,
-    ``evaluate_first``), and also its whole CG (``cg_world``, in blocks of ``cg_block_threads``, default
-    ``world_block_threads``) and the rest of its Newton iteration
-    (``step_world``, ``step_world_first``), its substep start (``start``) and end (``finish``)."""
+    ``phase_graphs``: capture each phase as a CPU graph (False where the caller captures the whole
+    substep). ``compaction``: the row maps; ``listed_cg``: also record the CG iterations over the
+    listed worlds and the listing; ``world_block_threads`` > 0: each world's evaluation in one
+    launch of that many threads per world (``evaluate``, ``evaluate_first``), and also its whole CG
+    (``cg_world``, in blocks of ``cg_block_threads``, default ``world_block_threads``) and the rest
+    of its Newton iteration (``step_world``, ``step_world_first``), its substep start (``start``)
+    and end (``finish``)."""
     c = _Context(model, scratch, work, control, h, config.substeps, start_pads, step_start, compaction,
                  max(world_block_threads, 1), copy_from)
     if scratch.stress_partial.shape[0] < model.num_worlds * c.block_threads:

@@ -7,7 +7,7 @@ barrier (``block_sync.py``) wherever a phase reads what other threads wrote.
 Phase by phase this is thirteen launches (up to sixteen at a step's start) over the rows of every world
 (``contact.interpolate_pads``, ``substep.begin_substep``, ``contact.lag_contacts``,
 ``pad_edge_search.clear_edge_search``, ``nearest_surface_triangles`` twice,
-``pad_edge_contact.lag_edge_points``, ``contact.keep_pad_depth``, ``pad_edge_contact.clear_triangle_push``,
+``pad_edge_lag.lag_edge_points``, ``contact.keep_pad_depth``, ``pad_edge_guess.clear_triangle_push``,
 ``edge_point_push``, ``push_triangles``, ``elastic.seed_rotations``, ``substep.begin_newton``, and at
 a step's start ``substep.copy_world_rows`` twice and ``substep.clear_solve_report`` first): a lone
 world on a GPU pays a launch's latency for each, in every substep. ``start_world_blocks`` calls the
@@ -23,7 +23,8 @@ wp.set_module_options({"enable_backward": False})  # forward only, as ``world_ev
 from .block_sync import block_barrier
 from .contact import interpolate_pad, keep_pad_depth_node, lag_contact_node
 from .elastic import seed_rotation_tet
-from .pad_edge_contact import edge_point_push_slot, lag_edge_point, push_triangle
+from .pad_edge_guess import edge_point_push_slot, push_triangle
+from .pad_edge_lag import lag_edge_point
 from .pad_edge_search import NO_TRIANGLE, nearest_surface_triangle_pair
 from .substep import begin_substep_node, clear_report_world
 
@@ -72,7 +73,7 @@ def start_world_blocks(
     knee: float,
     lag_normal_force: wp.array(dtype=float),
     lag_normal: wp.array(dtype=wp.vec3),
-    # pad edge points (pad_edge_search, pad_edge_contact; points_per_world 0: none)
+    # pad edge points (pad_edge_search, pad_edge_lag, pad_edge_guess; points_per_world 0: none)
     triangles: wp.array(dtype=wp.vec3i),
     triangle_world: wp.array(dtype=int),
     triangle_first: wp.array(dtype=int),
@@ -137,7 +138,7 @@ def start_world_blocks(
             best_dist[e] = 1.0e30  # pad_edge_search.clear_edge_search
             best_tri[e] = NO_TRIANGLE
         for t in range(f0 + lane, f1, threads):
-            push[t] = 0.0  # pad_edge_contact.clear_triangle_push
+            push[t] = 0.0  # pad_edge_guess.clear_triangle_push
         block_barrier()
         for choose in range(2):
             for pair in range(f0 * pads_per_world + lane, f1 * pads_per_world, threads):
