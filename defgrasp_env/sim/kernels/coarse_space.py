@@ -18,10 +18,17 @@ Newton iteration.
 
 import warp as wp
 
+from .block_sync import block_barrier
 from .elastic import pick_vertex, row, spare_tet, stress_differential
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
 wp.set_module_options({"enable_backward": False})
+
+#: Coarse solves of at most this many unknowns (one aggregate: a compact object's) are factored and
+#: applied by one thread of a world's block (``coarse_factor_world``, ``linear_solve.end_iteration``);
+#: larger ones (a slender object's aggregates) by its threads (``coarse_factor_block``,
+#: ``coarse_row``), with more barriers. The same bits either way on the CPU.
+LANE_COARSE_SIZE = 3
 
 
 @wp.func
@@ -38,15 +45,23 @@ def add_rhs(rhs: wp.array2d(dtype=float), w: int, a: int, v: wp.vec3):
 
 
 @wp.func
+def coarse_coefficient(w: int, i: int, size: int, inverse: wp.array3d(dtype=wp.float64),
+                       rhs: wp.array2d(dtype=float), coef: wp.array2d(dtype=float)):
+    """coef_i = (E^-1 g)_i for g = rhs (T^T r); returns it in float64."""
+    s = wp.float64(0.0)
+    for j in range(size):
+        s += inverse[w, i, j] * wp.float64(rhs[w, j])
+    coef[w, i] = float(s)
+    return s
+
+
+@wp.func
 def coarse_coefficients(w: int, size: int, inverse: wp.array3d(dtype=wp.float64),
                         rhs: wp.array2d(dtype=float), coef: wp.array2d(dtype=float)):
     """coef = E^-1 g for g = rhs (T^T r), then rhs = 0; returns g . E^-1 g."""
     g_c = wp.float64(0.0)
     for i in range(size):
-        s = wp.float64(0.0)
-        for j in range(size):
-            s += inverse[w, i, j] * wp.float64(rhs[w, j])
-        coef[w, i] = float(s)
+        s = coarse_coefficient(w, i, size, inverse, rhs, coef)
         g_c += s * wp.float64(rhs[w, i])
     for i in range(size):
         rhs[w, i] = 0.0
@@ -60,10 +75,7 @@ def coarse_row(w: int, i: int, size: int, inverse: wp.array3d(dtype=wp.float64),
     g . E^-1 g (float64, summed in row order by ``coarse_gain``); rhs is left as it is. The same
     operations in the same order as there, so that rows computed by the threads of a block give
     the same bits as one thread's loop."""
-    s = wp.float64(0.0)
-    for j in range(size):
-        s += inverse[w, i, j] * wp.float64(rhs[w, j])
-    coef[w, i] = float(s)
+    s = coarse_coefficient(w, i, size, inverse, rhs, coef)
     terms[w, i] = s * wp.float64(rhs[w, i])
 
 
@@ -205,6 +217,63 @@ def coarse_assemble_tets(
 
 
 @wp.func
+def cholesky_pivot(w: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
+    """Column ``j``'s pivot of world ``w``'s in-place Cholesky factor (the columns before it done):
+    1 and L_jj in ``matrix[w, j, j]``, or 0 (not numerically positive definite; left as it is)."""
+    s = matrix[w, j, j]
+    for k in range(j):
+        s -= matrix[w, j, k] * matrix[w, j, k]
+    if not (s > wp.float64(1.0e-12) * matrix[w, j, j]):
+        return 0
+    matrix[w, j, j] = wp.sqrt(s)
+    return 1
+
+
+@wp.func
+def cholesky_entry(w: int, i: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
+    """L_ij (i > j) of world ``w``'s in-place Cholesky factor, after column ``j``'s pivot."""
+    s = matrix[w, i, j]
+    for k in range(j):
+        s -= matrix[w, i, k] * matrix[w, j, k]
+    matrix[w, i, j] = s / matrix[w, j, j]
+
+
+@wp.func
+def lower_inverse_column(w: int, j: int, size: int, ok: int, matrix: wp.array3d(dtype=wp.float64),
+                         lower_inv: wp.array3d(dtype=wp.float64)):
+    """Column ``j`` of L^-1 (forward substitution down the column; reads only this column of
+    ``lower_inv``), all zero where the factor failed (``ok`` = 0)."""
+    for i in range(size):
+        lower_inv[w, i, j] = wp.float64(0.0)
+    if ok == 1:
+        lower_inv[w, j, j] = wp.float64(1.0) / matrix[w, j, j]
+        for i in range(j + 1, size):
+            s = wp.float64(0.0)
+            for k in range(j, i):
+                s += matrix[w, i, k] * lower_inv[w, k, j]
+            lower_inv[w, i, j] = -s / matrix[w, i, i]
+
+
+@wp.func
+def inverse_entry(w: int, i: int, j: int, size: int, lower_inv: wp.array3d(dtype=wp.float64),
+                  inverse: wp.array3d(dtype=wp.float64)):
+    """E^-1_ij = E^-1_ji = (L^-T L^-1)_ij for j <= i."""
+    s = wp.float64(0.0)
+    for k in range(i, size):
+        s += lower_inv[w, k, i] * lower_inv[w, k, j]
+    inverse[w, i, j] = s
+    inverse[w, j, i] = s
+
+
+@wp.func
+def fix_coarse_diagonal(w: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
+    """An unknown with no stiffness (an empty aggregate, an axis prescribed on all of its nodes)
+    gets a diagonal of 1."""
+    if matrix[w, j, j] <= wp.float64(0.0):
+        matrix[w, j, j] = wp.float64(1.0)
+
+
+@wp.func
 def coarse_factor_world(
     w: int,
     world_active: wp.array(dtype=int),
@@ -216,51 +285,87 @@ def coarse_factor_world(
     coef: wp.array2d(dtype=float),
     rz: wp.array(dtype=float),
 ):
-    """Row ``w`` of ``coarse_factor``."""
+    """Row ``w`` of ``coarse_factor``: one thread's loops over the entry functions above
+    (``coarse_factor_block`` runs the same entries on a block's threads)."""
     if world_active[w] == 0:
         return
     size = sizes[w]
-    ok = int(1)
     for j in range(size):
-        if matrix[w, j, j] <= wp.float64(0.0):
-            matrix[w, j, j] = wp.float64(1.0)
+        fix_coarse_diagonal(w, j, matrix)
+    ok = int(1)
     for j in range(size):  # Cholesky, in place in the lower triangle
         if ok == 1:
-            s = matrix[w, j, j]
-            for k in range(j):
-                s -= matrix[w, j, k] * matrix[w, j, k]
-            if not (s > wp.float64(1.0e-12) * matrix[w, j, j]):
-                ok = 0
-            else:
-                d = wp.sqrt(s)
-                matrix[w, j, j] = d
+            ok = cholesky_pivot(w, j, matrix)
+            if ok == 1:
                 for i in range(j + 1, size):
-                    s2 = matrix[w, i, j]
-                    for k in range(j):
-                        s2 -= matrix[w, i, k] * matrix[w, j, k]
-                    matrix[w, i, j] = s2 / d
+                    cholesky_entry(w, i, j, matrix)
     for j in range(size):  # L^-1 (lower)
-        for i in range(size):
-            lower_inv[w, i, j] = wp.float64(0.0)
-        if ok == 1:
-            lower_inv[w, j, j] = wp.float64(1.0) / matrix[w, j, j]
-            for i in range(j + 1, size):
-                s = wp.float64(0.0)
-                for k in range(j, i):
-                    s += matrix[w, i, k] * lower_inv[w, k, j]
-                lower_inv[w, i, j] = -s / matrix[w, i, i]
+        lower_inverse_column(w, j, size, ok, matrix, lower_inv)
     for i in range(size):  # E^-1 = L^-T L^-1 (symmetric by construction)
         for j in range(i + 1):
-            s = wp.float64(0.0)
-            for k in range(i, size):
-                s += lower_inv[w, k, i] * lower_inv[w, k, j]
-            inverse[w, i, j] = s
-            inverse[w, j, i] = s
+            inverse_entry(w, i, j, size, lower_inv, inverse)
     for i in range(size):
         for j in range(size):
             matrix[w, i, j] = wp.float64(0.0)
     coarse_coefficients(w, size, inverse, rhs, coef)
     rz[w] = 0.0
+
+
+@wp.func
+def coarse_factor_block(
+    w: int,
+    lane: int,
+    threads: int,
+    sizes: wp.array(dtype=int),
+    matrix: wp.array3d(dtype=wp.float64),
+    lower_inv: wp.array3d(dtype=wp.float64),
+    inverse: wp.array3d(dtype=wp.float64),
+    rhs: wp.array2d(dtype=float),
+    coef: wp.array2d(dtype=float),
+    terms: wp.array2d(dtype=wp.float64),
+    factored: wp.array(dtype=int),
+    rz: wp.array(dtype=float),
+):
+    """``coarse_factor_world`` of an iterating world ``w`` by the ``threads`` threads of its block
+    (thread ``lane``; every thread must call it): each entry of the factor, of L^-1 and of E^-1
+    computed by the same function in the same order of operations as there, so the same bits
+    (``terms`` also gets ``coarse_row``'s terms). Per factor column, thread 0 takes the pivot and
+    the threads the entries below it (``factored[w]``: 1 while every pivot so far was positive);
+    L^-1 a column per thread, E^-1 an entry per thread, ``coef`` a row per thread. A slender
+    object's 24 unknowns on one thread were a serial chain of ~14,000 float64 multiply-adds."""
+    size = sizes[w]
+    for j in range(lane, size, threads):
+        fix_coarse_diagonal(w, j, matrix)
+    if lane == 0:
+        factored[w] = 1
+    block_barrier()
+    for j in range(size):  # Cholesky, in place in the lower triangle: a column per pass
+        if lane == 0 and factored[w] == 1:
+            factored[w] = cholesky_pivot(w, j, matrix)
+        block_barrier()
+        if factored[w] == 1:
+            for i in range(j + 1 + lane, size, threads):
+                cholesky_entry(w, i, j, matrix)
+        block_barrier()
+    ok = factored[w]
+    for j in range(lane, size, threads):
+        lower_inverse_column(w, j, size, ok, matrix, lower_inv)
+    block_barrier()
+    for e in range(lane, size * size, threads):
+        i = e // size
+        j = e - i * size
+        if j <= i:
+            inverse_entry(w, i, j, size, lower_inv, inverse)
+    block_barrier()
+    for e in range(lane, size * size, threads):
+        matrix[w, e // size, e - (e // size) * size] = wp.float64(0.0)
+    for i in range(lane, size, threads):
+        coarse_row(w, i, size, inverse, rhs, coef, terms)
+    block_barrier()
+    for i in range(lane, size, threads):
+        rhs[w, i] = 0.0
+    if lane == 0:
+        rz[w] = 0.0
 
 
 @wp.kernel

@@ -31,16 +31,11 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .block_sync import block_barrier
-from .coarse_space import coarse_gain, coarse_row
+from .coarse_space import LANE_COARSE_SIZE, coarse_gain, coarse_row
 from .elastic import hessian_product_tet
 from .linear_solve import end_iteration, finish_iteration, node_product, update_direction, update_solution
 from .pad_edge_hessian import edge_point_slot_product
 
-#: Coarse solves of at most this many unknowns (one aggregate: a compact object's) are applied by one
-#: thread of the block; larger ones (a slender object's aggregates) row by row by its threads
-#: (``coarse_space.coarse_row``), with one more barrier per iteration. The same bits either way on
-#: the CPU (on CUDA the compiler may fuse the one-thread sum's multiply-add, not the rows' stored terms).
-LANE_COARSE_SIZE = 3
 
 
 @wp.kernel

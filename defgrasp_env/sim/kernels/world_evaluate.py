@@ -8,7 +8,10 @@ Phase by phase this is eleven to fifteen launches over the rows of every world
 ``linear_solve.begin_linear_solve``, the coarse space's assembly, factor and initial guess with
 its Hessian product, ``coarse_space.coarse_start_cg``, ``linear_solve.start_cg_worlds``); one
 world on a GPU pays a launch's latency for each. ``evaluate_world_blocks`` calls the same row
-functions in the same order per world: bit-identical on the CPU (one thread per world). A world
+functions in the same order per world: bit-identical on the CPU (one thread per world). The coarse
+factor of a slender object (more unknowns than ``LANE_COARSE_SIZE``) is spread over the block's
+threads entry by entry (``coarse_space.coarse_factor_block``); a compact object's 3 x 3 stays on
+thread 0. A world
 not iterating Newton only has its CG flag cleared (the phase kernels also cleared its CG vectors,
 its CG stopping value and its line-search start energy, which nothing reads before its next solve
 sets them again).
@@ -21,8 +24,8 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .block_sync import block_barrier
-from .coarse_space import (coarse_assemble_node, coarse_assemble_tet, coarse_factor_world, coarse_guess_node,
-                           coarse_start_cg_node)
+from .coarse_space import (LANE_COARSE_SIZE, coarse_assemble_node, coarse_assemble_tet, coarse_factor_block,
+                           coarse_factor_world, coarse_guess_node, coarse_start_cg_node)
 from .contact import evaluate_node
 from .elastic import evaluate_tet, hessian_product_tet
 from .linear_solve import begin_node_solve, node_product, start_cg_world
@@ -111,6 +114,8 @@ def evaluate_world_blocks(
     coarse_lower_inv: wp.array3d(dtype=wp.float64),
     coarse_inverse: wp.array3d(dtype=wp.float64),
     coarse_coef: wp.array2d(dtype=float),
+    coarse_terms: wp.array2d(dtype=wp.float64),
+    coarse_factored: wp.array(dtype=int),
     coarse_guess: wp.array(dtype=wp.vec3),
     coarse_p_ap: wp.array(dtype=float),
     # CG's start (linear_solve.start_cg_world)
@@ -169,7 +174,10 @@ def evaluate_world_blocks(
         coarse_assemble_edge_point(e, triangles, active, points_per_world, point_tri, point_bary, point_block, free,
                                    node_aggregate, coarse_matrix)
     block_barrier()
-    if lane == 0:
+    if coarse_sizes[w] > LANE_COARSE_SIZE:  # the same for every thread of the block: all reach its barriers
+        coarse_factor_block(w, lane, threads, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
+                            coarse_coef, coarse_terms, coarse_factored, rz)
+    elif lane == 0:
         coarse_factor_world(w, active, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
                             coarse_coef, rz)
     block_barrier()
