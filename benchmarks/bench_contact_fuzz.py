@@ -117,14 +117,14 @@ class SubstepMonitor:
         advance = solver.advance
         half = PAD_BOX_HALF_EXTENTS
 
-        def checked_advance(state_in, state_out, control, dt, *args):
+        def checked_advance(state_in, state_out, control, dt, *args, **kwargs):
             x0 = state_in.positions.numpy().copy()
             if self._start is None or not np.array_equal(x0, self._start):
                 self.commit()
             self._start = x0
             c0 = state_in.pad_positions.numpy().astype(np.float64).copy()
             q0 = state_in.pad_orientations.numpy().astype(np.float64).copy()
-            advance(state_in, state_out, control, dt, *args)
+            advance(state_in, state_out, control, dt, *args, **kwargs)
             x1 = state_out.positions.numpy()
             c1 = control.pad_target_positions.numpy().astype(np.float64)
             q1 = control.pad_target_orientations.numpy().astype(np.float64)

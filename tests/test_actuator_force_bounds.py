@@ -142,9 +142,9 @@ def test_force_limit_retries_keep_vector_worlds_equal_to_single_envs():
             scene.period_graphs = False  # every solve through ``advance`` (the single env's periods run as graphs)
             advance = scene.solver.advance
 
-            def counted(state_in, state_out, control, dt, patient=None, worlds=None):
+            def counted(state_in, state_out, control, dt, patient=None, worlds=None, full_outputs=True):
                 spy.append(None if worlds is None else np.asarray(worlds).copy())
-                advance(state_in, state_out, control, dt, patient, worlds)
+                advance(state_in, state_out, control, dt, patient, worlds, full_outputs)
 
             scene.solver.advance = counted
         out = []

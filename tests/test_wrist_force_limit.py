@@ -188,10 +188,10 @@ def test_a_patient_solve_is_not_repeated_from_the_same_input(monkeypatch):
         calls = []
         advance = ImplicitSolver.advance
 
-        def logged(self, state_in, state_out, control, dt, patient=None, worlds=None):
+        def logged(self, state_in, state_out, control, dt, patient=None, worlds=None, full_outputs=True):
             solved = np.ones(scene.num_worlds, bool) if worlds is None else np.asarray(worlds, bool).copy()
             calls.append((solved, None if patient is None else np.asarray(patient, bool).copy()))
-            return advance(self, state_in, state_out, control, dt, patient, worlds)
+            return advance(self, state_in, state_out, control, dt, patient, worlds, full_outputs)
 
         monkeypatch.setattr(ImplicitSolver, "advance", logged)
         rng = np.random.default_rng(4)

@@ -347,7 +347,7 @@ class PickupScene:
                 tried = False
             else:
                 self.gripper.plan_substep(k, count, h)
-                first_try = self._solve_substep(None, h)  # as planned on the device (held worlds stay)
+                first_try = self._solve_substep(None, h, last=k == count - 1)  # as planned (held worlds stay)
             self._limit_and_accept(k, h, *first_try)
         if self.state is not self._home_state:  # an odd number of substeps
             self._home_state.copy_from(self.state)
@@ -366,11 +366,12 @@ class PickupScene:
             # a retry re-solves only the worlds whose fraction changed: the others' last solve
             # (in the other state, untouched since) is what a new one would give
             nonlocal solved
-            number, _, _, load = self._solve_substep(fraction, h, worlds=fraction != solved)
+            number, _, _, load = self._solve_substep(fraction, h, worlds=fraction != solved, last=last)
             solved = np.array(fraction, dtype=np.float64)
-            return self._patient_if_over(number, load, fraction, h)
+            return self._patient_if_over(number, load, fraction, h, last)
 
-        first = self._patient_if_over(number, load, solved, h)
+        last = k == self.substeps - 1
+        first = self._patient_if_over(number, load, solved, h, last)
         number, _, _ = limited_substep(solve, load_before, held=held, first=first)
         if number != self._solves:
             raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
@@ -435,7 +436,7 @@ class PickupScene:
             self._launches.launch(("mark", k), mark_substep, 1, [k], [self._gate])
             self.gripper.plan_substep(k, count, h)
             self.gripper.move_as_planned()
-            self.solver.launch_advance(src, dst, self._control, h)
+            self.solver.launch_advance(src, dst, self._control, h, full_outputs=k == count - 1)
             self._launch_loads(dst)
             self._launches.launch(("gate", FORCE_TOLERANCE), close_gate_if_limited, self.num_worlds,
                                   [self._loads, FORCE_TOLERANCE], [self._gate])
@@ -447,7 +448,7 @@ class PickupScene:
                 wp.capture_if(self._gate, on_true=functools.partial(self._accept_launches, k, states[(k + 1) % 2]))
         return capture.graph
 
-    def _patient_if_over(self, number: int, load: np.ndarray, fraction: np.ndarray, h: float):
+    def _patient_if_over(self, number: int, load: np.ndarray, fraction: np.ndarray, h: float, last: bool):
         """(solve number, load [W]) of a solve, re-solved patiently in the worlds over an actuator
         limit whose solve is unconverged and was not patient already (``_patient_solved``): an
         unconverged stiff contact can read kN where its solution reads tens of N, so over the
@@ -460,23 +461,25 @@ class PickupScene:
             # reads over its limit was so re-solved after each of the substep's later retries)
             patient = over & ~self._last_solve_converged() & ~self._patient_solved
             if patient.any():
-                number, _, _, load = self._solve_substep(fraction, h, patient, worlds=patient)
+                number, _, _, load = self._solve_substep(fraction, h, patient, worlds=patient, last=last)
         return number, load
 
     def _solve_substep(self, fraction: np.ndarray | None, h: float, patient: np.ndarray | None = None,
-                       worlds: np.ndarray | None = None):
+                       worlds: np.ndarray | None = None, last: bool = True):
         """One solve of the planned substep from its start (``state``, left untouched) into the
         other state, with ``fraction`` [W] of the actuators' motion (the force limit's retry,
         ``Gripper.move``; None: the plan's first try, ``Gripper.move_as_planned``), the ``patient``
         worlds [W] iterated to convergence, of the ``worlds`` [W] bool (default all; the others keep
-        their last solve: ``ImplicitSolver.advance``). Returns (the solve's number, then
+        their last solve: ``ImplicitSolver.advance``); ``last``: the period's last substep, whose
+        solve writes every output (the earlier ones only the contact part the gripper and the force
+        limit read: ``full_outputs``). Returns (the solve's number, then
         ``_read_loads``'s three arrays); the report and the forces stay on the device."""
         if fraction is None:
             self.gripper.move_as_planned()  # writes the control's pad targets
         else:
             self.gripper.move(fraction)
         out = self._next_state
-        self.solver.advance(self.state, out, self._control, h, patient, worlds)
+        self.solver.advance(self.state, out, self._control, h, patient, worlds, full_outputs=last)
         solved = np.ones(self.num_worlds, dtype=bool) if worlds is None else np.asarray(worlds, dtype=bool)
         self._patient_solved[solved] = False if patient is None else np.asarray(patient, dtype=bool)[solved]
         self.world_solves += self.num_worlds if worlds is None else int(np.count_nonzero(worlds))

@@ -278,7 +278,8 @@ class ImplicitSolver:
         return self._report.download()
 
     def advance(self, state_in: State, state_out: State, control: Control, dt: float,
-                patient: np.ndarray | None = None, worlds: np.ndarray | None = None) -> None:
+                patient: np.ndarray | None = None, worlds: np.ndarray | None = None,
+                full_outputs: bool = True) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object;
         distinct, ``state_in`` is only read). Every array of ``state_out`` is written (the rows of the
         solved worlds); the report is left in ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool
@@ -289,9 +290,12 @@ class ImplicitSolver:
         solved; every other world's rows of ``state_out`` and its report in ``scratch`` are left as they
         are (the solves of different worlds are independent, so a world solved again from the same input
         gets the same result, bit for bit on the CPU: a caller that re-solves some worlds, like the
-        actuator force limit's retries, need not redo the others). Where the device can (``graphs``),
-        the whole call is one graph launch, captured at the first call with these states, control and
-        ``dt``."""
+        actuator force limit's retries, need not redo the others). ``full_outputs`` False: of the
+        outputs at the returned positions only the contact part (pad loads, contact forces, the
+        penetration of the report; elastic forces, von Mises stresses, their mean and the report's
+        residual are left as they were: a caller's intermediate substeps, whose next solve reads none
+        of them). Where the device can (``graphs``), the whole call is one graph launch, captured at
+        the first call with these states, control and ``dt``."""
         check_range("dt", dt, 0.0, math.inf, "s")
         s = self.scratch
         if not self._select_worlds(worlds):
@@ -300,11 +304,12 @@ class ImplicitSolver:
         if patient_any:
             s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(self.model.num_worlds))
         run, graphs = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
-        if self.graphs and patient_any not in graphs:
+        key = (patient_any, bool(full_outputs))
+        if self.graphs and key not in graphs:
             try:
                 with scoped_capture(device=self.model.device, force_module_load=False) as capture:
-                    self._advance(run, state_in, state_out, control, patient_any)
-                graphs[patient_any] = capture.graph
+                    self._advance(run, state_in, state_out, control, patient_any, full_outputs)
+                graphs[key] = capture.graph
             except RuntimeError as exc:
                 if self.config.graphs:
                     raise
@@ -314,9 +319,9 @@ class ImplicitSolver:
                 self._launches.clear()
                 run, graphs = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
         if self.graphs:
-            wp.capture_launch(graphs[patient_any])
+            wp.capture_launch(graphs[key])
         else:
-            self._advance(run, state_in, state_out, control, patient_any)
+            self._advance(run, state_in, state_out, control, patient_any, full_outputs)
         if patient_any:
             s.patient.zero_()
 
@@ -325,8 +330,9 @@ class ImplicitSolver:
         itself; a caller replaying ``launch_advance`` inside its own graph calls it before)."""
         self._select_worlds(None)
 
-    def launch_advance(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
-        """The launches of ``advance(state_in, state_out, control, dt)`` (every world, none
+    def launch_advance(self, state_in: State, state_out: State, control: Control, dt: float,
+                       full_outputs: bool = True) -> None:
+        """The launches of ``advance(state_in, state_out, control, dt, full_outputs=...)`` (every world, none
         patient; ``state_in`` and ``state_out`` distinct) on the device's current stream, not its
         own graph: for a caller capturing them into a larger graph (``PickupScene``'s control
         period). Needs ``graphs`` (the loops' exit tests on the device) and every world selected
@@ -337,7 +343,7 @@ class ImplicitSolver:
             raise ValueError("launch_advance needs distinct input and output states")
         check_range("dt", dt, 0.0, math.inf, "s")
         run, _ = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
-        self._advance(run, state_in, state_out, control, False)
+        self._advance(run, state_in, state_out, control, False, full_outputs)
 
     # -- internals ---------------------------------------------------------------------------
     def _select_worlds(self, worlds: np.ndarray | None) -> bool:
@@ -359,7 +365,7 @@ class ImplicitSolver:
         return True
 
     def _advance(self, run: SubstepLaunches, state_in: State, state_out: State, control: Control,
-                 patient_any: bool) -> None:
+                 patient_any: bool, full_outputs: bool = True) -> None:
         cfg, s = self.config, self.scratch
         if state_in is state_out:  # the start positions are overwritten: keep them for the prescribed axes
             wp.copy(s.step_start, state_in.positions)
@@ -368,8 +374,9 @@ class ImplicitSolver:
             for cmd in run.start[k]:
                 cmd.launch()
             self._newton(run, cfg.patient_iterations if patient_any else 0)
-            for cmd in run.finish[k]:  # clamp, velocities, outputs after the last substep
-                cmd.launch()
+            last = k == cfg.substeps - 1
+            for cmd in run.finish_contact if last and not full_outputs else run.finish[k]:
+                cmd.launch()  # clamp, velocities, outputs after the last substep
 
     def _newton(self, run: SubstepLaunches, patient_iterations: int = 0) -> None:
         """The regular Newton iterations while a world iterates (all of them without checks), then
@@ -440,7 +447,7 @@ class ImplicitSolver:
     def _substep_launches(self, h: float, state_in: State, state_out: State, control: Control) -> tuple:
         """Recorded launches for substeps of length ``h`` (s) from ``state_in`` into ``state_out``
         under ``control`` (the arrays they are bound to), and the graphs captured of them (by
-        ``patient_any``); the least recently used set is dropped."""
+        ``(patient_any, full_outputs)``); the least recently used set is dropped."""
         key = (h, id(state_in), id(state_out), id(control))
         entry = self._launches.pop(key, None)
         if entry is None or entry[0] is not state_in or entry[1] is not state_out or entry[2] is not control:

@@ -101,6 +101,8 @@ class SubstepLaunches:
     depth: list         # launches: the iterate's deepest contact per world (extra iterations)
     finish: list        # [substeps] lists: clamp, end (velocities), at the last the outputs, CG's rz cleared
                         # and the pad poses copied, then the velocities' copy (one launch of world blocks)
+    finish_contact: list  # the last substep's ``finish`` with the contact part of the outputs only
+                          # (``ImplicitSolver.advance(full_outputs=False)``)
     cg_block: int       # CG iterations per launch of ``cg``
 
 
@@ -453,27 +455,33 @@ def _depth(c: _Context):
                   m.pad_half_extents, m.pads_per_world, s.lag_normal, s.depth)]
 
 
-def _outputs(c: _Context) -> list:
+def _outputs(c: _Context, outputs: int) -> list:
+    """The outputs pass at the returned positions (``outputs``: ``kwfin.ALL_OUTPUTS``, or
+    ``kwfin.CONTACT_OUTPUTS``: the node and pad edge terms only)."""
     m, s, work, x = c.model, c.scratch, c.work, c.work.positions
-    return [c.rec(ksub.clear_outputs, m.num_worlds, s.solve_worlds, m.pads_per_world, work.pad_normal_force,
+    cmds = [c.rec(ksub.clear_outputs, m.num_worlds, s.solve_worlds, m.pads_per_world, work.pad_normal_force,
                   work.pad_force, s.res_norm),
-            *_nodes(c, x, s.solve_worlds, 1), _tets(c, x, s.solve_worlds, outputs=1), _begin_solve(c, s.solve_worlds),
-            c.blocks(ksub.mean_stress, c.block_threads, c.block_threads, work.von_mises, m.tet_rest_volume,
-                     s.tet_start, s.tet_end, s.solve_worlds, m.world_volume, s.stress_partial, work.mean_von_mises)]
+            *_nodes(c, x, s.solve_worlds, 1)]
+    if outputs == kwfin.ALL_OUTPUTS:
+        cmds += [_tets(c, x, s.solve_worlds, outputs=1), _begin_solve(c, s.solve_worlds),
+                 c.blocks(ksub.mean_stress, c.block_threads, c.block_threads, work.von_mises, m.tet_rest_volume,
+                          s.tet_start, s.tet_end, s.solve_worlds, m.world_volume, s.stress_partial,
+                          work.mean_von_mises)]
+    return cmds
 
 
-def _finish(c: _Context, config, last: bool) -> list:
+def _finish(c: _Context, config, outputs: int) -> list:
     """A substep's end: nodes left too deep put back within the penetration bound, the velocities,
-    after the last substep the outputs pass (``_outputs``; then CG's ``rz`` cleared) and the pad
-    poses into the output state, and the velocities into it."""
+    after the last substep (``outputs`` not ``kwfin.NO_OUTPUTS``) the outputs pass (``_outputs``;
+    then CG's ``rz`` cleared) and the pad poses into the output state, and the velocities into it."""
     m, s, work, ctl, x = c.model, c.scratch, c.work, c.control, c.work.positions
     cmds = [c.rec(kc.clamp_depth, m.num_nodes, m.node_world, s.solve_worlds, m.free_axes, s.pad_pos1, s.pad_rot1,
                   m.pad_half_extents, m.pads_per_world, s.lag_normal, config.penetration_bound,
                   0.9 * config.penetration_bound, x, s.clamped),
             c.rec(ksub.end_substep, m.num_nodes, s.x_start, m.node_world, s.solve_worlds, s.diverged, 1.0 / c.h, x,
                   s.v_new)]
-    if last:
-        cmds += [*_outputs(c), c.rec(ksub.clear_values, m.num_worlds, s.rz)]
+    if outputs != kwfin.NO_OUTPUTS:
+        cmds += [*_outputs(c, outputs), c.rec(ksub.clear_values, m.num_worlds, s.rz)]
         if m.pads_per_world:
             cmds.append(c.rec(ksub.copy_pad_poses, m.num_worlds * m.pads_per_world, ctl.pad_target_positions,
                               ctl.pad_target_orientations, m.pads_per_world, s.solve_worlds, work.pad_positions,
@@ -481,12 +489,12 @@ def _finish(c: _Context, config, last: bool) -> list:
     return cmds + [c.rec(ksub.copy_world_rows, m.num_nodes, s.v_new, m.node_world, s.solve_worlds, work.velocities)]
 
 
-def _finish_world(c: _Context, config, threads: int, last: bool) -> list:
+def _finish_world(c: _Context, config, threads: int, outputs: int) -> list:
     """``_finish``'s launches as one: each solved world's substep end in a block of ``threads``
     threads (``kernels/world_finish.py``)."""
     m, s, e, wc, work, ctl = c.model, c.scratch, c.scratch.edges, c.compaction, c.work, c.control
     return [c.blocks(kwfin.finish_world_blocks, threads,
-                     threads, wc.nodes.start, wc.tets.start, s.solve_worlds, int(last), work.positions,
+                     threads, wc.nodes.start, wc.tets.start, s.solve_worlds, outputs, work.positions,
                      config.penetration_bound, 0.9 * config.penetration_bound, s.clamped, s.diverged, 1.0 / c.h,
                      s.v_new, *_world_node_terms(c),
                      s.residual, s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force,
@@ -528,6 +536,11 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
     def seq(commands: list) -> list:
         return [LaunchSequence(commands, model.device, phase_graphs)]
 
+    def finish(outputs: int) -> list:
+        if world_block_threads:
+            return seq(_finish_world(c, config, world_block_threads, outputs))
+        return seq(_finish(c, config, outputs))
+
     def evaluate(c: _Context, config, start_energy: bool = False) -> list:
         if world_block_threads:
             return _evaluate_world(c, config, world_block_threads, start_energy)
@@ -550,7 +563,7 @@ def record_substep_launches(model: Model, config, scratch: SolverScratch, work: 
         step_world=seq(_newton_step_world(c, config, world_block_threads, False)) if world_block_threads else [],
         step_world_first=seq(_newton_step_world(c, config, world_block_threads, True)) if world_block_threads else [],
         apply=seq(_apply(c, config)), depth=_depth(c),
-        finish=[seq(_finish_world(c, config, world_block_threads, k == c.substeps - 1) if world_block_threads
-                    else _finish(c, config, k == c.substeps - 1)) for k in range(c.substeps)],
+        finish=[finish(kwfin.ALL_OUTPUTS if k == c.substeps - 1 else kwfin.NO_OUTPUTS) for k in range(c.substeps)],
+        finish_contact=finish(kwfin.CONTACT_OUTPUTS),
         cg_block=block,
     )

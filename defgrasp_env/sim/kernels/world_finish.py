@@ -11,7 +11,8 @@ launches of the outputs pass (``substep.clear_outputs``, ``contact.evaluate_node
 ``linear_solve.begin_linear_solve``, ``substep.mean_stress``), a clear of CG's ``rz`` and
 ``substep.copy_pad_poses``, then ``substep.copy_world_rows`` of the velocities: a lone world on a GPU
 pays a launch's latency for each, in every substep (the scene advances the solver a substep at a
-time). ``finish_world_blocks`` calls the same row functions in the same order per world:
+time; a control period's earlier substeps need only the contact part of the outputs:
+``CONTACT_OUTPUTS``). ``finish_world_blocks`` calls the same row functions in the same order per world:
 bit-identical on the CPU (one thread per world). A world not solved only has its ``rz`` cleared
 after an outputs pass (the phase kernels also cleared its CG vectors, which nothing reads before its
 next solve sets them again).
@@ -27,6 +28,14 @@ from .elastic import evaluate_tet
 from .linear_solve import begin_node_solve
 from .pad_edge_contact import evaluate_edge_point
 from .substep import end_substep_node
+
+#: ``finish_world_blocks``'s ``outputs``: none (not an advance's last substep); the whole outputs pass;
+#: or only the contact part (pad loads, contact forces, penetration: what a control period's earlier
+#: substeps are read for, ``ImplicitSolver.advance(full_outputs=False)``), leaving the elastic forces,
+#: the von Mises stresses, their mean and the residual's norm unwritten.
+NO_OUTPUTS = wp.constant(0)
+ALL_OUTPUTS = wp.constant(1)
+CONTACT_OUTPUTS = wp.constant(2)
 
 
 @wp.kernel
@@ -124,8 +133,9 @@ def finish_world_blocks(
     """The substep end of world ``tid // threads`` (thread ``tid % threads`` of its block) if it
     was solved (``solve``): ``x`` (m) kept within the penetration ``bound`` (m; moved back to
     ``target``), ``v_new`` = the substep's velocities (m/s; ``inv_dt``: 1 / the substep's length),
-    then, where ``outputs`` = 1, the outputs pass (``v_start`` still the substep's start velocities),
-    ``rz[w]`` = 0 in every world, and the pad poses (``pad_target_*`` into ``state_pad_*``); last,
+    then, where ``outputs`` is ``ALL_OUTPUTS``, the outputs pass (``v_start`` still the substep's
+    start velocities; ``CONTACT_OUTPUTS``: its node and pad edge terms only), ``rz[w]`` = 0 in every
+    world, and the pad poses (``pad_target_*`` into ``state_pad_*``); last,
     ``v_start`` = ``v_new``. ``node_start`` / ``tet_start`` [W+1]: each world's rows;
     ``stress_first`` / ``stress_end`` [W]: its object's tets for the mean stress (Pa,
     volume-weighted, into ``mean_von_mises``)."""
@@ -133,7 +143,7 @@ def finish_world_blocks(
     w = tid // threads
     lane = tid - w * threads
     if solve[w] == 0:
-        if lane == 0 and outputs != 0:
+        if lane == 0 and outputs != NO_OUTPUTS:
             rz[w] = 0.0
         return
     n0 = node_start[w]
@@ -142,7 +152,7 @@ def finish_world_blocks(
         clamp_depth_node(i, node_world, solve, free, pad_pos1, pad_rot1, pad_half, pads_per_world, lag_normal, bound,
                          target, x, clamped)
         end_substep_node(i, x_start, node_world, solve, diverged, inv_dt, x, v_new)
-    if outputs != 0:
+    if outputs != NO_OUTPUTS:
         t0 = tet_start[w]
         t1 = tet_start[w + 1]
         if lane == 0:  # substep.clear_outputs
@@ -165,24 +175,27 @@ def finish_world_blocks(
                                 point_normal, point_stiffness, point_allowed, point_friction, knee, pad_mu, slip_eps,
                                 triangle_first, 1, residual, diag_block, point_block, contact_force, pad_normal_force,
                                 pad_force, penetration)
-        block_barrier()
-        for t in range(t0 + lane, t1, threads):
-            evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, solve, tet_rotation,
-                         residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, 1, 0, energy)
-        block_barrier()
-        for i in range(n0 + lane, n1, threads):
-            begin_node_solve(i, residual, diag_block, free, node_world, solve, precond, z, p, dx, ap, rz, residual_norm)
-        total = float(0.0)
-        volume = world_volume[w]
-        for t in range(stress_first[w] + lane, stress_end[w], threads):
-            total = total + von_mises[t] * rest_volume[t] / volume
-        partial[tid] = total
-        block_barrier()
+        if outputs == ALL_OUTPUTS:
+            block_barrier()
+            for t in range(t0 + lane, t1, threads):
+                evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, solve, tet_rotation,
+                             residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, 1, 0, energy)
+            block_barrier()
+            for i in range(n0 + lane, n1, threads):
+                begin_node_solve(i, residual, diag_block, free, node_world, solve, precond, z, p, dx, ap, rz,
+                                 residual_norm)
+            total = float(0.0)
+            volume = world_volume[w]
+            for t in range(stress_first[w] + lane, stress_end[w], threads):
+                total = total + von_mises[t] * rest_volume[t] / volume
+            partial[tid] = total
+            block_barrier()
+            if lane == 0:
+                mean_w = float(0.0)
+                for k in range(threads):
+                    mean_w = mean_w + partial[w * threads + k]
+                mean_von_mises[w] = mean_w
         if lane == 0:
-            mean_w = float(0.0)
-            for k in range(threads):
-                mean_w = mean_w + partial[w * threads + k]
-            mean_von_mises[w] = mean_w
             rz[w] = 0.0
         for k in range(lane, pads_per_world, threads):
             pad = w * pads_per_world + k
