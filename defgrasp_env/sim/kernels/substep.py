@@ -196,6 +196,25 @@ def end_substep(
     end_substep_node(wp.tid(), x_start, node_world, solve, diverged, inv_dt, x, v)
 
 
+@wp.func
+def mean_stress_block(w: int, lane: int, threads: int, first: int, end: int, von_mises: wp.array(dtype=float),
+                      rest_volume: wp.array(dtype=float), world_volume: wp.array(dtype=float),
+                      partial: wp.array(dtype=float), mean: wp.array(dtype=float)):
+    """World ``w``'s ``mean_stress`` by thread ``lane`` of its block of ``threads`` (tets
+    ``first:end``; every thread of the block must call it: it holds a barrier)."""
+    total = float(0.0)
+    volume = world_volume[w]
+    for t in range(first + lane, end, threads):
+        total = total + von_mises[t] * rest_volume[t] / volume
+    partial[w * threads + lane] = total
+    block_barrier()
+    if lane == 0:
+        mean_w = float(0.0)
+        for k in range(threads):
+            mean_w = mean_w + partial[w * threads + k]
+        mean[w] = mean_w
+
+
 @wp.kernel
 def mean_stress(
     threads: int,
@@ -215,20 +234,10 @@ def mean_stress(
     thread (the CPU) the sum in tet order of the CPU's atomic sum before."""
     tid = wp.tid()
     w = tid // threads
-    lane = tid - w * threads
     if solve[w] == 0:
         return
-    total = float(0.0)
-    volume = world_volume[w]
-    for t in range(tet_start[w] + lane, tet_end[w], threads):
-        total = total + von_mises[t] * rest_volume[t] / volume
-    partial[tid] = total
-    block_barrier()
-    if lane == 0:
-        mean_w = float(0.0)
-        for k in range(threads):
-            mean_w = mean_w + partial[w * threads + k]
-        mean[w] = mean_w
+    mean_stress_block(w, tid - w * threads, threads, tet_start[w], tet_end[w], von_mises, rest_volume, world_volume,
+                      partial, mean)
 
 
 @wp.kernel

@@ -27,7 +27,7 @@ from .contact import clamp_depth_node, evaluate_node
 from .elastic import evaluate_tet
 from .linear_solve import begin_node_solve
 from .pad_edge_contact import evaluate_edge_point
-from .substep import end_substep_node
+from .substep import end_substep_node, mean_stress_block
 
 #: ``finish_world_blocks``'s ``outputs``: none (not an advance's last substep); the whole outputs pass;
 #: or only the contact part (pad loads, contact forces, penetration: what a control period's earlier
@@ -184,17 +184,8 @@ def finish_world_blocks(
             for i in range(n0 + lane, n1, threads):
                 begin_node_solve(i, residual, diag_block, free, node_world, solve, precond, z, p, dx, ap, rz,
                                  residual_norm)
-            total = float(0.0)
-            volume = world_volume[w]
-            for t in range(stress_first[w] + lane, stress_end[w], threads):
-                total = total + von_mises[t] * rest_volume[t] / volume
-            partial[tid] = total
-            block_barrier()
-            if lane == 0:
-                mean_w = float(0.0)
-                for k in range(threads):
-                    mean_w = mean_w + partial[w * threads + k]
-                mean_von_mises[w] = mean_w
+            mean_stress_block(w, lane, threads, stress_first[w], stress_end[w], von_mises, rest_volume, world_volume,
+                              partial, mean_von_mises)
         if lane == 0:
             rz[w] = 0.0
         for k in range(lane, pads_per_world, threads):
