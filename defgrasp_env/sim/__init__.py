@@ -13,7 +13,8 @@ Public API (Newton's Model/State/Control split)::
     stats = solver.step(state, state, control, dt=0.05)   # SolveStats: per-world convergence report
 
 ``solver.advance(state_in, state_out, control, dt)`` is ``step`` without the report's download
-(``state_in`` is only read when distinct from ``state_out``); ``SolveReport.fold`` accumulates the
+(``state_in`` is only read when distinct from ``state_out``; ``full_outputs=False`` writes only
+the contact outputs, for a caller's intermediate substeps); ``SolveReport.fold`` accumulates the
 reports of several solves on the device for one download.
 
 ``meshing`` builds tet meshes (named objects, watertight surfaces); ``pad_motion`` sizes substeps
