@@ -30,12 +30,11 @@ SIZE = 24  # the rope's 8 aggregates x 3 translations
 @wp.kernel
 def _factor_blocks(threads: int, sizes: wp.array(dtype=int), matrix: wp.array3d(dtype=wp.float64),
                    lower_inv: wp.array3d(dtype=wp.float64), inverse: wp.array3d(dtype=wp.float64),
-                   rhs: wp.array2d(dtype=float), coef: wp.array2d(dtype=float), terms: wp.array2d(dtype=wp.float64),
-                   factored: wp.array(dtype=int), rz: wp.array(dtype=float)):
+                   rhs: wp.array2d(dtype=float), coef: wp.array2d(dtype=float), factored: wp.array(dtype=int),
+                   rz: wp.array(dtype=float)):
     tid = wp.tid()
     w = tid // threads
-    coarse_factor_block(w, tid - w * threads, threads, sizes, matrix, lower_inv, inverse, rhs, coef, terms, factored,
-                        rz)
+    coarse_factor_block(w, tid - w * threads, threads, sizes, matrix, lower_inv, inverse, rhs, coef, factored, rz)
 
 
 @wp.kernel
@@ -79,10 +78,9 @@ def _factor(m, rhs, sizes, threads):
     ``factored``."""
     block = _arrays(m, rhs)
     factored = wp.array(np.full(len(m), 7, np.int32), dtype=int)
-    terms = wp.zeros(rhs.shape, dtype=wp.float64)
     wp.launch(_factor_blocks, dim=len(m) * threads, block_dim=threads,
               inputs=[threads, wp.array(sizes, dtype=int), block["matrix"], block["lower_inv"], block["inverse"],
-                      block["rhs"], block["coef"], terms, factored, block["rz"]])
+                      block["rhs"], block["coef"], factored, block["rz"]])
     return {name: a.numpy() for name, a in block.items()}, factored.numpy()
 
 

@@ -282,7 +282,7 @@ class ImplicitSolver:
                 full_outputs: bool = True) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object;
         distinct, ``state_in`` is only read). Every array of ``state_out`` is written (the rows of the
-        solved worlds); the report is left in ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool
+        solved worlds; with ``full_outputs`` False all but the von Mises stresses and their mean); the report is left in ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool
         (default none): worlds given up to ``config.patient_iterations`` extra Newton iterations per
         substep until they meet ``newton_tolerance``; every other world's result is the same, bit for
         bit, as without it (its ``converged`` flag stays False when the regular iterations did not
@@ -292,9 +292,9 @@ class ImplicitSolver:
         gets the same result, bit for bit on the CPU: a caller that re-solves some worlds, like the
         actuator force limit's retries, need not redo the others). ``full_outputs`` False: of the
         outputs at the returned positions only the contact part (pad loads, contact forces, the
-        penetration of the report; elastic forces, von Mises stresses, their mean and the report's
-        residual are left as they were: a caller's intermediate substeps, whose next solve reads none
-        of them). Where the device can (``graphs``), the whole call is one graph launch, captured at
+        report's penetration); the elastic forces and the report's residual read 0, the von Mises
+        stresses and their mean keep their last values (a caller's intermediate substeps, whose next
+        solve reads none of them). Where the device can (``graphs``), the whole call is one graph launch, captured at
         the first call with these states, control and ``dt``."""
         check_range("dt", dt, 0.0, math.inf, "s")
         s = self.scratch

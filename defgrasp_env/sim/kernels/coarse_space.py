@@ -322,17 +322,16 @@ def coarse_factor_block(
     inverse: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
     coef: wp.array2d(dtype=float),
-    terms: wp.array2d(dtype=wp.float64),
     factored: wp.array(dtype=int),
     rz: wp.array(dtype=float),
 ):
     """``coarse_factor_world`` of an iterating world ``w`` by the ``threads`` threads of its block
     (thread ``lane``; every thread must call it): each entry of the factor, of L^-1 and of E^-1
-    computed by the same function in the same order of operations as there, so the same bits
-    (``terms`` also gets ``coarse_row``'s terms). Per factor column, thread 0 takes the pivot and
+    computed by the same function in the same order of operations as there, so the same bits.
+    Per factor column, thread 0 takes the pivot and
     the threads the entries below it (``factored[w]``: 1 while every pivot so far was positive);
     L^-1 a column per thread, E^-1 an entry per thread, ``coef`` a row per thread. A slender
-    object's 24 unknowns on one thread were a serial chain of ~14,000 float64 multiply-adds."""
+    object's 24 unknowns on one thread were a serial chain of ~7,800 float64 multiply-adds."""
     size = sizes[w]
     for j in range(lane, size, threads):
         fix_coarse_diagonal(w, j, matrix)
@@ -360,7 +359,7 @@ def coarse_factor_block(
     for e in range(lane, size * size, threads):
         matrix[w, e // size, e - (e // size) * size] = wp.float64(0.0)
     for i in range(lane, size, threads):
-        coarse_row(w, i, size, inverse, rhs, coef, terms)
+        coarse_coefficient(w, i, size, inverse, rhs, coef)
     block_barrier()
     for i in range(lane, size, threads):
         rhs[w, i] = 0.0

@@ -114,7 +114,6 @@ def evaluate_world_blocks(
     coarse_lower_inv: wp.array3d(dtype=wp.float64),
     coarse_inverse: wp.array3d(dtype=wp.float64),
     coarse_coef: wp.array2d(dtype=float),
-    coarse_terms: wp.array2d(dtype=wp.float64),
     coarse_factored: wp.array(dtype=int),
     coarse_guess: wp.array(dtype=wp.vec3),
     coarse_p_ap: wp.array(dtype=float),
@@ -176,7 +175,7 @@ def evaluate_world_blocks(
     block_barrier()
     if coarse_sizes[w] > LANE_COARSE_SIZE:  # the same for every thread of the block: all reach its barriers
         coarse_factor_block(w, lane, threads, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
-                            coarse_coef, coarse_terms, coarse_factored, rz)
+                            coarse_coef, coarse_factored, rz)
     elif lane == 0:
         coarse_factor_world(w, active, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
                             coarse_coef, rz)

@@ -31,8 +31,9 @@ from .substep import end_substep_node, mean_stress_block
 
 #: ``finish_world_blocks``'s ``outputs``: none (not an advance's last substep); the whole outputs pass;
 #: or only the contact part (pad loads, contact forces, penetration: what a control period's earlier
-#: substeps are read for, ``ImplicitSolver.advance(full_outputs=False)``), leaving the elastic forces,
-#: the von Mises stresses, their mean and the residual's norm unwritten.
+#: substeps are read for, ``ImplicitSolver.advance(full_outputs=False)``): the elastic forces and the
+#: residual's norm are then left at 0 (the nodes' pass clears them) and the von Mises stresses and
+#: their mean as they were.
 NO_OUTPUTS = wp.constant(0)
 ALL_OUTPUTS = wp.constant(1)
 CONTACT_OUTPUTS = wp.constant(2)
@@ -134,8 +135,8 @@ def finish_world_blocks(
     was solved (``solve``): ``x`` (m) kept within the penetration ``bound`` (m; moved back to
     ``target``), ``v_new`` = the substep's velocities (m/s; ``inv_dt``: 1 / the substep's length),
     then, where ``outputs`` is ``ALL_OUTPUTS``, the outputs pass (``v_start`` still the substep's
-    start velocities; ``CONTACT_OUTPUTS``: its node and pad edge terms only), ``rz[w]`` = 0 in every
-    world, and the pad poses (``pad_target_*`` into ``state_pad_*``); last,
+    start velocities; ``CONTACT_OUTPUTS``: its node and pad edge terms only) and, with either,
+    ``rz[w]`` = 0 in every world and the pad poses (``pad_target_*`` into ``state_pad_*``); last,
     ``v_start`` = ``v_new``. ``node_start`` / ``tet_start`` [W+1]: each world's rows;
     ``stress_first`` / ``stress_end`` [W]: its object's tets for the mean stress (Pa,
     volume-weighted, into ``mean_von_mises``)."""
