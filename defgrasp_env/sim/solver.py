@@ -270,9 +270,9 @@ class ImplicitSolver:
     # -- public --------------------------------------------------------------------------------
     def step(self, state_in: State, state_out: State, control: Control, dt: float,
              patient: np.ndarray | None = None, worlds: np.ndarray | None = None) -> SolveStats:
-        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object)
-        and return the per-world report (one device-to-host copy); ``patient`` and ``worlds`` as for
-        ``advance`` (the report of a world outside ``worlds`` is that of its last solve)."""
+        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object) and return
+        the per-world report (one device-to-host copy); ``patient`` and ``worlds`` as for ``advance`` (the
+        report of a world outside ``worlds`` is that of its last solve)."""
         self.advance(state_in, state_out, control, dt, patient, worlds)
         self._report.fold(self.scratch, self.config.penetration_bound, first=True)
         return self._report.download()
@@ -280,22 +280,22 @@ class ImplicitSolver:
     def advance(self, state_in: State, state_out: State, control: Control, dt: float,
                 patient: np.ndarray | None = None, worlds: np.ndarray | None = None,
                 full_outputs: bool = True) -> None:
-        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object;
-        distinct, ``state_in`` is only read). Every array of ``state_out`` is written (the rows of the
-        solved worlds; with ``full_outputs`` False all but the von Mises stresses and their mean); the report is left in ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool
-        (default none): worlds given up to ``config.patient_iterations`` extra Newton iterations per
-        substep until they meet ``newton_tolerance``; every other world's result is the same, bit for
-        bit, as without it (its ``converged`` flag stays False when the regular iterations did not
-        converge, even if the extra ones did). ``worlds`` [W] bool (default all): only these worlds are
-        solved; every other world's rows of ``state_out`` and its report in ``scratch`` are left as they
-        are (the solves of different worlds are independent, so a world solved again from the same input
-        gets the same result, bit for bit on the CPU: a caller that re-solves some worlds, like the
-        actuator force limit's retries, need not redo the others). ``full_outputs`` False: of the
-        outputs at the returned positions only the contact part (pad loads, contact forces, the
-        report's penetration); the elastic forces and the report's residual read 0, the von Mises
-        stresses and their mean keep their last values (a caller's intermediate substeps, whose next
-        solve reads none of them). Where the device can (``graphs``), the whole call is one graph launch, captured at
-        the first call with these states, control and ``dt``."""
+        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object; distinct,
+        ``state_in`` is only read). Every array of ``state_out`` is written (the rows of the solved worlds;
+        with ``full_outputs`` False all but the von Mises stresses and their mean); the report is left in
+        ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool (default none): worlds given up to
+        ``config.patient_iterations`` extra Newton iterations per substep until they meet
+        ``newton_tolerance``; every other world's result is the same, bit for bit, as without it (its
+        ``converged`` flag stays False when the regular iterations did not converge, even if the extra ones
+        did). ``worlds`` [W] bool (default all): only these worlds are solved; every other world's rows of
+        ``state_out`` and its report in ``scratch`` are left as they are (the solves of different worlds are
+        independent, so a world solved again from the same input gets the same result, bit for bit on the
+        CPU: a caller that re-solves some worlds, like the actuator force limit's retries, need not redo the
+        others). ``full_outputs`` False: of the outputs at the returned positions only the contact part (pad
+        loads, contact forces, the report's penetration); the elastic forces and the report's residual read
+        0, the von Mises stresses and their mean keep their last values (a caller's intermediate substeps,
+        whose next solve reads none of them). Where the device can (``graphs``), the whole call is one graph
+        launch, captured at the first call with these states, control and ``dt``."""
         check_range("dt", dt, 0.0, math.inf, "s")
         s = self.scratch
         if not self._select_worlds(worlds):

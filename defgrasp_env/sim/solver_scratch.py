@@ -147,7 +147,7 @@ class SolverScratch:
     solve_worlds: wp.array      # int: world computed by the current solve (1 in all unless advance(worlds=...))
     patient: wp.array           # int: world to iterate until newton_tolerance (ImplicitSolver.advance)
     searching: wp.array         # int: world still line-searching
-    coarse_factored: wp.array   # int: 1 while a world block's coarse Cholesky pivots were positive (its threads read it)
+    coarse_factored: wp.array   # int: 1 while a world block's coarse Cholesky pivots were positive
     energy0: wp.array           # float64: incremental potential of the accepted iterate
     energy_trial: wp.array      # float64: that of the trial
     # coarse space: translations of K node aggregates per world (C = 3K unknowns, sim/aggregates.py;
