@@ -28,3 +28,23 @@ class ExpertNoisyPress:
 
     def episodes_ended(self, terminated, truncated) -> None:
         self.expert.reset(np.asarray(terminated) | np.asarray(truncated))
+
+
+def rollout_outputs(env, obs, steps: int, state_rows, seed: int = 0) -> dict:
+    """``steps`` steps of a 3-world vector env from its reset observation ``obs`` with
+    ``ExpertNoisyPress(env, seed)`` (restarted where episodes end): every observation, reward and
+    (array-valued) info entry per step, the final state's ``state_rows`` arrays and the scene's
+    ``world_solves``, by name: what two ways of stepping the same batch must agree on."""
+    policy = ExpertNoisyPress(env, seed=seed)
+    out = {}
+    for k in range(steps):
+        obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
+        policy.episodes_ended(terminated, truncated)
+        out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
+        out[f"{k}/reward"] = np.asarray(reward)
+        out.update({f"{k}/info/{name}": np.asarray(v) for name, v in info.items() if not isinstance(v, dict)})
+    scene = env.unwrapped.scene
+    for name in state_rows:
+        out[f"state/{name}"] = getattr(scene.state, name).numpy().copy()
+    out["world_solves"] = np.array(scene.world_solves)
+    return out

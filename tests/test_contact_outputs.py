@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import defgrasp_env  # noqa: F401
-from contact_rollout import ExpertNoisyPress
+from contact_rollout import rollout_outputs
 from defgrasp_env.sim.solve_report import SolveReport
 from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig
 from defgrasp_env.sim.state import State
@@ -38,18 +38,7 @@ def _episode(steps: int, full_everywhere: bool, monkeypatch) -> tuple[dict, int]
         env = gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point", object="random",
                            youngs_modulus=1e5, max_episode_steps=25)
         obs, _ = env.reset(seed=4)
-        policy = ExpertNoisyPress(env, seed=2)
-        out = {}
-        for k in range(steps):
-            obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
-            policy.episodes_ended(terminated, truncated)
-            out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
-            out[f"{k}/reward"] = np.asarray(reward)
-            out.update({f"{k}/info/{name}": np.asarray(v) for name, v in info.items() if not isinstance(v, dict)})
-        scene = env.unwrapped.scene
-        for name in STATE_ROWS:
-            out[f"state/{name}"] = getattr(scene.state, name).numpy().copy()
-        out["world_solves"] = np.array(scene.world_solves)
+        out = rollout_outputs(env, obs, steps, STATE_ROWS, seed=2)
         env.close()
     return out, sum(contact_only)
 

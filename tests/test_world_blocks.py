@@ -20,7 +20,7 @@ from defgrasp_env.envs.config import PickupConfig
 from defgrasp_env.sim.model import ContactParams
 from defgrasp_env.sim.solver import (MANY_WORLDS, WORLD_BLOCK_THREADS, WORLD_BLOCK_THREADS_MANY, ImplicitSolver,
                                      SolverConfig, default_world_block_threads)
-from contact_rollout import ExpertNoisyPress
+from contact_rollout import rollout_outputs
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.meshing import make_object_mesh
 from defgrasp_env.sim.model import build_model
@@ -39,18 +39,7 @@ def _episode(world_block_threads: int, steps: int, device: str = "cpu"):
     obs, reset_info = env.reset(seed=11)
     scene = env.unwrapped.scene
     assert scene.solver.world_block_threads == (min(world_block_threads, 1) if device == "cpu" else world_block_threads)
-    policy = ExpertNoisyPress(env, seed=5)
-    out = {"reset/object": np.asarray(reset_info["object"])}
-    for k in range(steps):
-        obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
-        policy.episodes_ended(terminated, truncated)
-        out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
-        out[f"{k}/reward"] = np.asarray(reward)
-        out.update({f"{k}/info/{name}": np.asarray(v) for name, v in info.items()
-                    if not isinstance(v, dict)})
-    for name in STATE_ROWS:
-        out[f"state/{name}"] = getattr(scene.state, name).numpy().copy()
-    out["world_solves"] = np.array(scene.world_solves)
+    out = {"reset/object": np.asarray(reset_info["object"]), **rollout_outputs(env, obs, steps, STATE_ROWS, seed=5)}
     env.close()
     return out
 
