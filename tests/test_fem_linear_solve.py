@@ -1,5 +1,5 @@
 """FEM core, linear solves: the node aggregates of the coarse space, the coarse matrix T^T A T
-against its definition (A applied to the coarse columns by the CG's own Hessian-product kernels),
+against its definition (A applied to the coarse columns by the CG's own Hessian-product kernel),
 and the CPU graphs of the recorded launches (bit-identical to launching one by one)."""
 
 from __future__ import annotations
@@ -11,7 +11,6 @@ import pytest
 import warp as wp
 
 from defgrasp_env.sim.aggregates import bisect_nodes
-from defgrasp_env.sim.kernels import elastic as ke
 from defgrasp_env.sim.kernels import linear_solve as klin
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.meshing import make_object_mesh
@@ -107,8 +106,9 @@ def squeezed_rope(fixed: bool):
 @pytest.mark.parametrize("fixed", [False, True])
 def test_coarse_matrix_is_the_galerkin_product(fixed):
     """The assembled coarse matrix equals T^T (A T) with A T computed column by column by the CG's
-    Hessian-product kernels (elastic tets + mass/contact nodes), to float32 rounding: with all axes
-    free (inner tets skipped) and with prescribed axes (T masked, every tet assembled)."""
+    Hessian-product kernel (the elastic Hessian's assembled rows + mass/contact nodes), to float32
+    rounding: with all axes free (inner tets skipped) and with prescribed axes (T masked, every tet
+    assembled)."""
     model, solver, state, control = squeezed_rope(fixed)
     s, n, d = solver.scratch, model.num_nodes, model.device
     size = s.coarse_size
@@ -130,13 +130,10 @@ def test_coarse_matrix_is_the_galerkin_product(fixed):
     for c in range(size):
         direction = wp.array(columns[c].astype(np.float32), dtype=wp.vec3, device=d)
         product = wp.zeros(n, dtype=wp.vec3, device=d)
-        wp.launch(ke.hessian_product_tets, model.num_tets,
-                  inputs=[direction, model.tets, model.tet_rest_inv, model.tet_rest_volume, model.tet_mu,
-                          model.tet_lambda, s.cofactor, model.tet_world, s.solve_worlds, product, s.tet_r, s.tet_twist,
-                          every_row(d)],
-                  device=d)
+        h = s.hessian
         wp.launch(klin.cg_node_product, n, inputs=[direction, model.node_mass, s.contact_hessian, model.free_axes,
-                                                   model.node_world, s.solve_worlds, 1.0 / DT**2, product,
+                                                   model.node_world, s.solve_worlds, 1.0 / DT**2, h.node_blocks,
+                                                   h.block_node, h.values, product,
                                                    wp.zeros(1, dtype=float, device=d), every_row(d)], device=d)
         at[c] = product.numpy()
     galerkin = np.einsum("inj,knj->ik", columns, at)

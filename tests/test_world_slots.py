@@ -83,7 +83,7 @@ def _arrays(obj) -> dict:
 
 def test_a_model_rewritten_in_place_equals_one_assembled_afresh():
     """After resets that change objects, the slotted scene's model (every device array and the host
-    offsets, surfaces and aggregates), the solver's copies of it and the control's prescribed
+    offsets, surfaces and aggregates), the solver's copies of it (the Hessian's pattern included) and the control's prescribed
     positions equal those of a slotted model assembled from the worlds' current setups; the spare
     rows rest at SPARE_POSITION, fixed, massless, with zero-volume tets."""
     config = PickupConfig(object=OBJECTS)
@@ -115,6 +115,15 @@ def test_a_model_rewritten_in_place_equals_one_assembled_afresh():
     assert np.array_equal(scratch.edges.triangles.numpy(), fresh_solver.edges.triangles.numpy())
     assert scratch.coarse_size == fresh_solver.coarse_size == 3 * scene.slots.aggregates
     assert np.array_equal(scene.solver.scratch.edges.triangle_first.numpy(), fresh_solver.edges.triangle_first.numpy())
+    for name in ("node_blocks", "node_incidences"):  # the Hessian's pattern
+        assert np.array_equal(getattr(scratch.hessian, name).numpy(), getattr(fresh_solver.hessian, name).numpy()), name
+    used = np.concatenate([np.arange(a, b) for a, b in fresh_solver.hessian.node_blocks.numpy()])
+    assert np.array_equal(scratch.hessian.block_node.numpy()[used], fresh_solver.hessian.block_node.numpy()[used])
+    for w in range(4):  # the incidences the object's nodes name (rows past them: the old object's, never read)
+        used = slice(4 * int(model.tet_start[w]), 4 * int(model.tet_end[w]))
+        for name in ("incidence", "incidence_blocks"):
+            assert np.array_equal(getattr(scratch.hessian, name).numpy()[used],
+                                  getattr(fresh_solver.hessian, name).numpy()[used]), name
     for w in range(4):
         spare = slice(int(model.node_end[w]), int(model.node_start[w + 1]))
         assert spare.stop - spare.start >= 1

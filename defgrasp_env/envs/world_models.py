@@ -20,6 +20,7 @@ import numpy as np
 import warp as wp
 
 from ..sim.aggregates import bisect_nodes
+from ..sim.hessian_blocks import block_count
 from ..sim.materials import Material
 from ..sim.meshing import TetMesh
 from ..sim.model import SPARE_POSITION, ContactParams, Model, build_model, material_fields, set_world_materials
@@ -34,13 +35,14 @@ _TET_FIELDS = {"tet_rest_inv": wp.mat33, "tet_rest_volume": wp.float32, "tet_mu"
 @dataclass(frozen=True)
 class SlotSizes:
     """Rows per world of a slotted model: nodes (the most of any object plus one, so that every
-    slot has a spare node for its spare tets and triangles to name), tets, surface triangles and
-    coarse aggregates (the most of any object)."""
+    slot has a spare node for its spare tets and triangles to name), tets, surface triangles,
+    coarse aggregates and elastic Hessian blocks (the most of any object)."""
 
     nodes: int
     tets: int
     triangles: int
     aggregates: int
+    blocks: int
 
 
 _REFERENCE = Material(1000.0, 1e5, 0.3)  # the geometry's rows do not depend on it
@@ -88,7 +90,8 @@ def slot_sizes(meshes: Sequence[TetMesh]) -> SlotSizes:
     return SlotSizes(nodes=max(len(m.nodes) for m in meshes) + 1, tets=max(len(m.tets) for m in meshes),
                      triangles=max(len(m.surface) for m in meshes),
                      aggregates=max(int(bisect_nodes(np.asarray(m.nodes, dtype=np.float64)).max()) + 1
-                                    for m in meshes))
+                                    for m in meshes),
+                     blocks=max(block_count(np.asarray(m.tets), len(m.nodes)) for m in meshes))
 
 
 def _rows(part: dict, pose: tuple, node_start: int, slots: SlotSizes | None) -> dict:
@@ -105,9 +108,11 @@ def _rows(part: dict, pose: tuple, node_start: int, slots: SlotSizes | None) -> 
         return rows
     spare_nodes, spare_tets = slots.nodes - n, slots.tets - t
     aggregates = int(part["node_aggregate"].max()) + 1
-    if spare_nodes < 1 or spare_tets < 0 or slots.triangles < len(part["surface"]) or aggregates > slots.aggregates:
-        raise ValueError(f"an object of {n} nodes, {t} tets, {len(part['surface'])} surface triangles and {aggregates} "
-                         f"coarse aggregates does not fit the slot {slots}")
+    blocks = block_count(part["tets"], n)
+    if (spare_nodes < 1 or spare_tets < 0 or slots.triangles < len(part["surface"]) or aggregates > slots.aggregates
+            or blocks > slots.blocks):
+        raise ValueError(f"an object of {n} nodes, {t} tets, {len(part['surface'])} surface triangles, {aggregates} "
+                         f"coarse aggregates and {blocks} Hessian blocks does not fit the slot {slots}")
     spare = node_start + n  # the slot's first spare node: what its spare tets name
 
     def pad(a, count, value=0):
@@ -158,6 +163,7 @@ def assemble_model(meshes: Sequence[TetMesh], materials: Sequence[Material], pos
         gravity=parts[0]["gravity"], contact=contact,
         max_aggregates=0 if slots is None else slots.aggregates,
         triangle_slot=0 if slots is None else slots.triangles,
+        block_slot=0 if slots is None else slots.blocks,
         **{name: arr(name, dtype) for name, dtype in {**_NODE_FIELDS, **_TET_FIELDS}.items()})
 
 
@@ -166,7 +172,7 @@ def _slots_of(model: Model) -> SlotSizes:
         raise ValueError("the model is not slotted (assemble_model without slots)")
     return SlotSizes(nodes=int(model.node_start[1] - model.node_start[0]),
                      tets=int(model.tet_start[1] - model.tet_start[0]), triangles=model.triangle_slot,
-                     aggregates=model.max_aggregates)
+                     aggregates=model.max_aggregates, blocks=model.block_slot)
 
 
 def rewrite_worlds(model: Model, worlds: Sequence[int], meshes: Sequence[TetMesh], materials: Sequence[Material],

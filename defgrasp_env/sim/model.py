@@ -119,6 +119,9 @@ class Model:
     max_aggregates: int = 0
     #: surface triangle rows per world (a slotted model; 0: each world's own surface, packed)
     triangle_slot: int = 0
+    #: elastic Hessian blocks per world the solver allocates (a slotted model: the most of any object
+    #: it may hold, ``hessian_blocks.block_count``; 0: each world's own, packed)
+    block_slot: int = 0
 
     @property
     def num_nodes(self) -> int:

@@ -37,6 +37,7 @@ from .kernels import pad_edge_hessian as kph
 from .kernels import pad_edge_lag as kpl
 from .kernels import pad_edge_search as kps
 from .kernels import elastic as ke
+from .kernels import hessian_blocks as khb
 from .kernels import energy as kenergy
 from .kernels import line_search as kls
 from .kernels import linear_solve as klin
@@ -217,6 +218,25 @@ def _begin_solve(c: _Context, active):
                  s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm)
 
 
+def _hessian_rows(c: _Context) -> tuple:
+    """The assembled elastic Hessian's rows, as its products read them (``hessian_row_product``)."""
+    h = c.scratch.hessian
+    return h.node_blocks, h.block_node, h.values
+
+
+def _hessian_pattern(c: _Context) -> tuple:
+    """The assembly's inputs of the Hessian's pattern (``hessian_blocks.assemble_hessian_row``)."""
+    h = c.scratch.hessian
+    return h.node_blocks, h.node_incidences, h.incidence, h.incidence_blocks
+
+
+def _assemble_hessian(c: _Context, active):
+    """The elastic Hessian's rows at the iterate just evaluated (``_tets``)."""
+    m, s = c.model, c.scratch
+    return c.rec(khb.assemble_hessian_rows, m.num_nodes, m.node_world, active, *_hessian_pattern(c), m.tet_rest_inv,
+                 m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, s.tet_r, s.tet_twist, s.hessian.values)
+
+
 def _coarse_before(c: _Context, active) -> list:
     """Coarse solve before CG: assemble and invert T^T A T, start CG from dx = T (T^T A T)^-1 T^T r
     with the residual and CG vectors that follow (kernels/coarse_space.py)."""
@@ -234,12 +254,9 @@ def _coarse_before(c: _Context, active) -> list:
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),
         c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx,
               s.coarse_guess),
-        c.rec(ke.hessian_product_tets, m.num_tets, s.coarse_guess, m.tets, m.tet_rest_inv, m.tet_rest_volume,
-              m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist,
-              c.compaction.every_row),
         *_edge_product(c, s.coarse_guess, active),
         c.rec(klin.cg_node_product, n, s.coarse_guess, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
-              active, 1.0 / (c.h * c.h), s.ap, s.coarse_scratch, c.compaction.every_row),
+              active, 1.0 / (c.h * c.h), *_hessian_rows(c), s.ap, s.coarse_scratch, c.compaction.every_row),
         c.rec(kcs.coarse_start_cg, n, s.precond, m.free_axes, m.node_world, active, s.residual, s.ap, s.z, s.p,
               s.rz)]
 
@@ -326,6 +343,7 @@ def _evaluate(c: _Context, config, start_energy: bool = False) -> list:
     clear = [c.rec(kls.clear_world_energy, c.model.num_worlds, s.energy0)] if start_energy else []
     return [*clear, *_nodes(c, x, s.newton_active, 0),
             _tets(c, x, s.newton_active, add_energy=s.energy0 if start_energy else None), _begin_solve(c, s.newton_active),
+            _assemble_hessian(c, s.newton_active),
             *_coarse_before(c, s.newton_active),
             c.rec(klin.start_cg_worlds, c.model.num_worlds, s.newton_active, s.substep_newton_it, s.patient, s.last_dx,
                   config.newton_tolerance, config.cg_tolerance, config.cg_tolerance_far, s.rz, s.rz_stop,
@@ -365,6 +383,8 @@ def _evaluate_world(c: _Context, config, threads: int, start_energy: bool = Fals
                      work.pad_normal_force, work.pad_force, s.penetration,
                      *_world_edge_terms(c), e.triangle_first, e.point_block,
                      *_world_tet_terms(c), s.cofactor, work.von_mises, s.tet_r, s.tet_twist,
+                     s.hessian.node_blocks, s.hessian.block_node, s.hessian.node_incidences, s.hessian.incidence,
+                     s.hessian.incidence_blocks, s.hessian.values,
                      m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm, s.node_aggregate,
                      1.0 / (c.h * c.h), s.coarse_sizes, s.coarse_matrix, s.coarse_rhs, s.coarse_lower_inv,
                      s.coarse_inverse, s.coarse_coef, s.coarse_factored, s.coarse_guess, s.coarse_scratch,
@@ -376,15 +396,12 @@ def _cg(c: _Context, config, listed: bool = False) -> list:
     """One CG iteration over every row, or (``listed``) over the rows of the listed worlds."""
     m, s, wc = c.model, c.scratch, c.compaction
     active = s.cg_active
-    tets, nodes = (wc.tets, wc.nodes) if listed else (wc.every_row, wc.every_row)
+    nodes = wc.nodes if listed else wc.every_row
     n = wc.dim(nodes) if listed else m.num_nodes
     return [
-        c.rec(ke.hessian_product_tets, wc.dim(tets) if listed else m.num_tets, s.p, m.tets, m.tet_rest_inv,
-              m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world, active, s.ap, s.tet_r, s.tet_twist,
-              tets),
         *_edge_product(c, s.p, active, listed),
         c.rec(klin.cg_node_product, n, s.p, m.node_mass, s.contact_hessian, m.free_axes, m.node_world, active,
-              1.0 / (c.h * c.h), s.ap, s.p_ap, nodes),
+              1.0 / (c.h * c.h), *_hessian_rows(c), s.ap, s.p_ap, nodes),
         c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate, active,
               s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs, nodes),
         c.rec(klin.cg_end_iteration, m.num_worlds, s.rz_stop,
@@ -400,10 +417,8 @@ def _cg_world(c: _Context, config, threads: int) -> list:
     (CUDA thread blocks of that size)."""
     m, s, e, wc = c.model, c.scratch, c.scratch.edges, c.compaction
     return [c.blocks(kwcg.cg_world_blocks, threads,
-                     threads, config.cg_iterations, wc.nodes.start, wc.tets.start,
-                     e.points_per_world if e.active else 0,
-                     m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu, m.tet_lambda, s.cofactor, m.tet_world,
-                     s.tet_r, s.tet_twist,
+                     threads, config.cg_iterations, wc.nodes.start, e.points_per_world if e.active else 0,
+                     *_hessian_rows(c),
                      e.triangles, e.point_tri, e.point_bary, e.point_block,
                      m.node_mass, s.contact_hessian, m.free_axes, m.node_world, s.node_aggregate, s.precond,
                      1.0 / (c.h * c.h),

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .hessian_blocks import HessianBlocks
 from .model import Model
 from .kernels.world_rows import scatter_rows
 from .pad_edge_points import pad_edge_points, surface_triangles, world_surface_triangles
@@ -164,6 +165,7 @@ class SolverScratch:
     coarse_terms: wp.array      # [W, C] float64: (T^T r)_i ((T^T A T)^-1 T^T r)_i (world-block CG's rows)
     coarse_guess: wp.array      # [N] vec3, m: T coef of the coarse initial guess
     edges: EdgeContactScratch   # pad edge contact (empty unless ContactParams.edge_contact)
+    hessian: HessianBlocks      # the elastic Hessian assembled per node row (its pattern and values)
     stress_partial: wp.array    # [W*B] float, Pa: a world block's per-thread partial mean stresses (B threads)
 
     @classmethod
@@ -211,7 +213,7 @@ class SolverScratch:
             coarse_terms=coarse(wp.float64, 2),
             coarse_guess=vec(), tet_start=wp.array(np.asarray(model.tet_start, dtype=np.int32), dtype=int, device=d),
             tet_end=wp.array(np.asarray(model.tet_end, dtype=np.int32), dtype=int, device=d),
-            edges=EdgeContactScratch.from_model(model),
+            edges=EdgeContactScratch.from_model(model), hessian=HessianBlocks.from_model(model),
             stress_partial=wp.zeros(w * max(int(block_threads), 1), dtype=float, device=d),
         )
         scratch.solve_worlds.fill_(1)
@@ -220,7 +222,7 @@ class SolverScratch:
 
     def rewrite_worlds(self, model: Model, worlds) -> None:
         """The rows of ``worlds`` that this scratch copies from ``model`` (coarse aggregates, surface
-        triangles, the objects' last tets), written again after ``model``'s rows of them changed in
+        triangles, the objects' last tets, the Hessian's pattern), written again after ``model``'s rows of them changed in
         place (a slotted model's object change, ``envs.world_models.rewrite_worlds``)."""
         worlds = [int(w) for w in worlds]
         if not worlds:
@@ -236,6 +238,7 @@ class SolverScratch:
         wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(aggregates, dtype=int, device=d),
                                                     wp.array(rows.astype(np.int32), dtype=int, device=d)],
                   outputs=[self.node_aggregate], device=d)
+        self.hessian.rewrite_worlds(model, worlds)
         e = self.edges
         if e.triangles.shape[0]:
             slot = model.triangle_slot

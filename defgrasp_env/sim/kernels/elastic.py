@@ -24,8 +24,6 @@ F = sum_a x_a (outer) b_a, and the gradient of the element energy w.r.t. x_a is 
 
 import warp as wp
 
-from .world_rows import RowMap, mapped_row
-
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
 wp.set_module_options({"enable_backward": False})
 
@@ -261,68 +259,6 @@ def stress_differential(df: wp.mat33, cof: wp.mat33, r: wp.mat33, twist: float, 
     # remove the fraction (1 - c) of the skew part of M = R^T dF (the rotation, -dR/dF)
     df_shear = df - (0.5 * (1.0 - twist)) * (r * (m - wp.transpose(m)))
     return volume * (2.0 * mu * df_shear + lam * wp.ddot(cof, df) * cof)
-
-
-@wp.func
-def hessian_product_tet(
-    t: int,
-    direction: wp.array(dtype=wp.vec3),
-    tets: wp.array(dtype=wp.vec4i),
-    rest_inv: wp.array(dtype=wp.mat33),
-    rest_volume: wp.array(dtype=float),
-    tet_mu: wp.array(dtype=float),
-    tet_lambda: wp.array(dtype=float),
-    tet_cof: wp.array(dtype=wp.mat33),
-    tet_world: wp.array(dtype=int),
-    world_active: wp.array(dtype=int),
-    product: wp.array(dtype=wp.vec3),
-    tet_r: wp.array(dtype=wp.mat33),
-    tet_twist: wp.array(dtype=float),
-):
-    """product += K_t * direction for tet ``t`` (the elastic Hessian above), added onto its nodes."""
-    if world_active[tet_world[t]] == 0:
-        return
-    idx = tets[t]
-    if spare_tet(idx):
-        return
-    dm_inv = rest_inv[t]
-    b1 = row(dm_inv, 0)
-    b2 = row(dm_inv, 1)
-    b3 = row(dm_inv, 2)
-    b0 = -(b1 + b2 + b3)
-    p0 = direction[idx[0]]
-    df = wp.outer(direction[idx[1]] - p0, b1) + wp.outer(direction[idx[2]] - p0, b2) + wp.outer(
-        direction[idx[3]] - p0, b3)
-    dp = stress_differential(df, tet_cof[t], tet_r[t], tet_twist[t], tet_mu[t], tet_lambda[t], rest_volume[t])
-    wp.atomic_add(product, idx[0], dp * b0)
-    wp.atomic_add(product, idx[1], dp * b1)
-    wp.atomic_add(product, idx[2], dp * b2)
-    wp.atomic_add(product, idx[3], dp * b3)
-
-
-@wp.kernel
-def hessian_product_tets(
-    direction: wp.array(dtype=wp.vec3),
-    tets: wp.array(dtype=wp.vec4i),
-    rest_inv: wp.array(dtype=wp.mat33),
-    rest_volume: wp.array(dtype=float),
-    tet_mu: wp.array(dtype=float),
-    tet_lambda: wp.array(dtype=float),
-    tet_cof: wp.array(dtype=wp.mat33),
-    tet_world: wp.array(dtype=int),
-    world_active: wp.array(dtype=int),
-    product: wp.array(dtype=wp.vec3),
-    tet_r: wp.array(dtype=wp.mat33),
-    tet_twist: wp.array(dtype=float),
-    rows: RowMap,
-):
-    """product += K * direction (the elastic Hessian above), accumulated per node, for the tets of
-    ``rows`` (``world_rows.py``)."""
-    t = mapped_row(rows, wp.tid())
-    if t < 0:
-        return
-    hessian_product_tet(t, direction, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_cof, tet_world,
-                        world_active, product, tet_r, tet_twist)
 
 
 @wp.func

@@ -4,14 +4,16 @@ Jacobi plus a coarse solve on the translations of node aggregates (two-level add
 
 Every world runs its own CG (its own alpha, beta and stopping test) inside one set of flat arrays,
 so a world's result never depends on the other worlds. Per-world flags switch finished worlds off.
-One CG iteration is five launches: ``hessian_product_tets`` (elastic.py), ``cg_node_product``,
-``cg_update_solution``, ``cg_end_iteration`` (per world: coarse part, stopping test, beta) and
-``cg_update_direction``.
+One CG iteration is four or five launches: the pad edge points' ``edge_point_product``
+(pad_edge_hessian.py, with edge contact), ``cg_node_product`` (the elastic Hessian's rows, assembled
+by ``hessian_blocks.py`` once per Newton iteration, and the node terms), ``cg_update_solution``,
+``cg_end_iteration`` (per world: coarse part, stopping test, beta) and ``cg_update_direction``.
 """
 
 import warp as wp
 
 from .coarse_space import add_rhs, aggregate_part, coarse_coefficients
+from .hessian_blocks import hessian_row_product
 from .world_rows import RowMap, mapped_row
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
@@ -139,13 +141,17 @@ def start_cg_worlds(
 def node_product(i: int, p: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float),
                  contact_hessian: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3),
                  node_world: wp.array(dtype=int), cg_active: wp.array(dtype=int), inv_dt2: float,
-                 ap: wp.array(dtype=wp.vec3), p_ap: wp.array(dtype=float)):
-    """ap_i += (m/dt^2 I + contact Hessian) p_i, masked; p_ap[w] += p_i . ap_i (node ``i``)."""
+                 node_blocks: wp.array(dtype=wp.vec2i), block_node: wp.array(dtype=int),
+                 hessian_values: wp.array(dtype=wp.mat33), ap: wp.array(dtype=wp.vec3), p_ap: wp.array(dtype=float)):
+    """ap_i += (K p)_i + (m/dt^2 I + contact Hessian) p_i, masked, K the assembled elastic Hessian
+    (``hessian_blocks.hessian_row_product``; ap holds the pad edge points' part); p_ap[w] += p_i . ap_i
+    (node ``i``)."""
     w = node_world[i]
     if cg_active[w] == 0:
         return
     pi = p[i]
-    api = wp.cw_mul(ap[i] + mass[i] * inv_dt2 * pi + contact_hessian[i] * pi, free[i])
+    elastic = hessian_row_product(i, p, node_blocks, block_node, hessian_values)
+    api = wp.cw_mul(ap[i] + elastic + mass[i] * inv_dt2 * pi + contact_hessian[i] * pi, free[i])
     ap[i] = api
     wp.atomic_add(p_ap, w, wp.dot(pi, api))
 
@@ -159,16 +165,20 @@ def cg_node_product(
     node_world: wp.array(dtype=int),
     cg_active: wp.array(dtype=int),
     inv_dt2: float,
+    node_blocks: wp.array(dtype=wp.vec2i),
+    block_node: wp.array(dtype=int),
+    hessian_values: wp.array(dtype=wp.mat33),
     ap: wp.array(dtype=wp.vec3),
     p_ap: wp.array(dtype=float),
     rows: RowMap,
 ):
-    """ap += (m/dt^2 I + contact Hessian) p (the tets added their part); accumulate p . ap per world
-    (the nodes of ``rows``)."""
+    """ap += (K + m/dt^2 I + contact Hessian) p (the pad edge points added their part); accumulate
+    p . ap per world (the nodes of ``rows``)."""
     i = mapped_row(rows, wp.tid())
     if i < 0:
         return
-    node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, ap, p_ap)
+    node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, node_blocks, block_node,
+                 hessian_values, ap, p_ap)
 
 
 @wp.func

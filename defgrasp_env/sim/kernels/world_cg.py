@@ -6,9 +6,9 @@ rows of every world (or of the listed worlds), and loops in blocks of ``check_ev
 while any world iterates. Where a launch costs more than its work (one world on a GPU: ~4.5 us per
 dependent launch; the slowest worlds of a batch, iterating alone), ``cg_world_blocks`` does a world's
 iterations in one launch: block ``w`` (``threads`` threads: a CUDA thread block, launched with
-``block_dim = threads``) strides over world ``w``'s tets, pad edge slots and nodes, calling the same
-row functions as the phase kernels (``elastic.hessian_product_tet``,
-``pad_edge_hessian.edge_point_slot_product``, ``linear_solve.node_product``, ``update_solution``,
+``block_dim = threads``) strides over world ``w``'s pad edge slots and nodes, calling the same
+row functions as the phase kernels (``pad_edge_hessian.edge_point_slot_product``,
+``linear_solve.node_product`` with the assembled elastic Hessian's rows, ``update_solution``,
 ``end_iteration``, ``update_direction``), with ``block_barrier`` between the phases (their sums and
 the world's alpha and beta are read after it). A world computes its rows in the same order either
 way, so with one thread per world (the CPU, which runs a launch's threads one after another) the
@@ -32,7 +32,6 @@ wp.set_module_options({"enable_backward": False})
 
 from .block_sync import block_barrier
 from .coarse_space import LANE_COARSE_SIZE, coarse_gain, coarse_row
-from .elastic import hessian_product_tet
 from .linear_solve import end_iteration, finish_iteration, node_product, update_direction, update_solution
 from .pad_edge_hessian import edge_point_slot_product
 
@@ -43,18 +42,11 @@ def cg_world_blocks(
     threads: int,
     max_iterations: int,
     node_start: wp.array(dtype=int),
-    tet_start: wp.array(dtype=int),
     points_per_world: int,
-    # tets (elastic.hessian_product_tet)
-    tets: wp.array(dtype=wp.vec4i),
-    rest_inv: wp.array(dtype=wp.mat33),
-    rest_volume: wp.array(dtype=float),
-    tet_mu: wp.array(dtype=float),
-    tet_lambda: wp.array(dtype=float),
-    tet_cof: wp.array(dtype=wp.mat33),
-    tet_world: wp.array(dtype=int),
-    tet_r: wp.array(dtype=wp.mat33),
-    tet_twist: wp.array(dtype=float),
+    # the assembled elastic Hessian (hessian_blocks.hessian_row_product)
+    node_blocks: wp.array(dtype=wp.vec2i),
+    block_node: wp.array(dtype=int),
+    hessian_values: wp.array(dtype=wp.mat33),
     # pad edge points (pad_edge_hessian.edge_point_slot_product; points_per_world 0: none)
     triangles: wp.array(dtype=wp.vec3i),
     point_tri: wp.array(dtype=int),
@@ -101,20 +93,16 @@ def cg_world_blocks(
         return
     n0 = node_start[w]
     n1 = node_start[w + 1]
-    t0 = tet_start[w]
-    t1 = tet_start[w + 1]
     e0 = w * points_per_world
     e1 = e0 + points_per_world
     for _it in range(max_iterations):
-        for t in range(t0 + lane, t1, threads):
-            hessian_product_tet(t, p, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_cof, tet_world, cg_active,
-                                ap, tet_r, tet_twist)
         for e in range(e0 + lane, e1, threads):
             edge_point_slot_product(e, p, triangles, cg_active, points_per_world, point_tri, point_bary, point_block,
                                     ap)
         block_barrier()
         for i in range(n0 + lane, n1, threads):
-            node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, ap, p_ap)
+            node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, node_blocks, block_node,
+                         hessian_values, ap, p_ap)
         block_barrier()
         for i in range(n0 + lane, n1, threads):
             update_solution(i, p, ap, precond, free, node_world, node_aggregate, cg_active, rz, p_ap, dx, r, z,

@@ -5,8 +5,9 @@ what other threads wrote.
 
 Phase by phase this is eleven to fifteen launches over the rows of every world
 (``contact.evaluate_nodes``, ``pad_edge_contact.evaluate_edge_points``, ``elastic.evaluate_tets``,
-``linear_solve.begin_linear_solve``, the coarse space's assembly, factor and initial guess with
-its Hessian product, ``coarse_space.coarse_start_cg``, ``linear_solve.start_cg_worlds``); one
+``linear_solve.begin_linear_solve``, the elastic Hessian's assembly (``hessian_blocks.py``), the
+coarse space's assembly, factor and initial guess with its Hessian product,
+``coarse_space.coarse_start_cg``, ``linear_solve.start_cg_worlds``); one
 world on a GPU pays a launch's latency for each. ``evaluate_world_blocks`` calls the same row
 functions in the same order per world: bit-identical on the CPU (one thread per world). The coarse
 factor of a slender object (more unknowns than ``LANE_COARSE_SIZE``) is spread over the block's
@@ -27,7 +28,8 @@ from .block_sync import block_barrier
 from .coarse_space import (LANE_COARSE_SIZE, coarse_assemble_node, coarse_assemble_tet, coarse_factor_block,
                            coarse_factor_world, coarse_guess_node, coarse_start_cg_node)
 from .contact import evaluate_node
-from .elastic import evaluate_tet, hessian_product_tet
+from .elastic import evaluate_tet
+from .hessian_blocks import assemble_hessian_row
 from .linear_solve import begin_node_solve, node_product, start_cg_world
 from .pad_edge_contact import evaluate_edge_point
 from .pad_edge_hessian import coarse_assemble_edge_point, edge_point_slot_product
@@ -97,6 +99,13 @@ def evaluate_world_blocks(
     von_mises: wp.array(dtype=float),
     tet_r: wp.array(dtype=wp.mat33),
     tet_twist: wp.array(dtype=float),
+    # the assembled elastic Hessian (hessian_blocks.py)
+    node_blocks: wp.array(dtype=wp.vec2i),
+    block_node: wp.array(dtype=int),
+    node_incidences: wp.array(dtype=wp.vec2i),
+    incidence: wp.array(dtype=int),
+    incidence_blocks: wp.array(dtype=wp.vec4i),
+    hessian_values: wp.array(dtype=wp.mat33),
     # the linear solve (linear_solve.begin_node_solve) and its coarse space (coarse_space.py)
     free: wp.array(dtype=wp.vec3),
     precond: wp.array(dtype=wp.mat33),
@@ -162,6 +171,8 @@ def evaluate_world_blocks(
     block_barrier()
     for i in range(n0 + lane, n1, threads):
         begin_node_solve(i, residual, diag_block, free, node_world, active, precond, z, p, dx, ap, rz, residual_norm)
+        assemble_hessian_row(i, node_world, active, node_blocks, node_incidences, incidence, incidence_blocks, rest_inv,
+                             rest_volume, tet_mu, tet_lambda, tet_cof, tet_r, tet_twist, hessian_values)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
         coarse_assemble_node(i, mass, contact_hessian, free, node_world, node_aggregate, active, inv_dt2, residual,
@@ -183,15 +194,13 @@ def evaluate_world_blocks(
     for i in range(n0 + lane, n1, threads):
         coarse_guess_node(i, free, node_world, node_aggregate, active, coarse_coef, dx, coarse_guess)
     block_barrier()
-    for t in range(t0 + lane, t1, threads):
-        hessian_product_tet(t, coarse_guess, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_cof, tet_world,
-                            active, ap, tet_r, tet_twist)
     for e in range(e0 + lane, e1, threads):
         edge_point_slot_product(e, coarse_guess, triangles, active, points_per_world, point_tri, point_bary,
                                 point_block, ap)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
-        node_product(i, coarse_guess, mass, contact_hessian, free, node_world, active, inv_dt2, ap, coarse_p_ap)
+        node_product(i, coarse_guess, mass, contact_hessian, free, node_world, active, inv_dt2, node_blocks,
+                     block_node, hessian_values, ap, coarse_p_ap)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
         coarse_start_cg_node(i, precond, free, node_world, active, residual, ap, z, p, rz)

@@ -3,7 +3,7 @@ short list of worlds (the worlds still iterating once few are left).
 
 A batched CG iterates as long as its slowest world. Its kernels test a per-world flag on every row,
 so once most worlds have stopped, a launch over all rows still costs a thread per row of every
-world: on an H200 at W = 4096 (3 M tets) 26-69 us a ``hessian_product_tets`` launch for the work of
+world: on an H200 at W = 4096 (3 M tets) 26-69 us a tet-by-tet Hessian product launch for the work of
 a few worlds, 7-12 us listed (benchmarks/RESULTS.md). The same
 kernels launched over ``capacity x rows_per_world`` threads through a ``RowMap`` of the listed worlds
 do that world's work for the cost of a small launch.
