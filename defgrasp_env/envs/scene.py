@@ -35,13 +35,13 @@ from ..sim.solve_report import SolveReport
 from ..sim.solver import ImplicitSolver, SolveStats
 from ..sim.state import Control, State
 from ..transforms import quat_to_matrix
-from ..wrist.force_limit import FORCE_TOLERANCE, limited_substep
+from ..wrist.force_limit import FORCE_TOLERANCE, limited_substep, tip_force_bound
 from .actions import max_flange_step
 from .config import PickupConfig
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model, rewrite_worlds, set_materials, slot_sizes
 from .scene_kernels import (close_gate_if_limited, gather_rows, mark_substep, open_period_gate, scatter_rows,
-                            solve_loads, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
+                            solve_loads, world_max, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
 
 
 @functools.lru_cache(maxsize=16)
@@ -164,6 +164,9 @@ class PickupScene:
                                        [object_keypoints(s.object_name, config.object_resolution) for s in setups])
         self._report = SolveReport(self.num_worlds, self.model.device)  # the control step's solver report
         self._loads = wp.zeros(self.num_worlds, dtype=wp.vec4d, device=self.model.device)  # ``solve_loads``
+        #: [W] N/m: each world's stiffest node contact (``solve_loads``' bound on an unconverged
+        #: solve's force error), set at each reset (objects and materials change there)
+        self._contact_stiffness = wp.zeros(self.num_worlds, dtype=wp.float32, device=self.model.device)
         # a control period as one graph (``_period_on_device``): its gate (open, last substep tried),
         # the graphs by scalar key, the keys whose first period ran on the host
         self._gate = wp.zeros(2, dtype=wp.int32, device=self.model.device)
@@ -249,6 +252,9 @@ class PickupScene:
             x = wp.array(np.concatenate(values), dtype=wp.vec3, device=m.device)
             wp.launch(scatter_rows, dim=len(index), inputs=[x, index, self.state.positions], device=m.device)
         self._zero_outputs(mask)
+        self._contact_stiffness.zero_()
+        wp.launch(world_max, dim=m.num_nodes, inputs=[m.node_contact_stiffness, m.node_world],
+                  outputs=[self._contact_stiffness], device=m.device)
         pos, quat = self.gripper.pad_poses()
         self.state.pad_positions.assign(pos.reshape(-1, 3).astype(np.float32))
         self.state.pad_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
@@ -489,10 +495,14 @@ class PickupScene:
         return (self._solves, *loads)
 
     def _launch_loads(self, out: State) -> None:
-        """``solve_loads`` of the solve in ``out`` into ``_loads``."""
+        """``solve_loads`` of the solve in ``out`` into ``_loads`` (an unconverged solve's load
+        raised by its possible force error: see there)."""
         wrist_limit, grip_limit = self.config.wrist_force_limit, self.config.gripper.grip_force_limit
-        self._launches.launch(("loads", id(out), wrist_limit, grip_limit), solve_loads, self.num_worlds,
-                              [out.pad_normal_force, out.pad_force, self.gripper.plan_limits, wrist_limit, grip_limit],
+        unit = min(wrist_limit, tip_force_bound(grip_limit, wrist_limit))
+        tolerance = self.solver.config.newton_tolerance
+        self._launches.launch(("loads", id(out), wrist_limit, grip_limit, tolerance), solve_loads, self.num_worlds,
+                              [out.pad_normal_force, out.pad_force, self.gripper.plan_limits, wrist_limit, grip_limit,
+                               self.solver.scratch.last_dx, tolerance, self._contact_stiffness, unit],
                               [self._loads], keep=(out,))
 
     def _read_loads(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
