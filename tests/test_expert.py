@@ -258,19 +258,34 @@ def test_gripped_stiff_object_survives_jaw_errors_of_an_imitating_policy(name):
     assert not ok_exact
 
 
+def distance_from_path(points: np.ndarray, path: np.ndarray) -> float:
+    """Largest distance (m) of ``points`` [K, 3] from the polyline ``path`` [L, 3]."""
+    start, step = path[:-1], np.diff(path, axis=0)
+    worst = 0.0
+    for p in points:
+        t = np.clip(np.einsum("ij,ij->i", p - start, step) / np.maximum(np.einsum("ij,ij->i", step, step), 1e-18), 0, 1)
+        worst = max(worst, float(np.min(np.linalg.norm(start + t[:, None] * step - p, axis=1))))
+    return worst
+
+
 @pytest.mark.parametrize("name, youngs_modulus", [("rope", 1e4), ("cuboid", 1e7)])
 def test_expert_in_absolute_and_topdown_actions_picks_as_in_delta_actions(name, youngs_modulus):
     """For an env with ``action_mode="absolute"`` the expert returns ``ABSOLUTE_ACTION`` [8] (its
     next-period flange position, the yaw it turns to, the gap command): the same seeded episode
-    succeeds in the same number of steps with the feature point on the delta episode's path. The
-    modes move the wrist alike (the turn toward the held target at the rate limit equals the
-    saturated rate); they differ by the float32 observation the position target is built from and
-    the jaw command's round trip through [-1, 1], which the contact amplifies: measured 0.10 mm
-    (rope) and 1.1 mm (stiff cube) at most; bound 3 mm, a tenth of the objects' size. The absolute
-    expert here closes at the delta rate (``absolute_close_lead=1``; its default 3 has its own test).
-    In top-down actions (``TOPDOWN_ACTION`` [5]: the delta velocities and jaw, the planned yaw as a
-    target turned to at the rate limit) the same: measured 0.08 mm (rope) and 0.13 mm (stiff cube);
-    bound 1 mm (no jaw command round trip differs from the delta episode's)."""
+    succeeds, within 2 steps of the delta episode, with the feature point on the delta episode's
+    path. The modes move the wrist alike (the turn toward the held target at the rate limit equals
+    the saturated rate); they differ by the float32 observation the position target is built from
+    and the jaw command's round trip through [-1, 1], which the contact amplifies: measured 0.06 mm
+    (rope) and 0.32 mm (stiff cube) off the path at most; bound 3 mm, a tenth of the objects' size.
+    The step counts may differ: the expert lifts once the 3-step minimum of each pad's tip force
+    reaches its target, read from a stiff cube's unconverged closing solves, so a reading a step
+    earlier starts the same lift a step earlier (measured 82 / 83 / 84 steps delta / top-down /
+    absolute, where the order of the float sums in CG changed; the lift 12.7 mm a step behind: the
+    same path, later). The absolute expert here closes at the delta rate (``absolute_close_lead=1``;
+    its default 3 has its own test). In top-down actions (``TOPDOWN_ACTION`` [5]: the delta
+    velocities and jaw, the planned yaw as a target turned to at the rate limit) the same: measured
+    0.04 mm (rope) and 0.39 mm (stiff cube); bound 1 mm (no jaw command round trip differs from the
+    delta episode's)."""
     runs = {}
     for mode in ("delta", "absolute", "topdown"):
         env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=youngs_modulus, action_mode=mode)
@@ -289,8 +304,9 @@ def test_expert_in_absolute_and_topdown_actions_picks_as_in_delta_actions(name, 
         runs[mode] = (bool(info["is_success"]), len(path), np.array(path))
     assert runs["delta"][0]
     for mode, bound in (("absolute", 3e-3), ("topdown", 1e-3)):
-        assert runs[mode][:2] == runs["delta"][:2]
-        assert np.abs(runs["delta"][2] - runs[mode][2]).max() < bound
+        assert runs[mode][0] and abs(runs[mode][1] - runs["delta"][1]) <= 2
+        path, delta_path = runs[mode][2], runs["delta"][2]
+        assert max(distance_from_path(path, delta_path), distance_from_path(delta_path, path)) < bound
     with pytest.raises(ValueError, match="action_mode"):
         ScriptedPickupExpert(action_mode="velocity")
     for bad in (0, 2.5, True):
