@@ -107,7 +107,7 @@ class SolverConfig:
             this many threads per world evaluates, runs its CG iterations, and its coarse
             correction, line-search trials and update, each to its own stopping test, with block
             barriers between the phases, instead of eleven to fifteen launches for the evaluation,
-            five or six per CG iteration and seven per line-search trial over the rows of all worlds
+            four or five per CG iteration and seven per line-search trial over the rows of all worlds
             while any world iterates (``listed_cg_worlds`` and, inside a Newton iteration,
             ``check_every`` are then unused); also a substep's start and end in one launch each
             (``world_start.py``: copies, pad poses, guess, contact lag and guess fixes, up to 16

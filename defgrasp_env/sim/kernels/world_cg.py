@@ -1,7 +1,7 @@
 """Each world's whole CG in one launch: a block of threads per world runs its CG iterations to the
 world's own stopping test, with a block barrier between the phases of an iteration.
 
-The phase-by-phase CG of ``linear_solve.py`` launches five or six kernels per iteration over the
+The phase-by-phase CG of ``linear_solve.py`` launches four or five kernels per iteration over the
 rows of every world (or of the listed worlds), and loops in blocks of ``check_every`` iterations
 while any world iterates. Where a launch costs more than its work (one world on a GPU: ~4.5 us per
 dependent launch; the slowest worlds of a batch, iterating alone), ``cg_world_blocks`` does a world's
