@@ -241,8 +241,8 @@ def evaluate_tets(
     """Add each tet's elastic force to ``residual`` and store the polar rotation of F (the next warm
     start); then, in a Newton iteration (``outputs`` = 0), add its Hessian diagonal blocks to
     ``diag_block`` and store cof(F), R as a matrix and the twist factor for the Hessian's assembly
-    (``hessian_blocks.py``), or, in the outputs pass after a solve (``outputs`` = 1), add the force to ``elastic_force`` and
-    store the von Mises stress: each pass writes only what is read after it (the same values as
+    (``hessian_blocks.py``), or, in the outputs pass after a solve (``outputs`` = 1), add the force
+    to ``elastic_force`` and store the von Mises stress: each pass writes only what is read after it (the same values as
     both passes writing everything). ``add_energy`` = 1: also add V0 psi(F) (``energy.tet_energy``'s
     term, with the rotation just found) to ``energy[world]`` (the line search's start energy, from
     the F and R this pass computes anyway)."""
