@@ -178,3 +178,22 @@ def test_a_world_whose_blocks_exceed_the_slot_is_refused():
     with pytest.raises(ValueError, match="Hessian blocks"):
         rewrite_worlds(model, [0], [rope], [Material()], [((0.0, 0.05, 0.0), (0.0, 0.0, 0.0, 1.0))], [])
     assert np.array_equal(model.tets.numpy(), tets)
+
+
+def test_a_model_whose_block_slot_is_too_small_is_refused():
+    """``HessianBlocks`` checks the slot itself too (a model whose rows were written some other way
+    than ``rewrite_worlds``, which checks first): with the name of the count and the slot."""
+    import dataclasses
+
+    rope = make_object_mesh("rope")
+    slots = slot_sizes([rope])
+    model = assemble_model([rope], [Material()], [((0.0, 0.05, 0.0), (0.0, 0.0, 0.0, 1.0))], [], ContactParams(),
+                           "cpu", slots)
+    HessianBlocks.from_model(model)
+    narrow = dataclasses.replace(model, block_slot=slots.blocks - 1)
+    with pytest.raises(ValueError, match=f"{slots.blocks} Hessian blocks, more than the model's block slot"):
+        HessianBlocks.from_model(narrow)
+    blocks = HessianBlocks.from_model(model)
+    with pytest.raises(ValueError, match="more than the model's block slot"):
+        blocks.rewrite_worlds(narrow, [0])
+

@@ -105,9 +105,10 @@ def solve_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.arra
     the pad forces are all finite, else 0).
 
     A solve whose last Newton update ``last_update[w]`` (m) is above ``newton_tolerance`` did not
-    converge, and its pad forces are off by about a node's contact stiffness times that update or
-    more (``stiffness[w]``: the world's stiffest node, N/m): its load counts that much more, in units
-    of ``force_unit`` (N: the smaller of the limits' forces; inf: limits off), so that an
+    converge, and where a pad touches the object its pad forces are off by about a node's contact
+    stiffness times that update or more (``stiffness[w]``: the world's stiffest node, N/m): its load
+    counts that much more, in units of ``force_unit`` (N: the smaller of the limits' forces; inf:
+    limits off, no margin), so that an
     unconverged solve that reads under the limit but may be over it is re-solved patiently
     (``PickupScene._patient_if_over``) and the limit decides on converged forces. (Measured: a
     stiff cube swept at 2 m/s, accepted at 164 N with a last update of 7 mm, read 1.5 kN solved
@@ -121,7 +122,7 @@ def solve_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.arra
     right = wp.vec3d(wp.float64(b[0]), wp.float64(b[1]), wp.float64(b[2]))
     load = actuator_load(left, right, wp.float64(n0), wp.float64(n1), wrist_limit, grip_limit)
     dx = last_update[w]
-    if dx > newton_tolerance:
+    if dx > newton_tolerance and (n0 > 0.0 or n1 > 0.0) and wp.isfinite(force_unit):
         load += wp.float64(stiffness[w] * dx) / force_unit
     finite = wp.float64(0.0)
     if wp.isfinite(a) and wp.isfinite(b) and wp.isfinite(n0) and wp.isfinite(n1):

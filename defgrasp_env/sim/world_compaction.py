@@ -72,9 +72,10 @@ class WorldCompaction:
 
     def pays(self, model: Model) -> bool:
         """Whether listed launches are smaller than launches over every row: more worlds than
-        ``capacity``, and ``capacity`` times the largest world's tets fewer than all tets (one large
-        world among small ones could make a listed launch the larger)."""
-        return 0 < self.capacity < model.num_worlds and self.dim(self.tets) < model.num_tets
+        ``capacity``, and ``capacity`` times the largest world's nodes (CG's rows: its products
+        gather the assembled Hessian per node) fewer than all nodes (one large world among small
+        ones could make a listed launch the larger)."""
+        return 0 < self.capacity < model.num_worlds and self.dim(self.nodes) < model.num_nodes
 
     def record_list(self, flags: wp.array) -> list:
         """The recorded launches that list the worlds whose ``flags`` [W] are set and set ``cond``."""

@@ -21,7 +21,6 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .elastic import pick_vertex, row
-from .world_rows import RowMap, mapped_row
 
 
 @wp.func
