@@ -114,8 +114,8 @@ def test_a_period_on_the_device_agrees_with_substeps_from_the_host_on_cuda():
 def test_an_unconverged_solves_load_counts_its_force_error(device):
     """``solve_loads`` against the host's ``actuator_load``: a converged solve's load is the pads'
     load; an unconverged one's (last update above the tolerance) with a pad touching adds the
-    stiffest node's stiffness x that update over the smaller limit force; none without pad
-    contact, none with the limits off (no NaN from inf / inf), and a diverged update (inf) reads
+    stiffest node's stiffness x that update over the smaller limit force, with the pads touching or
+    not (the solution may touch where the iterate does not); none with the limits off (no NaN from inf / inf), and a diverged update (inf) reads
     over any limit."""
     if device != "cpu" and not wp.is_cuda_available():
         pytest.skip("no CUDA device")
@@ -124,20 +124,22 @@ def test_an_unconverged_solves_load_counts_its_force_error(device):
 
     wrist_limit, grip_limit, tolerance, stiffness = 150.0, 20.0, 1e-5, 1.0e5
     unit = min(wrist_limit, tip_force_bound(grip_limit, wrist_limit))
-    normal = np.array([[12.0, 9.0], [12.0, 9.0], [0.0, 0.0], [12.0, 9.0], [12.0, 0.0]], np.float32)
-    pad_force = np.zeros((5, 2, 3), np.float32)
+    normal = np.array([[12.0, 9.0], [12.0, 9.0], [0.0, 0.0], [12.0, 9.0], [12.0, 0.0], [0.0, 0.0]], np.float32)
+    pad_force = np.zeros((6, 2, 3), np.float32)
     pad_force[:, 0, 0], pad_force[:, 1, 0] = normal[:, 0], -normal[:, 1]
-    pad_force[:, :, 1] = 30.0  # a lift: the net force is 60 N up plus the squeeze's difference
-    last = np.array([5e-6, 2e-3, 2e-3, np.inf, 1e-4], np.float32)
-    limits = np.tile([0.3, 0.0], (5, 1))
+    pad_force[:5, :, 1] = 30.0  # a lift: the net force is 60 N up plus the squeeze's difference
+    pad_force[2] = 0.0  # no pad touches the iterate
+    pad_force[5, :, 1] = 0.4  # pads pressed down on the object: no normal force along the jaw
+    last = np.array([5e-6, 2e-3, 2e-3, np.inf, 1e-4, 2e-3], np.float32)
+    limits = np.tile([0.3, 0.0], (6, 1))
 
     def loads(wrist):
-        out = wp.zeros(5, dtype=wp.vec4d, device=device)
-        wp.launch(solve_loads, dim=5, inputs=[wp.array(normal.ravel(), dtype=wp.float32, device=device),
+        out = wp.zeros(6, dtype=wp.vec4d, device=device)
+        wp.launch(solve_loads, dim=6, inputs=[wp.array(normal.ravel(), dtype=wp.float32, device=device),
                                               wp.array(pad_force.reshape(-1, 3), dtype=wp.vec3, device=device),
                                               wp.array(limits, dtype=wp.vec2d, device=device), wrist, grip_limit,
                                               wp.array(last, dtype=wp.float32, device=device), tolerance,
-                                              wp.full(5, stiffness, dtype=wp.float32, device=device),
+                                              wp.full(6, stiffness, dtype=wp.float32, device=device),
                                               min(wrist, tip_force_bound(grip_limit, wrist))],
                   outputs=[out], device=device)
         return out.numpy()
@@ -145,7 +147,7 @@ def test_an_unconverged_solves_load_counts_its_force_error(device):
     got = loads(wrist_limit)
     pads = actuator_load(np.linalg.norm(pad_force.sum(axis=1), axis=1), normal, wrist_limit, grip_limit)
     margin = np.float32(stiffness) * last / unit
-    expected = pads + np.array([0.0, margin[1], 0.0, np.inf, margin[4]])
+    expected = pads + np.array([0.0, margin[1], margin[2], np.inf, margin[4], margin[5]])
     np.testing.assert_allclose(got[:, 2], expected, rtol=1e-6)
     assert got[1, 2] > 1.0 + FORCE_TOLERANCE > got[0, 2]  # 200 N of margin: the unconverged solve is re-solved
     assert np.array_equal(got[:, 0:2], limits) and (got[:, 3] == 1.0).all()
