@@ -189,7 +189,6 @@ def test_a_model_whose_block_slot_is_too_small_is_refused():
     slots = slot_sizes([rope])
     model = assemble_model([rope], [Material()], [((0.0, 0.05, 0.0), (0.0, 0.0, 0.0, 1.0))], [], ContactParams(),
                            "cpu", slots)
-    HessianBlocks.from_model(model)
     narrow = dataclasses.replace(model, block_slot=slots.blocks - 1)
     with pytest.raises(ValueError, match=f"{slots.blocks} Hessian blocks, more than the model's block slot"):
         HessianBlocks.from_model(narrow)

@@ -165,8 +165,9 @@ class PickupScene:
         self._report = SolveReport(self.num_worlds, self.model.device)  # the control step's solver report
         self._loads = wp.zeros(self.num_worlds, dtype=wp.vec4d, device=self.model.device)  # ``solve_loads``
         #: [W] N/m: each world's stiffest node contact (``solve_loads``' bound on an unconverged
-        #: solve's force error), set at each reset (objects and materials change there)
+        #: solve's force error), set again where a reset changes objects or materials
         self._contact_stiffness = wp.zeros(self.num_worlds, dtype=wp.float32, device=self.model.device)
+        self._set_contact_stiffness()
         # a control period as one graph (``_period_on_device``): its gate (open, last substep tried),
         # the graphs by scalar key, the keys whose first period ran on the host
         self._gate = wp.zeros(2, dtype=wp.int32, device=self.model.device)
@@ -252,12 +253,18 @@ class PickupScene:
             x = wp.array(np.concatenate(values), dtype=wp.vec3, device=m.device)
             wp.launch(scatter_rows, dim=len(index), inputs=[x, index, self.state.positions], device=m.device)
         self._zero_outputs(mask)
-        self._contact_stiffness.zero_()
-        wp.launch(world_max, dim=m.num_nodes, inputs=[m.node_contact_stiffness, m.node_world],
-                  outputs=[self._contact_stiffness], device=m.device)
+        if changed or materials:  # a rebuild set it in ``_build``; a rewrite or new materials change it
+            self._set_contact_stiffness()
         pos, quat = self.gripper.pad_poses()
         self.state.pad_positions.assign(pos.reshape(-1, 3).astype(np.float32))
         self.state.pad_orientations.assign(quat.reshape(-1, 4).astype(np.float32))
+
+    def _set_contact_stiffness(self) -> None:
+        """``_contact_stiffness`` from the model's node contact stiffness (one launch over the nodes)."""
+        m = self.model
+        self._contact_stiffness.zero_()
+        wp.launch(world_max, dim=m.num_nodes, inputs=[m.node_contact_stiffness, m.node_world],
+                  outputs=[self._contact_stiffness], device=m.device)
 
     def _rebuild(self, mask: np.ndarray, setups: list[WorldSetup]) -> None:
         """New flat arrays for the objects after the reset of ``mask`` (node and tet offsets change

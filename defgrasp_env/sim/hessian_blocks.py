@@ -88,6 +88,23 @@ def _world_tets(model: Model, w: int, tets: np.ndarray) -> tuple[np.ndarray, int
     return tets - start, int(model.node_end[w]) - start
 
 
+def _check_slot(model: Model, parts: list[WorldBlocks]) -> None:
+    """A slotted model's block slot holds every world's blocks (a packed model has none to fill)."""
+    most = max(p.num_blocks for p in parts)
+    if model.block_slot and most > model.block_slot:
+        raise ValueError(f"a world's object has {most} Hessian blocks, more than the model's block slot "
+                         f"{model.block_slot}")
+
+
+def _spans(row: np.ndarray, base: int, rows: int) -> np.ndarray:
+    """[rows, 2] int32 (first, one past last) of a world's node rows from its object's local starts
+    ``row`` [n+1], offset by ``base``; the slot's spare rows past the object are empty."""
+    spans = np.full((rows, 2), base + row[-1], np.int64)
+    n = len(row) - 1
+    spans[:n, 0], spans[:n, 1] = row[:-1] + base, row[1:] + base
+    return spans.astype(np.int32)
+
+
 @dataclass
 class HessianBlocks:
     """The assembled elastic Hessian of every world (device arrays): N nodes, B block rows, T tets."""
@@ -105,12 +122,10 @@ class HessianBlocks:
         d, w = model.device, model.num_worlds
         tets = model.tets.numpy()
         parts = [world_blocks(*_world_tets(model, k, tets[model.world_tets(k)])) for k in range(w)]
+        _check_slot(model, parts)
         slot = model.block_slot
-        counts = np.array([p.num_blocks for p in parts])
-        if slot and counts.max() > slot:
-            raise ValueError(f"a world's object has {counts.max()} Hessian blocks, more than the model's block slot "
-                             f"{slot}")
-        block_start = np.concatenate([[0], np.cumsum(counts if not slot else np.full(w, slot))])
+        counts = np.full(w, slot) if slot else np.array([p.num_blocks for p in parts])
+        block_start = np.concatenate([[0], np.cumsum(counts)])
         n, t = model.num_nodes, model.num_tets
         arrays = cls._host_rows(model, range(w), parts, block_start)
         blocks = int(block_start[-1])
@@ -130,10 +145,7 @@ class HessianBlocks:
         for w in worlds:
             sl = model.world_tets(w)
             parts.append(world_blocks(*_world_tets(model, w, model.tets[sl.start:sl.stop].numpy())))
-        too_many = [p.num_blocks for p in parts if p.num_blocks > model.block_slot]
-        if too_many:
-            raise ValueError(f"a rewritten world's object has {max(too_many)} Hessian blocks, more than the model's "
-                             f"block slot {model.block_slot}")
+        _check_slot(model, parts)
         self._write(self._host_rows(model, worlds, parts, self.block_start), model.device)
 
     @staticmethod
@@ -147,18 +159,12 @@ class HessianBlocks:
             out[name][1].append(values)
 
         for w, p in zip(worlds, parts):
-            n0, n1, ne = int(model.node_start[w]), int(model.node_start[w + 1]), int(model.node_end[w])
+            n0, n1 = int(model.node_start[w]), int(model.node_start[w + 1])
             t0 = int(model.tet_start[w])
             b0 = int(block_start[w])
-            spans = np.zeros((n1 - n0, 2), np.int64)
-            spans[:ne - n0, 0], spans[:ne - n0, 1] = p.row[:-1] + b0, p.row[1:] + b0
-            spans[ne - n0:] = b0 + p.num_blocks
-            put("node_blocks", np.arange(n0, n1), spans.astype(np.int32))
+            put("node_blocks", np.arange(n0, n1), _spans(p.row, b0, n1 - n0))
             put("block_node", np.arange(b0, b0 + p.num_blocks), (p.node + n0).astype(np.int32))
-            spans = np.zeros((n1 - n0, 2), np.int64)
-            spans[:ne - n0, 0], spans[:ne - n0, 1] = p.incidence_row[:-1] + 4 * t0, p.incidence_row[1:] + 4 * t0
-            spans[ne - n0:] = 4 * t0 + len(p.incidence)
-            put("node_incidences", np.arange(n0, n1), spans.astype(np.int32))
+            put("node_incidences", np.arange(n0, n1), _spans(p.incidence_row, 4 * t0, n1 - n0))
             rows = np.arange(4 * t0, 4 * t0 + len(p.incidence))
             put("incidence", rows, (p.incidence + 4 * t0).astype(np.int32))
             blocks = np.where(p.incidence_blocks < 0, -1, p.incidence_blocks + b0)
