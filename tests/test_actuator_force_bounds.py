@@ -70,6 +70,45 @@ def test_bounds_held_out(name, e):
     assert worst_wrist <= wrist_limit * (1 + FORCE_TOLERANCE) + impact, (worst_wrist, impact)
 
 
+@pytest.mark.parametrize("name", ["torus", "cuboid"])
+def test_patient_re_solves_settle_the_limits_decision_not_convergence(monkeypatch, name):
+    """Stiff objects (E = 1e7) swept and dived into at the largest legal speeds: the force limit
+    re-solves an unconverged solve patiently only until its decision is settled (a try that reads
+    over the limit even less its force error twice is retried with less motion at once; one that
+    reads under, over only with its error, iterates to half the update that settles it:
+    ``PickupScene._patient_if_over``). Independent truth: the actuator bounds (as
+    ``test_torus_sweep_pinch``), and the same runs with the rule before 2026-12-07 (every solve
+    over the limit re-solved to the Newton tolerance, emulated) keep them too, with more Newton
+    iterations over all solves (retries and patient re-solves counted): measured torus 2,315 ->
+    1,664, cuboid 10,794 -> 5,518 (asserted: at most 0.85x)."""
+    from defgrasp_env.envs import scene as scene_module
+    from defgrasp_env.sim.solver import ImplicitSolver
+
+    advance, iterations = ImplicitSolver.advance, [0]
+
+    def counted(self, state_in, state_out, control, dt, patient=None, worlds=None, **kwargs):
+        advance(self, state_in, state_out, control, dt, patient, worlds, **kwargs)
+        solved = np.ones(self.model.num_worlds, bool) if worlds is None else np.asarray(worlds, bool)
+        iterations[0] += int(self.scratch.newton_it.numpy()[solved].sum())
+
+    monkeypatch.setattr(ImplicitSolver, "advance", counted)
+
+    def run():
+        iterations[0] = 0
+        r = run_cell(name, 1e7, 10, sequences=("sweep", "dive"))
+        grip = GripperConfig().grip_force_limit
+        assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
+        assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
+        assert r["crossed"] == 0 and r["diverged"] == 0 and r["unflagged"] == 0, r
+        return iterations[0]
+
+    settled = run()
+    monkeypatch.setattr(scene_module, "PATIENT_UPDATE_FRACTION", 0.0)  # to the Newton tolerance
+    monkeypatch.setattr(scene_module.SolveLoads, "certainly_over", lambda self: np.zeros(len(self.load), bool))
+    converged = run()
+    assert settled <= 0.85 * converged, (settled, converged)
+
+
 def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical():
     """Two identical worlds swept into a torus (E = 1e7) until the first substep of a step reads
     kN with its 4 regular Newton iterations, unconverged (searched over the sweep's first 30 steps:
@@ -78,7 +117,9 @@ def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical
     with world 0 patient. World 1's result equals, bit for bit, the solve without patience; world 0
     meets the Newton tolerance and reads a pad force far below world 1's unconverged one. With node
     contact alone (``edge_contact=False``): with the pads' edges held out (the default) no substep
-    of this sweep's first steps read kN unconverged, and the case needs one."""
+    of this sweep's first steps read kN unconverged, and the case needs one. Asked to stop at an
+    update between the plain solve's and the tolerance (``patient_update``), world 0 stops under
+    it with fewer iterations than to the tolerance; a NaN update is refused."""
     venv = gym.make_vec("DeformablePickup-v0", num_envs=2, object="torus", youngs_modulus=1e7,
                         max_linear_speed=2.0, max_angular_speed=2 * math.pi, init_yaw_noise=0.0,
                         init_position_noise=0.0, edge_contact=False)
@@ -104,6 +145,14 @@ def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical
             tip_plain = plain_state.pad_normal_force.numpy().reshape(2, 2)
             if not plain.converged[0] and tip_plain[0].max() > 1000.0:
                 patient = scene.solver.step(scene.state, patient_state, control, h, np.array([True, False]))
+                partial_state = State.from_model(scene.model)
+                middle = math.sqrt(1e-5 * float(plain.last_update[0]))  # between the tolerance and the plain update
+                partial = scene.solver.step(scene.state, partial_state, control, h, np.array([True, False]),
+                                            patient_update=np.array([middle, 1.0]))
+                x_partial = partial_state.positions.numpy().copy()
+                with pytest.raises(ValueError, match="patient_update"):
+                    scene.solver.step(scene.state, partial_state, control, h, np.array([True, False]),
+                                      patient_update=np.array([np.nan, 1.0]))
                 rows = scene.model.world_nodes(1)
                 x_plain, x_patient = plain_state.positions.numpy(), patient_state.positions.numpy()
                 tip_patient = patient_state.pad_normal_force.numpy().reshape(2, 2)
@@ -118,6 +167,10 @@ def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical
     np.testing.assert_array_equal(tip_patient[1], tip_plain[1])
     assert patient.last_update[0] <= 1e-5 and patient.newton_iterations[0] > plain.newton_iterations[0]
     assert tip_patient[0].max() < 0.1 * tip_plain[0].max(), (tip_patient, tip_plain)
+    # asked for a larger update (``patient_update``), world 0 stops once under it, before convergence
+    assert 1e-5 < partial.last_update[0] <= middle, (partial.last_update[0], middle)
+    assert plain.newton_iterations[0] < partial.newton_iterations[0] < patient.newton_iterations[0]
+    np.testing.assert_array_equal(x_partial[rows], x_plain[rows])
 
 
 def test_force_limit_retries_keep_vector_worlds_equal_to_single_envs():
@@ -142,9 +195,9 @@ def test_force_limit_retries_keep_vector_worlds_equal_to_single_envs():
             scene.period_graphs = False  # every solve through ``advance`` (the single env's periods run as graphs)
             advance = scene.solver.advance
 
-            def counted(state_in, state_out, control, dt, patient=None, worlds=None, full_outputs=True):
+            def counted(state_in, state_out, control, dt, patient=None, worlds=None, **kwargs):
                 spy.append(None if worlds is None else np.asarray(worlds).copy())
-                advance(state_in, state_out, control, dt, patient, worlds, full_outputs)
+                advance(state_in, state_out, control, dt, patient, worlds, **kwargs)
 
             scene.solver.advance = counted
         out = []

@@ -183,10 +183,10 @@ def test_wrist_limit_retries_solve_from_the_untouched_substep_start():
     solves = []
     advance = scene.solver.advance
 
-    def checked(state_in, state_out, control, dt, patient=None, worlds=None, full_outputs=True):
+    def checked(state_in, state_out, control, dt, patient=None, worlds=None, **kwargs):
         assert state_in is scene.state and state_out is not state_in
         before = state_in.positions.numpy().copy()
-        advance(state_in, state_out, control, dt, patient, worlds, full_outputs)
+        advance(state_in, state_out, control, dt, patient, worlds, **kwargs)
         np.testing.assert_array_equal(state_in.positions.numpy(), before)
         solves.append(state_out)
 

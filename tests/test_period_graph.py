@@ -16,7 +16,7 @@ import warp as wp
 
 import defgrasp_env  # noqa: F401
 from defgrasp_env.envs.config import PickupConfig
-from defgrasp_env.envs.scene_kernels import close_gate_if_limited
+from defgrasp_env.envs.scene_kernels import close_gate_if_limited, solve_load_row
 from defgrasp_env.wrist.force_limit import FORCE_TOLERANCE
 from contact_rollout import ExpertNoisyPress
 
@@ -87,8 +87,8 @@ def test_the_gate_closes_exactly_where_the_host_would_decide(device):
     ]
     for load, finite, stays_open in cases:
         for others in (0, 3):  # the world alone, or among worlds that pass
-            rows = [(0.2, 0.0, 0.5, 1.0)] * others + [(0.9, 1.0, load, finite)]
-            loads = wp.array(np.array(rows, dtype=np.float64), dtype=wp.vec4d, device=device)
+            rows = [(0.2, 0.0, 0.5, 1.0, 0.0, 0.0)] * others + [(0.9, 1.0, load, finite, 0.0, 0.0)]
+            loads = wp.array(np.array(rows, dtype=np.float64), dtype=solve_load_row, device=device)
             gate = wp.array(np.array([1, 7], dtype=np.int32), dtype=wp.int32, device=device)
             wp.launch(close_gate_if_limited, dim=len(rows), inputs=[loads, FORCE_TOLERANCE], outputs=[gate],
                       device=device)
@@ -113,9 +113,11 @@ def test_a_period_on_the_device_agrees_with_substeps_from_the_host_on_cuda():
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
 def test_an_unconverged_solves_load_counts_its_force_error(device):
     """``solve_loads`` against the host's ``actuator_load``: a converged solve's load is the pads'
-    load; an unconverged one's (last update above the tolerance) with a pad touching adds the
+    load; an unconverged one's (last update above the tolerance) adds its force error, the
     stiffest node's stiffness x that update over the smaller limit force, with the pads touching or
-    not (the solution may touch where the iterate does not); none with the limits off (no NaN from inf / inf), and a diverged update (inf) reads
+    not (the solution may touch where the iterate does not), reported on its own too; the deciding
+    update is the one at which the reading plus that error reaches 1 (0 where the reading is not
+    under 1); none with the limits off (no NaN from inf / inf), and a diverged update (inf) reads
     over any limit."""
     if device != "cpu" and not wp.is_cuda_available():
         pytest.skip("no CUDA device")
@@ -134,7 +136,7 @@ def test_an_unconverged_solves_load_counts_its_force_error(device):
     limits = np.tile([0.3, 0.0], (6, 1))
 
     def loads(wrist):
-        out = wp.zeros(6, dtype=wp.vec4d, device=device)
+        out = wp.zeros(6, dtype=solve_load_row, device=device)
         wp.launch(solve_loads, dim=6, inputs=[wp.array(normal.ravel(), dtype=wp.float32, device=device),
                                               wp.array(pad_force.reshape(-1, 3), dtype=wp.vec3, device=device),
                                               wp.array(limits, dtype=wp.vec2d, device=device), wrist, grip_limit,
@@ -149,7 +151,19 @@ def test_an_unconverged_solves_load_counts_its_force_error(device):
     margin = np.float32(stiffness) * last / unit
     expected = pads + np.array([0.0, margin[1], margin[2], np.inf, margin[4], margin[5]])
     np.testing.assert_allclose(got[:, 2], expected, rtol=1e-6)
+    np.testing.assert_allclose(got[:, 4], expected - pads, rtol=1e-6)
+    assert (pads < 1.0).all()
+    deciding = (1.0 - pads) * unit / np.float32(stiffness)
+    np.testing.assert_allclose(got[:, 5], deciding, rtol=1e-6)
+    # at the deciding update the reading plus its error is 1
+    np.testing.assert_allclose(pads + np.float32(stiffness) * deciding / unit, 1.0, rtol=1e-9)
     assert got[1, 2] > 1.0 + FORCE_TOLERANCE > got[0, 2]  # 200 N of margin: the unconverged solve is re-solved
     assert np.array_equal(got[:, 0:2], limits) and (got[:, 3] == 1.0).all()
     off = loads(np.inf)
     assert not np.isnan(off[:, 2]).any() and (off[:, 2] == 0.0).all()
+    assert (off[:, 4:] == 0.0).all()
+    # a 40 N wrist limit: the lifts (60 N) read over it, and nothing decides them short of the limit
+    low = loads(40.0)
+    over = actuator_load(np.linalg.norm(pad_force.sum(axis=1), axis=1), normal, 40.0, grip_limit) >= 1.0
+    assert over[[0, 1, 3, 4]].all() and not over[[2, 5]].any()
+    assert (low[over, 5] == 0.0).all() and (low[~over, 5] > 0.0).all()

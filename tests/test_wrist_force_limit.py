@@ -118,10 +118,12 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
     steps, then lifted: what an RL policy does while learning, also turning its wrist about the
     vertical back and forth (``turn``: the yaw action, alternating each step, as a learner's noisy
     policy does). The wrist stops at its limit; each later substep of the same push is held
-    (``Gripper.held_at_limit``, turn or not) in one solve instead of a full-motion try, its patient
-    re-solve and a stopped re-solve. Independent truth: the same episode with holding switched off
-    (``HOLD_COSINE`` above 1: every substep tries its motion) gives bit-identical observations and
-    wrist forces with >= 1.6x the solves (measured 1.8-1.9x), turning or not: a world at its limit whose try reads over is
+    (``Gripper.held_at_limit``, turn or not) in one solve instead of a full-motion try (with a
+    patient re-solve where the try may be under the limit converged) and a stopped re-solve.
+    Independent truth: the same episode with holding switched off (``HOLD_COSINE`` above 1: every
+    substep tries its motion) gives bit-identical observations and wrist forces with >= 1.4x the
+    solves (measured 1.5-1.8x; 1.8-1.9x while every try over the limit was re-solved patiently,
+    before 2026-12-07), turning or not: a world at its limit whose try reads over is
     stopped whole (slide, turn and jaw), as the held one is. While pressing, the turning wrist keeps
     its orientation. The lift then moves the wrist up at the full 0.3 m/s from its first step.
     (Where a turn eases the load enough for the full try to read within the limit, holding does
@@ -161,7 +163,7 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
         assert max(np.abs(quats[t] - quats[t - 1]).max() for t in pressing[1:]) == 0.0
     assert max(r[2] for r in held_rows) > DEFAULT_WRIST_FORCE_LIMIT  # it pressed at the limit
     assert max(r[2] for r in held_rows) <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE)
-    assert tried_solves >= 1.6 * held_solves, (held_solves, tried_solves)
+    assert tried_solves >= 1.4 * held_solves, (held_solves, tried_solves)
     heights = [AGENT_POS.get(r[0], "wrist_position")[1] for r in held_rows[31:]]
     np.testing.assert_allclose(np.diff(heights), 0.3 * 0.05, rtol=1e-3)  # lifting at full speed at once
 
@@ -188,10 +190,10 @@ def test_a_patient_solve_is_not_repeated_from_the_same_input(monkeypatch):
         calls = []
         advance = ImplicitSolver.advance
 
-        def logged(self, state_in, state_out, control, dt, patient=None, worlds=None, full_outputs=True):
+        def logged(self, state_in, state_out, control, dt, patient=None, worlds=None, **kwargs):
             solved = np.ones(scene.num_worlds, bool) if worlds is None else np.asarray(worlds, bool).copy()
             calls.append((solved, None if patient is None else np.asarray(patient, bool).copy()))
-            return advance(self, state_in, state_out, control, dt, patient, worlds, full_outputs)
+            return advance(self, state_in, state_out, control, dt, patient, worlds, **kwargs)
 
         monkeypatch.setattr(ImplicitSolver, "advance", logged)
         rng = np.random.default_rng(4)

@@ -93,28 +93,35 @@ def world_max(values: wp.array(dtype=wp.float32), row_world: wp.array(dtype=wp.i
     wp.atomic_max(out, row_world[i], values[i])
 
 
+#: a row of ``solve_loads``: (load at the substep start, held, the solve's load, finite, its force
+#: error, the update deciding it), float64
+solve_load_row = wp.types.vector(length=6, dtype=wp.float64)
+
+
 @wp.kernel
 def solve_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.array(dtype=wp.vec3),
                 limits: wp.array(dtype=wp.vec2d), wrist_limit: wp.float64, grip_limit: wp.float64,
                 last_update: wp.array(dtype=wp.float32), newton_tolerance: wp.float32,
-                stiffness: wp.array(dtype=wp.float32), force_unit: wp.float64, loads: wp.array(dtype=wp.vec4d)):
+                stiffness: wp.array(dtype=wp.float32), force_unit: wp.float64, loads: wp.array(dtype=solve_load_row)):
     """What the actuator force limit needs of world w after a solve (its two pads' normal forces
     ``pad_normal_force[2w], [2w+1]`` and total forces ``pad_force``, N), packed for one download:
     ``loads[w]`` = (the load at the substep start and 1 if held at the limit, ``limits[w]`` of
-    ``Gripper.plan_substep``; the solve's actuator load, ``wrist.force_limit.actuator_load``; 1 if
-    the pad forces are all finite, else 0).
+    ``Gripper.plan_substep``; the solve's actuator load, ``wrist.force_limit.actuator_load``, plus
+    its force error; 1 if the pad forces are all finite, else 0; the force error; the last update (m)
+    under which the load as read plus its force error stays under 1, 0 where it is not under 1).
 
     A solve whose last Newton update ``last_update[w]`` (m) is above ``newton_tolerance`` did not
     converge, and its pad forces are off by about a node's contact stiffness times that update or
     more (``stiffness[w]``: the world's stiffest node, N/m), also where its pads read no force at all
     (the iterate may not have reached a contact the solution has: a stiff cube pressed into the
     ground by pads at a 1 N limit read 0 N with an update of 12 mm, then kN): its load counts that
-    much more, in units of ``force_unit`` (N: the smaller of the limits' forces; inf: limits off,
-    no margin), so that an unconverged solve that reads under the limit but may be over it is
-    re-solved patiently (``PickupScene._patient_if_over``) and the limit decides on converged
-    forces; an unconverged solve of a soft object rarely counts (E = 1e4: ~3,000 N/m x 3e-4 m =
-    0.9 N), a stiff one's does from an update of ~0.2 mm (1e6 N/m over 150 N). (Measured: a stiff
-    cube swept at 2 m/s, accepted at 164 N with a last update of 7 mm, read 1.5 kN solved on.)"""
+    much more (the force error, in units of ``force_unit``, N: the smaller of the limits' forces;
+    inf: limits off, no margin), so that an unconverged solve that reads under the limit but may be
+    over it is re-solved patiently (``PickupScene._patient_if_over``, down to a fraction of the
+    deciding update) and the limit decides on converged forces; an unconverged solve of a soft
+    object rarely counts (E = 1e4: ~3,000 N/m x 3e-4 m = 0.9 N), a stiff one's does from an update
+    of ~0.2 mm (1e6 N/m over 150 N). (Measured: a stiff cube swept at 2 m/s, accepted at 164 N with
+    a last update of 7 mm, read 1.5 kN solved on.)"""
     w = wp.tid()
     a = pad_force[2 * w]
     b = pad_force[2 * w + 1]
@@ -124,13 +131,19 @@ def solve_loads(pad_normal_force: wp.array(dtype=wp.float32), pad_force: wp.arra
     right = wp.vec3d(wp.float64(b[0]), wp.float64(b[1]), wp.float64(b[2]))
     load = actuator_load(left, right, wp.float64(n0), wp.float64(n1), wrist_limit, grip_limit)
     dx = last_update[w]
-    if dx > newton_tolerance and wp.isfinite(force_unit):
-        load += wp.float64(stiffness[w] * dx) / force_unit
+    error = wp.float64(0.0)
+    deciding = wp.float64(0.0)
+    k = wp.float64(stiffness[w])
+    if wp.isfinite(force_unit):
+        if dx > newton_tolerance:
+            error = k * wp.float64(dx) / force_unit
+        if load < wp.float64(1.0) and k > wp.float64(0.0):
+            deciding = (wp.float64(1.0) - load) * force_unit / k
     finite = wp.float64(0.0)
     if wp.isfinite(a) and wp.isfinite(b) and wp.isfinite(n0) and wp.isfinite(n1):
         finite = wp.float64(1.0)
     lim = limits[w]
-    loads[w] = wp.vec4d(lim[0], lim[1], load, finite)
+    loads[w] = solve_load_row(lim[0], lim[1], load + error, finite, error, deciding)
 
 
 @wp.kernel
@@ -193,7 +206,7 @@ def mark_substep(k: int, gate: wp.array(dtype=wp.int32)):
 
 
 @wp.kernel
-def close_gate_if_limited(loads: wp.array(dtype=wp.vec4d), tolerance: wp.float64, gate: wp.array(dtype=wp.int32)):
+def close_gate_if_limited(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64, gate: wp.array(dtype=wp.int32)):
     """``gate[0] = 0`` where world w's first try needs the actuator force limit's decision on the
     host (``wrist.force_limit.limited_substep``, ``PickupScene._patient_if_over``): its load
     (``loads[w][2]``, ``solve_loads``) above 1 + ``tolerance`` (a retry or a patient re-solve), or

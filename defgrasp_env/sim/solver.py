@@ -269,23 +269,26 @@ class ImplicitSolver:
 
     # -- public --------------------------------------------------------------------------------
     def step(self, state_in: State, state_out: State, control: Control, dt: float,
-             patient: np.ndarray | None = None, worlds: np.ndarray | None = None) -> SolveStats:
+             patient: np.ndarray | None = None, worlds: np.ndarray | None = None,
+             patient_update: np.ndarray | None = None) -> SolveStats:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object) and return
-        the per-world report (one device-to-host copy); ``patient`` and ``worlds`` as for ``advance`` (the
-        report of a world outside ``worlds`` is that of its last solve)."""
-        self.advance(state_in, state_out, control, dt, patient, worlds)
+        the per-world report (one device-to-host copy); ``patient``, ``worlds`` and ``patient_update`` as for
+        ``advance`` (the report of a world outside ``worlds`` is that of its last solve)."""
+        self.advance(state_in, state_out, control, dt, patient, worlds, patient_update=patient_update)
         self._report.fold(self.scratch, self.config.penetration_bound, first=True)
         return self._report.download()
 
     def advance(self, state_in: State, state_out: State, control: Control, dt: float,
                 patient: np.ndarray | None = None, worlds: np.ndarray | None = None,
-                full_outputs: bool = True) -> None:
+                full_outputs: bool = True, patient_update: np.ndarray | None = None) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (they may be the same object; distinct,
         ``state_in`` is only read). Every array of ``state_out`` is written (the rows of the solved worlds;
         with ``full_outputs`` False all but the von Mises stresses and their mean); the report is left in
         ``scratch`` (``SolveReport.fold``). ``patient`` [W] bool (default none): worlds given up to
-        ``config.patient_iterations`` extra Newton iterations per substep until they meet
-        ``newton_tolerance``; every other world's result is the same, bit for bit, as without it (its
+        ``config.patient_iterations`` extra Newton iterations per substep until their last update is
+        at most ``patient_update`` [W] (m; default, and where smaller, ``newton_tolerance``: a caller
+        that needs less than convergence, such as a decision that a smaller update settles, asks for
+        a larger one); every other world's result is the same, bit for bit, as without it (its
         ``converged`` flag stays False when the regular iterations did not converge, even if the extra ones
         did). ``worlds`` [W] bool (default all): only these worlds are solved; every other world's rows of
         ``state_out`` and its report in ``scratch`` are left as they are (the solves of different worlds are
@@ -302,7 +305,12 @@ class ImplicitSolver:
             return
         patient_any = patient is not None and bool(np.any(patient))
         if patient_any:
-            s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(self.model.num_worlds))
+            num_worlds, tol = self.model.num_worlds, self.config.newton_tolerance
+            s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(num_worlds))
+            update = np.full(num_worlds, tol) if patient_update is None else np.asarray(patient_update, np.float64)
+            if update.shape != (num_worlds,) or np.isnan(update).any():
+                raise ValueError(f"patient_update must be {num_worlds} update sizes (m), not NaN, got {update!r}")
+            s.patient_update.assign(np.maximum(update, tol).astype(np.float32))
         run, graphs = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
         key = (patient_any, bool(full_outputs))
         if self.graphs and key not in graphs:

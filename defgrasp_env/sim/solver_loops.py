@@ -54,7 +54,7 @@ class DeviceLoops:
                 limit,
                 self._rec(klc.extra_iteration_worlds, w, self.running, self.count["extra"],
                           config.penetration_iterations, patient, scratch.depth, 0.5 * config.penetration_bound,
-                          scratch.patient, scratch.last_dx, config.newton_tolerance, scratch.diverged,
+                          scratch.patient, scratch.last_dx, scratch.patient_update, scratch.diverged,
                           scratch.solve_worlds, scratch.substep_newton_it, config.newton_iterations,
                           scratch.newton_active),
                 self._rec(klc.extra_gate, 1, self.hit, self.count["extra"], limit, self.running, self.cond["extra"]))

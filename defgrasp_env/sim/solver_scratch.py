@@ -136,6 +136,7 @@ class SolverScratch:
     cg_beta: wp.array           # float: CG's beta of the current iteration
     coarse_scratch: wp.array    # float: p . A p of the coarse guess (unused)
     depth: wp.array             # float, m: deepest contact of the iterate (extra iterations)
+    patient_update: wp.array    # float, m: the last update a patient world iterates down to (>= newton_tolerance)
     newton_active: wp.array     # int: world still iterating Newton
     cg_active: wp.array         # int: world still iterating CG
     newton_it: wp.array         # int: Newton iterations of the step (SolveStats)
@@ -146,7 +147,7 @@ class SolverScratch:
     unconverged: wp.array       # int: a substep stopped at the iteration limit
     clamped: wp.array           # int: a substep's solve left a node deeper than the penetration bound
     solve_worlds: wp.array      # int: world computed by the current solve (1 in all unless advance(worlds=...))
-    patient: wp.array           # int: world to iterate until newton_tolerance (ImplicitSolver.advance)
+    patient: wp.array           # int: world to iterate until patient_update (ImplicitSolver.advance)
     searching: wp.array         # int: world still line-searching
     coarse_factored: wp.array   # int: 1 while a world block's coarse Cholesky pivots were positive
     energy0: wp.array           # float64: incremental potential of the accepted iterate

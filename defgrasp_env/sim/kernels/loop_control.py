@@ -64,14 +64,15 @@ def extra_begin(regular_count: wp.array(dtype=wp.int32), regular: int, running: 
 @wp.kernel
 def extra_iteration_worlds(running: wp.array(dtype=wp.int32), extra_count: wp.array(dtype=wp.int32),
                            deep_iterations: int, patient_iterations: int, depth: wp.array(dtype=float),
-                           bound: float, patient: wp.array(dtype=int), last_dx: wp.array(dtype=float), tol: float,
+                           bound: float, patient: wp.array(dtype=int), last_dx: wp.array(dtype=float),
+                           patient_update: wp.array(dtype=float),
                            diverged: wp.array(dtype=int), solve: wp.array(dtype=int),
                            substep_iterations: wp.array(dtype=int), regular: int,
                            newton_active: wp.array(dtype=int)):
     """Which worlds take extra Newton iteration e (= ``extra_count``): in the first
     ``deep_iterations``, those whose iterate is deeper than ``bound`` (m; ``depth`` from
     ``deepest_contact``, cleared here); in the first ``patient_iterations``, also the ``patient``
-    worlds whose last update (m) is above ``tol`` and that did not diverge; no other world: only
+    worlds whose last update (m) is above their ``patient_update`` (m) and that did not diverge; no other world: only
     worlds of this solve (``solve``) that ran all ``regular`` iterations themselves (a world that
     converged earlier takes none, whatever the other worlds did: each world's result is the one
     it gets alone)."""
@@ -87,7 +88,7 @@ def extra_iteration_worlds(running: wp.array(dtype=wp.int32), extra_count: wp.ar
     active = 0
     if e < wp.int32(deep_iterations) and d > bound:
         active = 1
-    if e < wp.int32(patient_iterations) and patient[w] != 0 and last_dx[w] > tol and diverged[w] == 0:
+    if e < wp.int32(patient_iterations) and patient[w] != 0 and last_dx[w] > patient_update[w] and diverged[w] == 0:
         active = 1
     newton_active[w] = active
 
