@@ -167,3 +167,20 @@ def test_an_unconverged_solves_load_counts_its_force_error(device):
     over = actuator_load(np.linalg.norm(pad_force.sum(axis=1), axis=1), normal, 40.0, grip_limit) >= 1.0
     assert over[[0, 1, 3, 4]].all() and not over[[2, 5]].any()
     assert (low[over, 5] == 0.0).all() and (low[~over, 5] > 0.0).all()
+
+
+def test_a_load_is_certainly_over_only_past_its_whole_error():
+    """``SolveLoads.certainly_over``: the load as read (load - error) still over 1 + tolerance
+    after taking the error off once more; a converged solve (error 0) is certainly over as soon as
+    it is over; a diverged one (error inf) never is (its patient re-solve is refused by the solver's
+    divergence flag, not skipped here), and no NaN warning comes of inf - inf."""
+    from defgrasp_env.envs.scene import SolveLoads
+
+    bound = 1.0 + FORCE_TOLERANCE
+    load = np.array([bound + 0.01, bound + 0.01, 3.0, 3.0, np.inf, 0.5])
+    error = np.array([0.0, 0.01, 0.9, 1.0, np.inf, 0.2])
+    loads = SolveLoads(start=np.zeros(6), held=np.zeros(6, bool), load=load, error=error, deciding=np.zeros(6))
+    with np.errstate(all="raise"):
+        got = loads.certainly_over()
+    # 3.0 - 2 x 0.9 = 1.2 > 1.1; 3.0 - 2 x 1.0 = 1.0 is not
+    assert got.tolist() == [True, False, True, False, False, False]

@@ -70,8 +70,10 @@ class SolveLoads:
 
     def certainly_over(self, tolerance: float = FORCE_TOLERANCE) -> np.ndarray:
         """[W] bool: over 1 + ``tolerance`` even if the reading is off by its whole error the other
-        way: a patient re-solve would read over too."""
-        return self.load - 2.0 * self.error > 1.0 + tolerance
+        way: a patient re-solve would read over too (False where the error is not finite: a
+        diverged solve's)."""
+        finite = np.isfinite(self.error)
+        return finite & (self.load - 2.0 * np.where(finite, self.error, 0.0) > 1.0 + tolerance)
 
 
 @functools.lru_cache(maxsize=16)
@@ -213,8 +215,8 @@ class PickupScene:
         #: world-solves run since the scene was built: per solver call, the worlds it computed (all of
         #: them in a substep's first solve, those the force limit retries or re-solves patiently after)
         self.world_solves = 0
-        #: [W] bool: the world's last solve of the current substep was patient (its result is as
-        #: converged as a re-solve from the same input would get: ``_patient_if_over`` skips it)
+        #: [W] bool: the world's last solve of the current substep was patient (its result is what a
+        #: re-solve from the same input and target would get: ``_patient_if_over`` skips it)
         self._patient_solved = np.zeros(self.num_worlds, dtype=bool)
         self._readout: StepReadout | None = None
         world = np.arange(self.num_worlds, dtype=np.int32)
@@ -492,15 +494,16 @@ class PickupScene:
 
     def _patient_if_over(self, number: int, loads: SolveLoads, fraction: np.ndarray, h: float, last: bool):
         """(solve number, load [W]) of a solve, re-solved patiently in the worlds over an actuator
-        limit whose solve is unconverged, may be under the limit converged (not
-        ``SolveLoads.certainly_over``) and was not patient already (``_patient_solved``): an
-        unconverged stiff contact can read kN where its solution reads tens of N, so over the
-        limit the forces of a better converged solve decide. A world whose reading is under the
-        limit (over it with its force error) iterates until its update is
-        ``PATIENT_UPDATE_FRACTION`` of the one that settles the decision (``SolveLoads.deciding``),
-        not to the Newton tolerance: the limit needs the decision, not convergence (a stiff torus
-        touching a pad at 0.1 N read 1.1-2.4 with its error and took 60 extra iterations a
-        substep to converge)."""
+        limit whose solve is unconverged and was not patient already (``_patient_solved``), except
+        a world that moved (``fraction`` > 0) and is ``SolveLoads.certainly_over`` (the limit
+        retries it with less motion): an unconverged stiff contact can read kN where its solution
+        reads tens of N, so over the limit the forces of a better converged solve decide. A world
+        that moved and reads under the limit (over it only with its force error) iterates until
+        its update is ``PATIENT_UPDATE_FRACTION`` of the one that settles the decision
+        (``SolveLoads.deciding``), not to the Newton tolerance: the limit needs the decision, not
+        convergence (a stiff torus touching a pad at 0.1 N read 1.1-2.4 with its error and took 60
+        extra iterations a substep to converge). A world that did not move (stopped or held) keeps
+        this solve whatever it reads, so it iterates to the Newton tolerance."""
         over = loads.load > 1.0 + FORCE_TOLERANCE
         if over.any():
             # not a world whose last solve was patient already: the flag ``unconverged`` stays set
@@ -509,11 +512,12 @@ class PickupScene:
             # reads over its limit was so re-solved after each of the substep's later retries)
             # a certainly over world that moved is retried with less motion (this solve is dropped);
             # one that did not move (stopped or held) keeps this solve, whose forces must be right
-            retried = loads.certainly_over() & (np.asarray(fraction) > 0.0)
-            patient = over & ~retried & ~self._last_solve_converged() & ~self._patient_solved
+            moved = np.asarray(fraction) > 0.0
+            patient = over & ~(loads.certainly_over() & moved) & ~self._last_solve_converged() & ~self._patient_solved
             if patient.any():
+                target = np.where(moved, PATIENT_UPDATE_FRACTION * loads.deciding, 0.0)
                 number, loads = self._solve_substep(fraction, h, patient, worlds=patient, last=last,
-                                                    patient_update=PATIENT_UPDATE_FRACTION * loads.deciding)
+                                                    patient_update=target)
         return number, loads.load
 
     def _solve_substep(self, fraction: np.ndarray | None, h: float, patient: np.ndarray | None = None,

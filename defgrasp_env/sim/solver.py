@@ -87,9 +87,9 @@ class SolverConfig:
             ``penetration_bound`` (a violent contact the regular iterations did not resolve).
         patient_iterations: extra Newton iterations at most per substep, after
             ``newton_iterations``, in the worlds a ``step`` or ``advance`` call marks ``patient``, while their update
-            is above ``newton_tolerance`` (a caller that needs the contact forces of a converged
-            solve: an unconverged iterate of a stiff contact can read kN where the solution reads
-            tens of N).
+            is above ``newton_tolerance`` or the call's larger ``patient_update`` (a caller that needs
+            the contact forces of a converged solve: an unconverged iterate of a stiff contact can
+            read kN where the solution reads tens of N).
         check_every: test every this many CG iterations, and after every Newton iteration and
             line-search trial, whether all worlds are done (0 = never: run the full iteration
             counts). The tests run on the device (``solver_loops``): inside the captured graph of
@@ -306,10 +306,10 @@ class ImplicitSolver:
         patient_any = patient is not None and bool(np.any(patient))
         if patient_any:
             num_worlds, tol = self.model.num_worlds, self.config.newton_tolerance
-            s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(num_worlds))
             update = np.full(num_worlds, tol) if patient_update is None else np.asarray(patient_update, np.float64)
             if update.shape != (num_worlds,) or np.isnan(update).any():
                 raise ValueError(f"patient_update must be {num_worlds} update sizes (m), not NaN, got {update!r}")
+            s.patient.assign(np.asarray(patient, dtype=np.int32).reshape(num_worlds))
             s.patient_update.assign(np.maximum(update, tol).astype(np.float32))
         run, graphs = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
         key = (patient_any, bool(full_outputs))

@@ -130,8 +130,8 @@ def start_cg_worlds(
     The last update is that of this substep (``newton_iterations`` [W]: its Newton iterations so
     far, cleared when a substep starts): a substep's first iteration solves to tolerance_near, so
     a substep's result depends on its input alone (not on the substeps or solves before it: a step
-    of K substeps is bit-identical to K steps of one). A ``patient`` world (iterated to
-    convergence because its contact forces decide the actuator force limit) solves every
+    of K substeps is bit-identical to K steps of one). A ``patient`` world (iterated on because
+    its contact forces decide the actuator force limit: ``ImplicitSolver.advance``) solves every
     iteration to tolerance_near."""
     start_cg_world(wp.tid(), newton_active, newton_iterations, patient, last_update, newton_tolerance, tolerance_near,
                    tolerance_far, rz, rz_stop, cg_active)
