@@ -6,7 +6,11 @@ clone (``ppo_five_clone_ppo_e1e6``) picks the rope and the cuboid, the objects t
 most (6 and 40 / 50 for the clone, 129 and 140 / 150 for it on the GPU), each on a seed its CPU
 evaluation counted as a success. Not compared step for step (the recorded episodes are
 bit-identical on one kind of CPU only, tests/conftest.recording_cpu): success within the env's 15 s
-and no pierced step."""
+and no pierced step. The cuboid's seed changed on 2026-12-07 with the force limit's patient rule
+(a re-solve settles the limit's decision, not convergence): seed 1000000000 grasps the cuboid
+elsewhere and no longer lifts it (300 steps, 0.60 m from the goal), while over seeds 1000000010-50
+the policy picks 4 of 5 under either rule (the same four); 1000000020 picks under both (83 and 70
+steps)."""
 
 import pathlib
 
@@ -33,7 +37,7 @@ def _check_settings(folder, settings):
 
 @pytest.mark.parametrize("folder, obj, seed", [
     (CLONE, "sphere", 1000000001), (CLONE, "cylinder", 1000000003), (CLONE, "torus", 1000000007),
-    (FINE_TUNED, "rope", 1000000004), (FINE_TUNED, "cuboid", 1000000000)])
+    (FINE_TUNED, "rope", 1000000004), (FINE_TUNED, "cuboid", 1000000020)])
 def test_a_shipped_five_object_policy_picks_an_object_at_the_tasks_goal(folder, obj, seed):
     from defgrasp_env.rl.ppo_policy import PPOPolicy
 
