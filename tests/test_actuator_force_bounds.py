@@ -76,12 +76,12 @@ def test_patient_re_solves_settle_the_limits_decision_not_convergence(monkeypatc
     re-solves an unconverged solve patiently only until its decision is settled (a try that reads
     over the limit even less its force error twice is retried with less motion at once; one that
     reads under, over only with its error, iterates to half the update that settles it:
-    ``PickupScene._patient_if_over``). Independent truth: the actuator bounds (as
+    ``limit_loads.SolveLoads.patient_re_solve``). Independent truth: the actuator bounds (as
     ``test_torus_sweep_pinch``), and the same runs with the rule before 2026-12-07 (every solve
     over the limit re-solved to the Newton tolerance, emulated) keep them too, with more Newton
     iterations over all solves (retries and patient re-solves counted): measured torus 2,315 ->
     1,664, cuboid 10,794 -> 5,518 (asserted: at most 0.85x)."""
-    from defgrasp_env.envs import scene as scene_module
+    from defgrasp_env.envs import limit_loads
     from defgrasp_env.sim.solver import ImplicitSolver
 
     advance, iterations = ImplicitSolver.advance, [0]
@@ -103,8 +103,8 @@ def test_patient_re_solves_settle_the_limits_decision_not_convergence(monkeypatc
         return iterations[0]
 
     settled = run()
-    monkeypatch.setattr(scene_module, "PATIENT_UPDATE_FRACTION", 0.0)  # to the Newton tolerance
-    monkeypatch.setattr(scene_module.SolveLoads, "certainly_over", lambda self: np.zeros(len(self.load), bool))
+    monkeypatch.setattr(limit_loads, "PATIENT_UPDATE_FRACTION", 0.0)  # to the Newton tolerance
+    monkeypatch.setattr(limit_loads.SolveLoads, "certainly_over", lambda self: np.zeros(len(self.load), bool))
     converged = run()
     assert settled <= 0.85 * converged, (settled, converged)
 

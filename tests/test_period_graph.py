@@ -174,7 +174,7 @@ def test_a_load_is_certainly_over_only_past_its_whole_error():
     after taking the error off once more; a converged solve (error 0) is certainly over as soon as
     it is over; a diverged one (error inf) never is (its patient re-solve is refused by the solver's
     divergence flag, not skipped here), and no NaN warning comes of inf - inf."""
-    from defgrasp_env.envs.scene import SolveLoads
+    from defgrasp_env.envs.limit_loads import SolveLoads
 
     bound = 1.0 + FORCE_TOLERANCE
     load = np.array([bound + 0.01, bound + 0.01, 3.0, 3.0, np.inf, 0.5])
@@ -184,3 +184,22 @@ def test_a_load_is_certainly_over_only_past_its_whole_error():
         got = loads.certainly_over()
     # 3.0 - 2 x 0.9 = 1.2 > 1.1; 3.0 - 2 x 1.0 = 1.0 is not
     assert got.tolist() == [True, False, True, False, False, False]
+
+
+def test_the_patient_re_solve_is_asked_only_where_it_can_change_the_decision_or_the_kept_forces():
+    """``SolveLoads.patient_re_solve`` world by world: under the limit, none; over only with its
+    error and moved, a re-solve to half its deciding update; certainly over and moved, none (the
+    limit retries with less motion); certainly over and not moved (stopped or held: its forces
+    are kept), a re-solve to the Newton tolerance (target 0); a world the caller does not allow
+    (converged, or patient already), none."""
+    from defgrasp_env.envs.limit_loads import PATIENT_UPDATE_FRACTION, SolveLoads
+
+    load = np.array([0.5, 1.5, 3.0, 3.0, 1.5, 1.5])
+    error = np.array([0.1, 0.8, 0.5, 0.5, 0.8, 0.0])
+    deciding = np.array([4e-4, 2e-5, 0.0, 0.0, 2e-5, 0.0])
+    fraction = np.array([1.0, 1.0, 1.0, 0.0, 0.3, 1.0])
+    allowed = np.array([True, True, True, True, False, True])
+    loads = SolveLoads(start=np.zeros(6), held=np.zeros(6, bool), load=load, error=error, deciding=deciding)
+    patient, target = loads.patient_re_solve(fraction, allowed)
+    assert patient.tolist() == [False, True, False, True, False, False]  # the last: converged, over: no re-solve can help
+    assert target[1] == PATIENT_UPDATE_FRACTION * 2e-5 and target[3] == 0.0

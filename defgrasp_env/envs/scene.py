@@ -38,43 +38,11 @@ from ..transforms import quat_to_matrix
 from ..wrist.force_limit import FORCE_TOLERANCE, limited_substep, tip_force_bound
 from .actions import max_flange_step
 from .config import PickupConfig
+from .limit_loads import SolveLoads
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model, rewrite_worlds, set_materials, slot_sizes
 from .scene_kernels import (close_gate_if_limited, gather_rows, mark_substep, open_period_gate, scatter_rows,
                             solve_load_row, solve_loads, world_max, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
-
-#: a patient re-solve of a world whose load reads under the limit stops at this fraction of the
-#: update under which its reading plus the force error stays under 1 (``solve_loads``): a margin
-#: for the reading's own change as the iterate converges
-PATIENT_UPDATE_FRACTION = 0.5
-
-
-@dataclass(frozen=True)
-class SolveLoads:
-    """What the actuator force limit reads of a solve, per world (host copies of ``solve_loads``).
-
-    Attributes:
-        start: [W] the actuator load at the substep start (1 = at a limit).
-        held: [W] bool, held at its limit (no motion tried).
-        load: [W] the solve's load as read plus ``error`` (what the limit compares with 1).
-        error: [W] the load an unconverged solve may be off by (0 when converged).
-        deciding: [W] m, the last update under which the reading plus its error stays under 1 (0
-            where the reading is not under 1).
-    """
-
-    start: np.ndarray
-    held: np.ndarray
-    load: np.ndarray
-    error: np.ndarray
-    deciding: np.ndarray
-
-    def certainly_over(self, tolerance: float = FORCE_TOLERANCE) -> np.ndarray:
-        """[W] bool: over 1 + ``tolerance`` even if the reading is off by its whole error the other
-        way: a patient re-solve would read over too (False where the error is not finite: a
-        diverged solve's)."""
-        finite = np.isfinite(self.error)
-        return finite & (self.load - 2.0 * np.where(finite, self.error, 0.0) > 1.0 + tolerance)
-
 
 @functools.lru_cache(maxsize=16)
 def object_mesh(name: str, resolution: float | None) -> TetMesh:
@@ -493,29 +461,17 @@ class PickupScene:
         return capture.graph
 
     def _patient_if_over(self, number: int, loads: SolveLoads, fraction: np.ndarray, h: float, last: bool):
-        """(solve number, load [W]) of a solve, re-solved patiently in the worlds over an actuator
-        limit whose solve is unconverged and was not patient already (``_patient_solved``), except
-        a world that moved (``fraction`` > 0) and is ``SolveLoads.certainly_over`` (the limit
-        retries it with less motion): an unconverged stiff contact can read kN where its solution
-        reads tens of N, so over the limit the forces of a better converged solve decide. A world
-        that moved and reads under the limit (over it only with its force error) iterates until
-        its update is ``PATIENT_UPDATE_FRACTION`` of the one that settles the decision
-        (``SolveLoads.deciding``), not to the Newton tolerance: the limit needs the decision, not
-        convergence (a stiff torus touching a pad at 0.1 N read 1.1-2.4 with its error and took 60
-        extra iterations a substep to converge). A world that did not move (stopped or held) keeps
-        this solve whatever it reads, so it iterates to the Newton tolerance."""
-        over = loads.load > 1.0 + FORCE_TOLERANCE
-        if over.any():
+        """(solve number, load [W]) of a solve (of ``fraction`` [W] of the planned motion), re-solved
+        patiently where ``SolveLoads.patient_re_solve`` asks (``limit_loads``: over the limit and
+        the re-solve can change the decision or the kept forces) in the worlds whose solve is
+        unconverged and was not patient already (``_patient_solved``)."""
+        if (loads.load > 1.0 + FORCE_TOLERANCE).any():
             # not a world whose last solve was patient already: the flag ``unconverged`` stays set
             # after a patient solve (it tells of the regular iterations), and a re-solve from the
             # same input would repeat that solve, bit for bit on the CPU (a stopped world that still
             # reads over its limit was so re-solved after each of the substep's later retries)
-            # a certainly over world that moved is retried with less motion (this solve is dropped);
-            # one that did not move (stopped or held) keeps this solve, whose forces must be right
-            moved = np.asarray(fraction) > 0.0
-            patient = over & ~(loads.certainly_over() & moved) & ~self._last_solve_converged() & ~self._patient_solved
+            patient, target = loads.patient_re_solve(fraction, ~self._last_solve_converged() & ~self._patient_solved)
             if patient.any():
-                target = np.where(moved, PATIENT_UPDATE_FRACTION * loads.deciding, 0.0)
                 number, loads = self._solve_substep(fraction, h, patient, worlds=patient, last=last,
                                                     patient_update=target)
         return number, loads.load
@@ -561,12 +517,7 @@ class PickupScene:
     def _read_loads(self) -> SolveLoads:
         """The last solve's loads from one download (``scene_kernels.solve_loads``); raises where
         its pad forces are not finite."""
-        loads = self._loads.numpy().copy()  # CPU: numpy() views
-        bad = loads[:, 3] == 0.0
-        if bad.any():  # the gripper's kernels would carry them into the jaw and the force limit
-            raise FloatingPointError(f"the solver returned non-finite pad forces in worlds {np.flatnonzero(bad).tolist()}")
-        return SolveLoads(start=loads[:, 0], held=loads[:, 1] > 0.0, load=loads[:, 2], error=loads[:, 4],
-                          deciding=loads[:, 5])
+        return SolveLoads.from_rows(self._loads.numpy().copy())  # CPU: numpy() views
 
     def _last_solve_converged(self) -> np.ndarray:
         """[W] bool: the last solve met the Newton tolerance in every substep and did not diverge
