@@ -8,6 +8,7 @@ after substep k (odd k included: the states alternate)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import gymnasium as gym
 import numpy as np
@@ -24,8 +25,8 @@ from contact_rollout import ExpertNoisyPress
 def _run(period_graphs: bool, substeps: int, steps: int, device: str = "cpu", modulus: float = 1e6):
     """W = 3 cuboid worlds (E = 1e6 by default): the expert, the expert with noise, and a world closing over
     the object and pressing it into the ground at full speed (its wrist at the force limit: first
-    tries over the limit, retries, patient re-solves). Returns every output array and the number
-    of substeps each step's graph accepted."""
+    tries over the limit, retries, patient re-solves). Returns every output array (also the world-solves
+    beyond one per world and substep, per step) and the number of substeps each step's graph accepted."""
     solver = dataclasses.replace(PickupConfig().solver, substeps=substeps)
     env = gym.make_vec("DeformablePickup-v0", num_envs=3, vectorization_mode="vector_entry_point", object="cuboid",
                        youngs_modulus=modulus, solver=solver, device=device)
@@ -33,11 +34,12 @@ def _run(period_graphs: bool, substeps: int, steps: int, device: str = "cpu", mo
     scene = env.unwrapped.scene
     scene.period_graphs = period_graphs
     policy = ExpertNoisyPress(env)
-    out, graphed = {}, []
+    out, graphed, extra = {}, [], []
     for k in range(steps):
-        before = scene.device_substeps
+        before, solves = scene.device_substeps, scene.world_solves
         obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
         graphed.append(scene.device_substeps - before)
+        extra.append(scene.world_solves - solves - scene.substeps * 3)
         out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
         out[f"{k}/reward"] = np.asarray(reward)
         out.update({f"{k}/info/{name}": np.asarray(v) for name, v in info.items()})
@@ -49,6 +51,7 @@ def _run(period_graphs: bool, substeps: int, steps: int, device: str = "cpu", mo
                  "pad_force"):
         out[f"state/{name}"] = getattr(scene.state, name).numpy().copy()
     out["world_solves"] = np.array(scene.world_solves)
+    out["extra_world_solves"] = np.array(extra)
     env.close()
     return out, np.array(graphed), scene.substeps
 
@@ -56,17 +59,20 @@ def _run(period_graphs: bool, substeps: int, steps: int, device: str = "cpu", mo
 @pytest.mark.parametrize("substeps", [4, 5])
 def test_a_period_on_the_device_gives_the_bits_of_substeps_from_the_host(substeps):
     """Bit for bit on the CPU, with 4 substeps (the env's) and 5 (odd: the period ends with a copy
-    back into the home state). The graph took whole periods, handed some to the host after an odd
-    and some after an even number of accepted substeps, and none in the reference."""
+    back into the home state), stiff cuboids (E = 1e7: retries in most pressing periods). The graph took whole periods, handed some to the host after an odd
+    and some after an even number of accepted substeps, and none in the reference; it took whole
+    some periods with a first try's patient re-solve (``first_try_patient``: a world over the limit
+    only with its force error, re-solved patiently and then under it)."""
     steps = 60
-    graphed_out, graphed, count = _run(True, substeps, steps)
-    host_out, host, _ = _run(False, substeps, steps)
+    graphed_out, graphed, count = _run(True, substeps, steps, modulus=1e7)
+    host_out, host, _ = _run(False, substeps, steps, modulus=1e7)
     assert count == substeps
     assert host.sum() == 0
     assert graphed[0] == 0  # the first period records the launches on the host
     assert (graphed == count).sum() >= steps // 2, graphed
     handed = graphed[(graphed < count) & (np.arange(steps) > 0)]
     assert (handed % 2 == 1).any() and (handed % 2 == 0).any(), graphed
+    assert ((graphed == count) & (graphed_out["extra_world_solves"] > 0)).any(), graphed_out["extra_world_solves"]
     assert graphed_out.keys() == host_out.keys()
     differ = [k for k in host_out if not np.array_equal(graphed_out[k], host_out[k], equal_nan=True)
               or graphed_out[k].dtype != host_out[k].dtype]
@@ -203,3 +209,61 @@ def test_the_patient_re_solve_is_asked_only_where_it_can_change_the_decision_or_
     patient, target = loads.patient_re_solve(fraction, allowed)
     assert patient.tolist() == [False, True, False, True, False, False]  # the last: converged, over: no re-solve can help
     assert target[1] == PATIENT_UPDATE_FRACTION * 2e-5 and target[3] == 0.0
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
+def test_the_graphs_patient_re_solve_is_the_hosts(device):
+    """``first_try_patient`` against the host's rule (``SolveLoads.patient_re_solve`` of the first
+    try's fraction, 0 where held, among the unconverged or diverged worlds; ``advance``'s stored
+    target, at least the Newton tolerance, in float32) world by world over random loads: under and
+    over the limit, with and without their error, held or moved, converged or not, a diverged
+    update (inf error); non-finite worlds are counted, never patient; ``patient_re_solve_gate``
+    opens only where a world is patient and none non-finite, and counts the re-solve."""
+    if device != "cpu" and not wp.is_cuda_available():
+        pytest.skip("no CUDA device")
+    from defgrasp_env.envs import scene_kernels as sk
+    from defgrasp_env.envs.limit_loads import PATIENT_UPDATE_FRACTION, SolveLoads
+
+    rng = np.random.default_rng(5)
+    w, tol = 400, 1e-5
+    rows = np.zeros((w, 6))
+    rows[:, 0] = rng.uniform(0.0, 1.2, w)
+    rows[:, 1] = rng.random(w) < 0.3  # held
+    rows[:, 4] = np.where(rng.random(w) < 0.4, 0.0, rng.uniform(0.0, 2.0, w))
+    rows[:, 2] = rng.uniform(0.0, 4.0, w) + rows[:, 4]
+    rows[:, 3] = 1.0
+    rows[:, 5] = np.where(rows[:, 2] < 1.0, rng.uniform(0.0, 1e-3, w), 0.0)
+    rows[:3, 4], rows[:3, 2] = np.inf, np.inf  # diverged
+    unconverged = (rng.random(w) < 0.6).astype(np.int32)
+    diverged = np.zeros(w, np.int32)
+    diverged[:3] = 1
+    loads = SolveLoads.from_rows(rows)
+    allowed = (unconverged != 0) | (diverged != 0)
+    patient, target = loads.patient_re_solve(np.where(loads.held, 0.0, 1.0), allowed)
+    assert 20 < patient.sum() < w - 20 and (patient & loads.held).any() and (patient & ~loads.held).any()
+
+    def launch(rows):
+        arr = functools.partial(wp.array, device=device)
+        out = [wp.zeros(w, dtype=int, device=device), wp.zeros(w, dtype=float, device=device),
+               wp.zeros(w, dtype=wp.int32, device=device), wp.zeros(6, dtype=wp.int32, device=device)]
+        wp.launch(sk.first_try_patient, dim=w, inputs=[arr(rows, dtype=solve_load_row), arr(unconverged, dtype=int),
+                                                        arr(diverged, dtype=int), FORCE_TOLERANCE,
+                                                        PATIENT_UPDATE_FRACTION, tol], outputs=out, device=device)
+        cond = wp.zeros(1, dtype=wp.int32, device=device)
+        wp.launch(sk.patient_re_solve_gate, dim=1, inputs=[], outputs=[out[3], cond], device=device)
+        return [a.numpy() for a in out], int(cond.numpy()[0])
+
+    (got_patient, got_update, marked, gate), cond = launch(rows)
+    assert np.array_equal(got_patient != 0, patient) and np.array_equal(marked != 0, patient)
+    assert np.array_equal(got_update, np.maximum(target, tol).astype(np.float32))
+    assert gate[sk.GATE_PATIENT] == patient.sum() and gate[sk.GATE_NONFINITE] == 0 and cond == 1
+    assert gate[sk.GATE_PATIENT_SOLVES] == 1 and gate[sk.GATE_PATIENT_WORLDS] == patient.sum()
+    bad = rows.copy()
+    bad[[5, 9], 3] = 0.0  # non-finite pad forces: the host raises, nothing is re-solved on the device
+    (got_patient, _, _, gate), cond = launch(bad)
+    assert gate[sk.GATE_NONFINITE] == 2 and cond == 0 and gate[sk.GATE_PATIENT_SOLVES] == 0
+    assert got_patient[[5, 9]].tolist() == [0, 0]
+    calm = rows.copy()
+    calm[:, 2] = 0.5  # none over: no re-solve
+    (got_patient, _, _, gate), cond = launch(calm)
+    assert not got_patient.any() and cond == 0 and gate[sk.GATE_PATIENT_WORLDS] == 0

@@ -38,10 +38,13 @@ from ..transforms import quat_to_matrix
 from ..wrist.force_limit import FORCE_TOLERANCE, limited_substep, tip_force_bound
 from .actions import max_flange_step
 from .config import PickupConfig
+from . import limit_loads
 from .limit_loads import SolveLoads
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model, rewrite_worlds, set_materials, slot_sizes
-from .scene_kernels import (close_gate_if_limited, gather_rows, mark_substep, open_period_gate, scatter_rows,
+from .scene_kernels import (GATE_OPEN, GATE_PATIENT_SOLVES, GATE_PATIENT_WORLDS, GATE_TRIED, close_gate_if_limited,
+                            begin_patient_re_solve, end_patient_re_solve, first_try_patient, gather_rows, mark_substep, open_period_gate,
+                            patient_re_solve_gate, scatter_rows,
                             solve_load_row, solve_loads, world_max, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
 
 @functools.lru_cache(maxsize=16)
@@ -170,7 +173,9 @@ class PickupScene:
         self._set_contact_stiffness()
         # a control period as one graph (``_period_on_device``): its gate (open, last substep tried),
         # the graphs by scalar key, the keys whose first period ran on the host
-        self._gate = wp.zeros(2, dtype=wp.int32, device=self.model.device)
+        self._gate = wp.zeros(6, dtype=wp.int32, device=self.model.device)  # ``scene_kernels.GATE_*``
+        self._patient_cond = wp.zeros(1, dtype=wp.int32, device=self.model.device)
+        self._first_try_patient = wp.zeros(self.num_worlds, dtype=wp.int32, device=self.model.device)
         self._period_graphs: dict = {}
         self._periods_recorded: set = set()
         self._period_graph_failed = False
@@ -354,9 +359,10 @@ class PickupScene:
         h = self.config.dt / count
         k, tried = self._period_on_device(count, h)
         for k in range(k, count):
-            if tried:  # the graph ran this substep's first try and stopped: the force limit decides here
+            if tried:  # the graph ran this substep's first try (and its patient re-solve) and stopped:
+                # the force limit decides here
                 first_try = (self._solves, self._read_loads())
-                self._patient_solved[:] = False  # the graph's first try solved every world, none patiently
+                self._patient_solved[:] = self._first_try_patient.numpy() != 0
                 tried = False
             else:
                 self.gripper.plan_substep(k, count, h)
@@ -399,19 +405,23 @@ class PickupScene:
 
     def _period_on_device(self, count: int, h: float) -> tuple[int, bool]:
         """Run the control period as one graph (where the solver captures graphs): per substep the
-        gripper's plan, the first try as planned, its loads, and, while no world's first try is
-        over an actuator limit (+ ``FORCE_TOLERANCE``) or has non-finite pad forces
-        (``close_gate_if_limited``), its acceptance; the graph skips what follows a substep that
-        needs the host's decision. Returns (the first substep not accepted, whether its first try
-        ran): (``count``, False) when the graph took the whole period. The same launches in the same
+        gripper's plan, the first try as planned, its loads, its patient re-solve where the host
+        would ask for one (``scene_kernels.first_try_patient``, as ``_patient_if_over``) and its
+        loads, and, while no world is over an actuator limit (+ ``FORCE_TOLERANCE``) or has
+        non-finite pad forces (``close_gate_if_limited``), its acceptance; the graph skips what
+        follows a substep that needs the host's decision (retries with less motion). Returns (the
+        first substep not accepted, whether its first try ran): (``count``, False) when the graph
+        took the whole period. The same launches in the same
         order as the host's loop (bit-identical on the CPU); one download of the gate. The first
         period with a set of scalars runs on the host (it loads the kernels and records the
         launches the graph replays); the graph is captured at the second."""
         if not (self.period_graphs and self.solver.graphs) or self._period_graph_failed:
             return 0, False
         gripper = self.gripper
-        # every scalar the graph's launches bake in (the gripper's plan reads the module's HOLD_COSINE)
-        key = (count, h, gripper.driver.config, gripper.wrist_force_limit, gripper_module.HOLD_COSINE)
+        # every scalar the graph's launches bake in (the gripper's plan reads the module's HOLD_COSINE,
+        # the first try's patient re-solve limit_loads' PATIENT_UPDATE_FRACTION)
+        key = (count, h, gripper.driver.config, gripper.wrist_force_limit, gripper_module.HOLD_COSINE,
+               limit_loads.PATIENT_UPDATE_FRACTION)
         graph = self._period_graphs.get(key)
         if graph is None:
             if key not in self._periods_recorded:
@@ -427,11 +437,12 @@ class PickupScene:
         self.solver.select_all_worlds()
         wp.capture_launch(graph)
         self.gripper.device_state_changed()
-        open_gate, tried = (int(v) for v in self._gate.numpy())
+        gate = self._gate.numpy()
+        open_gate, tried = int(gate[GATE_OPEN]), int(gate[GATE_TRIED])
         accepted = count if open_gate else tried
-        solves = accepted if open_gate else accepted + 1
-        self._solves += solves
-        self.world_solves += solves * self.num_worlds
+        first_tries = accepted if open_gate else accepted + 1
+        self._solves += first_tries + int(gate[GATE_PATIENT_SOLVES])
+        self.world_solves += first_tries * self.num_worlds + int(gate[GATE_PATIENT_WORLDS])
         self.device_substeps += accepted
         if accepted % 2:  # the graph's states alternate from the home state
             self.state, self._next_state = self._next_state, self.state
@@ -443,6 +454,15 @@ class PickupScene:
         wp.launch(open_period_gate, dim=1, inputs=[self._gate], device=d)  # loads the module before the capture
         states = (self.state, self._next_state)
 
+        s, w = self.solver.scratch, self.num_worlds
+
+        def patient_re_solve(src, dst, last):
+            # the first try's move stays: the host's re-solve moves by the same fraction
+            self._launches.launch(("begin patient",), begin_patient_re_solve, w, [s.patient], [s.solve_worlds])
+            self.solver.launch_advance(src, dst, self._control, h, full_outputs=last, patient=True)
+            self._launch_loads(dst)
+            self._launches.launch(("end patient",), end_patient_re_solve, w, [], [s.patient, s.solve_worlds])
+
         def first_try(k):
             src, dst = states[k % 2], states[(k + 1) % 2]
             self._launches.launch(("mark", k), mark_substep, 1, [k], [self._gate])
@@ -450,7 +470,14 @@ class PickupScene:
             self.gripper.move_as_planned()
             self.solver.launch_advance(src, dst, self._control, h, full_outputs=k == count - 1)
             self._launch_loads(dst)
-            self._launches.launch(("gate", FORCE_TOLERANCE), close_gate_if_limited, self.num_worlds,
+            tolerance = self.solver.config.newton_tolerance
+            self._launches.launch(("patient", FORCE_TOLERANCE, limit_loads.PATIENT_UPDATE_FRACTION, tolerance),
+                                  first_try_patient, w, [self._loads, s.unconverged, s.diverged, FORCE_TOLERANCE,
+                                                         limit_loads.PATIENT_UPDATE_FRACTION, tolerance],
+                                  [s.patient, s.patient_update, self._first_try_patient, self._gate])
+            self._launches.launch(("patient gate",), patient_re_solve_gate, 1, [], [self._gate, self._patient_cond])
+            wp.capture_if(self._patient_cond, on_true=functools.partial(patient_re_solve, src, dst, k == count - 1))
+            self._launches.launch(("gate", FORCE_TOLERANCE), close_gate_if_limited, w,
                                   [self._loads, FORCE_TOLERANCE], [self._gate])
 
         with scoped_capture(device=d, force_module_load=False) as capture:

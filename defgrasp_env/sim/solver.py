@@ -339,19 +339,22 @@ class ImplicitSolver:
         self._select_worlds(None)
 
     def launch_advance(self, state_in: State, state_out: State, control: Control, dt: float,
-                       full_outputs: bool = True) -> None:
-        """The launches of ``advance(state_in, state_out, control, dt, full_outputs=...)`` (every world, none
-        patient; ``state_in`` and ``state_out`` distinct) on the device's current stream, not its
-        own graph: for a caller capturing them into a larger graph (``PickupScene``'s control
-        period). Needs ``graphs`` (the loops' exit tests on the device) and every world selected
-        (``select_all_worlds``) when the launches run."""
+                       full_outputs: bool = True, patient: bool = False) -> None:
+        """The launches of ``advance(state_in, state_out, control, dt, full_outputs=...)`` (``state_in``
+        and ``state_out`` distinct) on the device's current stream, not its own graph: for a caller
+        capturing them into a larger graph (``PickupScene``'s control period). Needs ``graphs``
+        (the loops' exit tests on the device). The worlds solved are those ``scratch.solve_worlds``
+        selects when the launches run (all after ``select_all_worlds``; a caller's kernel may write
+        it); ``patient``: with ``config.patient_iterations`` extra iterations in the worlds
+        ``scratch.patient`` marks, down to their ``scratch.patient_update`` (written by the caller's
+        kernel as ``advance`` writes them; the caller clears ``patient`` after)."""
         if not self.graphs:
             raise RuntimeError("launch_advance needs a solver whose loops test on the device (graphs=True)")
         if state_in is state_out:
             raise ValueError("launch_advance needs distinct input and output states")
         check_range("dt", dt, 0.0, math.inf, "s")
         run, _ = self._substep_launches(dt / self.config.substeps, state_in, state_out, control)
-        self._advance(run, state_in, state_out, control, False, full_outputs)
+        self._advance(run, state_in, state_out, control, patient, full_outputs)
 
     # -- internals ---------------------------------------------------------------------------
     def _select_worlds(self, worlds: np.ndarray | None) -> bool:
