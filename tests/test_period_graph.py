@@ -40,6 +40,7 @@ def _run(period_graphs: bool, substeps: int, steps: int, device: str = "cpu", mo
         obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
         graphed.append(scene.device_substeps - before)
         extra.append(scene.world_solves - solves - scene.substeps * 3)
+        assert not scene.solver.scratch.patient.numpy().any()  # no patient mark outlives its solve
         out.update({f"{k}/obs/{name}": np.asarray(v) for name, v in obs.items()})
         out[f"{k}/reward"] = np.asarray(reward)
         out.update({f"{k}/info/{name}": np.asarray(v) for name, v in info.items()})

@@ -452,15 +452,16 @@ class PickupScene:
         """The graph of ``_period_on_device`` from the home state (captured once per key)."""
         d = self.model.device
         wp.launch(open_period_gate, dim=1, inputs=[self._gate], device=d)  # loads the module before the capture
-        states = (self.state, self._next_state)
-
-        s, w = self.solver.scratch, self.num_worlds
+        states, s, w = (self.state, self._next_state), self.solver.scratch, self.num_worlds
 
         def patient_re_solve(src, dst, last):
             # the first try's move stays: the host's re-solve moves by the same fraction
             self._launches.launch(("begin patient",), begin_patient_re_solve, w, [s.patient], [s.solve_worlds])
             self.solver.launch_advance(src, dst, self._control, h, full_outputs=last, patient=True)
             self._launch_loads(dst)
+            end_patient()
+
+        def end_patient():  # also where none ran: a first try's patient marks never outlive it
             self._launches.launch(("end patient",), end_patient_re_solve, w, [], [s.patient, s.solve_worlds])
 
         def first_try(k):
@@ -476,7 +477,8 @@ class PickupScene:
                                                          limit_loads.PATIENT_UPDATE_FRACTION, tolerance],
                                   [s.patient, s.patient_update, self._first_try_patient, self._gate])
             self._launches.launch(("patient gate",), patient_re_solve_gate, 1, [], [self._gate, self._patient_cond])
-            wp.capture_if(self._patient_cond, on_true=functools.partial(patient_re_solve, src, dst, k == count - 1))
+            wp.capture_if(self._patient_cond, on_true=functools.partial(patient_re_solve, src, dst, k == count - 1),
+                          on_false=end_patient)
             self._launches.launch(("gate", FORCE_TOLERANCE), close_gate_if_limited, w,
                                   [self._loads, FORCE_TOLERANCE], [self._gate])
 
