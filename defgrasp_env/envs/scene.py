@@ -16,16 +16,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
 from ..gripper import Gripper, pad_reach
-from ..gripper import gripper as gripper_module
 from ..layout import NUM_KEYPOINTS
-from ..sim.launch_lock import scoped_capture
 from ..sim.materials import Material
 from ..sim.meshing import OBJECT_SHAPES, TetMesh, make_object_mesh, mesh_from_surface
 from ..sim.launch_cache import LaunchCache
@@ -38,14 +35,12 @@ from ..transforms import quat_to_matrix
 from ..wrist.force_limit import FORCE_TOLERANCE, limited_substep, tip_force_bound
 from .actions import max_flange_step
 from .config import PickupConfig
-from . import limit_loads
 from .limit_loads import SolveLoads
 from .readouts import SceneReadouts, StepReadout
 from .world_models import assemble_model, rewrite_worlds, set_materials, slot_sizes
-from .scene_kernels import (GATE_OPEN, GATE_PATIENT_SOLVES, GATE_PATIENT_WORLDS, GATE_TRIED, close_gate_if_limited,
-                            begin_patient_re_solve, end_patient_re_solve, first_try_patient, gather_rows, mark_substep, open_period_gate,
-                            patient_re_solve_gate, scatter_rows,
-                            solve_load_row, solve_loads, world_max, zero_float_rows_of_worlds, zero_vec3_rows_of_worlds)
+from .period_graph import PeriodGraph
+from .scene_kernels import (gather_rows, scatter_rows, solve_load_row, solve_loads, world_max, zero_float_rows_of_worlds,
+                            zero_vec3_rows_of_worlds)
 
 @functools.lru_cache(maxsize=16)
 def object_mesh(name: str, resolution: float | None) -> TetMesh:
@@ -135,7 +130,7 @@ class PickupScene:
         travel = max_pad_travel(linear, angle, pad_reach(), config.gripper.closing_speed * config.dt)
         self.substeps = substeps_for_travel(travel, config.solver.substeps)
         self._gripper = Gripper(config.gripper, self.num_worlds, config.device, config.wrist_force_limit)
-        #: run each control period as one graph where the solver captures graphs (``_period_on_device``;
+        #: run each control period as one graph where the solver captures graphs (``PeriodGraph``;
         #: the same results, bit for bit on the CPU); False: substep by substep from the host (a
         #: benchmark timing each solve on its own sets it)
         self.period_graphs = True
@@ -171,19 +166,14 @@ class PickupScene:
         #: solve's force error), set again where a reset changes objects or materials
         self._contact_stiffness = wp.zeros(self.num_worlds, dtype=wp.float32, device=self.model.device)
         self._set_contact_stiffness()
-        # a control period as one graph (``_period_on_device``): its gate (open, last substep tried),
-        # the graphs by scalar key, the keys whose first period ran on the host
-        self._gate = wp.zeros(6, dtype=wp.int32, device=self.model.device)  # ``scene_kernels.GATE_*``
-        self._patient_cond = wp.zeros(1, dtype=wp.int32, device=self.model.device)
-        self._first_try_patient = wp.zeros(self.num_worlds, dtype=wp.int32, device=self.model.device)
-        self._period_graphs: dict = {}
-        self._periods_recorded: set = set()
-        self._period_graph_failed = False
         #: substeps accepted inside a control period's graph since the scene was built (the others
-        #: ran substep by substep on the host: the first period, and from a first try that needed the
-        #: force limit's decision on)
+        #: ran substep by substep on the host: the first period with a set of scalars, and all where
+        #: the solver captures no graphs or ``period_graphs`` is off)
         self.device_substeps = 0
         self._launches = LaunchCache(self.model.device)  # per-solve launches, recorded once and replayed
+        # a control period as one graph where the solver captures graphs (``period_graph``)
+        self._period = PeriodGraph(self.solver, self.gripper, self._control, self._loads, self._launch_loads,
+                                   self._accept_launches, self._launches)
         self._solves = 0  # solves run by ``_solve_substep`` (the wrist limit's accepted solve is its last)
         #: world-solves run since the scene was built: per solver call, the worlds it computed (all of
         #: them in a substep's first solve, those the force limit retries or re-solves patiently after)
@@ -352,22 +342,26 @@ class PickupScene:
 
     def _advance_period(self) -> SolveStats:
         """The control period's substeps after the gripper's ``begin_step``: as one graph on the
-        device while no world's first try needs the force limit (``_period_on_device``), then the
-        rest here, each substep's first try followed by the force limit's decision on the host."""
+        device (``period_graph.PeriodGraph``: the same launches and decisions) where the solver
+        captures graphs, else here, each substep's first try followed by the force limit's
+        decisions on the host."""
         self._readout = None
         count = self.substeps
         h = self.config.dt / count
-        k, tried = self._period_on_device(count, h)
-        for k in range(k, count):
-            if tried:  # the graph ran this substep's first try (and its patient re-solve) and stopped:
-                # the force limit decides here
-                first_try = (self._solves, self._read_loads())
-                self._patient_solved[:] = self._first_try_patient.numpy() != 0
-                tried = False
-            else:
+        run = self._period.run((self.state, self._next_state), count, h) if self.period_graphs else None
+        if run is not None:
+            self._solves += run.solves
+            self.world_solves += run.world_solves
+            self.device_substeps += run.accepted
+            if run.accepted % 2:  # the graph's states alternate from the home state
+                self.state, self._next_state = self._next_state, self.state
+            if run.accepted < count:  # a solve left non-finite pad forces: the graph stopped there
+                self._read_loads()
+                raise RuntimeError("the period graph stopped on a solve whose loads read finite")
+        else:
+            for k in range(count):
                 self.gripper.plan_substep(k, count, h)
-                first_try = self._solve_substep(None, h, last=k == count - 1)  # as planned (held worlds stay)
-            self._limit_and_accept(k, h, *first_try)
+                self._limit_and_accept(k, h, *self._solve_substep(None, h, last=k == count - 1))
         if self.state is not self._home_state:  # an odd number of substeps
             self._home_state.copy_from(self.state)
             self.state, self._next_state = self._home_state, self.state
@@ -402,92 +396,6 @@ class PickupScene:
         sensed, its move's fraction the limit's scale (launches only)."""
         self._report.fold(self.solver.scratch, self.solver.config.penetration_bound, first=k == 0)
         self.gripper.sense(accepted.pad_normal_force, accepted.pad_force, record_limit=True)
-
-    def _period_on_device(self, count: int, h: float) -> tuple[int, bool]:
-        """Run the control period as one graph (where the solver captures graphs): per substep the
-        gripper's plan, the first try as planned, its loads, its patient re-solve where the host
-        would ask for one (``scene_kernels.first_try_patient``, as ``_patient_if_over``) and its
-        loads, and, while no world is over an actuator limit (+ ``FORCE_TOLERANCE``) or has
-        non-finite pad forces (``close_gate_if_limited``), its acceptance; the graph skips what
-        follows a substep that needs the host's decision (retries with less motion). Returns (the
-        first substep not accepted, whether its first try ran): (``count``, False) when the graph
-        took the whole period. The same launches in the same
-        order as the host's loop (bit-identical on the CPU); one download of the gate. The first
-        period with a set of scalars runs on the host (it loads the kernels and records the
-        launches the graph replays); the graph is captured at the second."""
-        if not (self.period_graphs and self.solver.graphs) or self._period_graph_failed:
-            return 0, False
-        gripper = self.gripper
-        # every scalar the graph's launches bake in (the gripper's plan reads the module's HOLD_COSINE,
-        # the first try's patient re-solve limit_loads' PATIENT_UPDATE_FRACTION)
-        key = (count, h, gripper.driver.config, gripper.wrist_force_limit, gripper_module.HOLD_COSINE,
-               limit_loads.PATIENT_UPDATE_FRACTION)
-        graph = self._period_graphs.get(key)
-        if graph is None:
-            if key not in self._periods_recorded:
-                self._periods_recorded.add(key)
-                return 0, False
-            try:
-                graph = self._period_graphs[key] = self._capture_period(count, h)
-            except RuntimeError as exc:
-                self._period_graph_failed = True
-                warnings.warn(f"capturing a control period as a graph failed on {self.model.device} ({exc}); "
-                              "stepping substep by substep from now on", RuntimeWarning, stacklevel=3)
-                return 0, False
-        self.solver.select_all_worlds()
-        wp.capture_launch(graph)
-        self.gripper.device_state_changed()
-        gate = self._gate.numpy()
-        open_gate, tried = int(gate[GATE_OPEN]), int(gate[GATE_TRIED])
-        accepted = count if open_gate else tried
-        first_tries = accepted if open_gate else accepted + 1
-        self._solves += first_tries + int(gate[GATE_PATIENT_SOLVES])
-        self.world_solves += first_tries * self.num_worlds + int(gate[GATE_PATIENT_WORLDS])
-        self.device_substeps += accepted
-        if accepted % 2:  # the graph's states alternate from the home state
-            self.state, self._next_state = self._next_state, self.state
-        return accepted, not open_gate
-
-    def _capture_period(self, count: int, h: float):
-        """The graph of ``_period_on_device`` from the home state (captured once per key)."""
-        d = self.model.device
-        wp.launch(open_period_gate, dim=1, inputs=[self._gate], device=d)  # loads the module before the capture
-        states, s, w = (self.state, self._next_state), self.solver.scratch, self.num_worlds
-
-        def patient_re_solve(src, dst, last):
-            # the first try's move stays: the host's re-solve moves by the same fraction
-            self._launches.launch(("begin patient",), begin_patient_re_solve, w, [s.patient], [s.solve_worlds])
-            self.solver.launch_advance(src, dst, self._control, h, full_outputs=last, patient=True)
-            self._launch_loads(dst)
-            end_patient()
-
-        def end_patient():  # also where none ran: a first try's patient marks never outlive it
-            self._launches.launch(("end patient",), end_patient_re_solve, w, [], [s.patient, s.solve_worlds])
-
-        def first_try(k):
-            src, dst = states[k % 2], states[(k + 1) % 2]
-            self._launches.launch(("mark", k), mark_substep, 1, [k], [self._gate])
-            self.gripper.plan_substep(k, count, h)
-            self.gripper.move_as_planned()
-            self.solver.launch_advance(src, dst, self._control, h, full_outputs=k == count - 1)
-            self._launch_loads(dst)
-            tolerance = self.solver.config.newton_tolerance
-            self._launches.launch(("patient", FORCE_TOLERANCE, limit_loads.PATIENT_UPDATE_FRACTION, tolerance),
-                                  first_try_patient, w, [self._loads, s.unconverged, s.diverged, FORCE_TOLERANCE,
-                                                         limit_loads.PATIENT_UPDATE_FRACTION, tolerance],
-                                  [s.patient, s.patient_update, self._first_try_patient, self._gate])
-            self._launches.launch(("patient gate",), patient_re_solve_gate, 1, [], [self._gate, self._patient_cond])
-            wp.capture_if(self._patient_cond, on_true=functools.partial(patient_re_solve, src, dst, k == count - 1),
-                          on_false=end_patient)
-            self._launches.launch(("gate", FORCE_TOLERANCE), close_gate_if_limited, w,
-                                  [self._loads, FORCE_TOLERANCE], [self._gate])
-
-        with scoped_capture(device=d, force_module_load=False) as capture:
-            self._launches.launch(("open",), open_period_gate, 1, [], [self._gate])
-            for k in range(count):
-                wp.capture_if(self._gate, on_true=functools.partial(first_try, k))
-                wp.capture_if(self._gate, on_true=functools.partial(self._accept_launches, k, states[(k + 1) % 2]))
-        return capture.graph
 
     def _patient_if_over(self, number: int, loads: SolveLoads, fraction: np.ndarray, h: float, last: bool):
         """(solve number, load [W]) of a solve (of ``fraction`` [W] of the planned motion), re-solved

@@ -2,7 +2,8 @@
 state remap of a rebuild (worlds whose object changed at a reset), the per-world readouts of a
 step (feature point, keypoints, finiteness, object material inside a pad), which reduce the full
 state to small [W, ...] arrays,
-the force limit's loads of a solve and the readouts, each packed for one download.
+the force limit's loads of a solve and the readouts, each packed for one download (the limit's
+decisions on the device: ``limit_kernels``).
 Kernels take arrays and scalars only; the launchers are in ``scene.py`` / ``readouts.py``."""
 
 from __future__ import annotations
@@ -189,103 +190,3 @@ def pack_readouts(feature_position: wp.array(dtype=wp.vec3d), feature_velocity: 
             out[w, 6 + 3 * k + i] = wp.float64(p[i])
     out[w, 6 + 3 * per_world] = wp.float64(finite[w])
     out[w, 7 + 3 * per_world] = wp.float64(pad_embedding[w])
-
-
-#: the entries of a control period graph's ``gate`` (``PickupScene._period_on_device``): open (its
-#: substeps may run on the device), the substep whose first try ran last, the patient re-solves
-#: run and the worlds they solved (``first_try_patient``), and, per substep, its first try's
-#: patient worlds and non-finite worlds (``patient_re_solve_gate``)
-GATE_OPEN, GATE_TRIED, GATE_PATIENT_SOLVES, GATE_PATIENT_WORLDS, GATE_PATIENT, GATE_NONFINITE = (
-    wp.constant(i) for i in range(6))
-
-
-@wp.kernel
-def open_period_gate(gate: wp.array(dtype=wp.int32)):
-    """``gate`` = (1, 0, ...) at the start of a control period captured as one graph
-    (``PickupScene``): its substeps may run on the device; none has been tried yet."""
-    for i in range(6):
-        gate[i] = 0
-    gate[GATE_OPEN] = 1
-
-
-@wp.kernel
-def mark_substep(k: int, gate: wp.array(dtype=wp.int32)):
-    """Substep ``k``'s first try is the last one the period's graph ran; none of its worlds is
-    patient or non-finite yet."""
-    gate[GATE_TRIED] = k
-    gate[GATE_PATIENT] = 0
-    gate[GATE_NONFINITE] = 0
-
-
-@wp.kernel
-def first_try_patient(loads: wp.array(dtype=solve_load_row), unconverged: wp.array(dtype=int),
-                      diverged: wp.array(dtype=int), tolerance: wp.float64, update_fraction: wp.float64,
-                      newton_tolerance: wp.float64, patient: wp.array(dtype=int), patient_update: wp.array(dtype=float),
-                      marked: wp.array(dtype=wp.int32), gate: wp.array(dtype=wp.int32)):
-    """The patient re-solve of a substep's first try, chosen on the device as the host chooses it
-    (``limit_loads.SolveLoads.patient_re_solve`` with the first try's fraction, 0 where held and 1
-    elsewhere, among the worlds whose solve did not converge or diverged): world w is patient
-    where its load (``loads[w][2]``) is over 1 + ``tolerance``, unless it moved and reads over
-    even less twice its error; its update target is ``update_fraction`` x its deciding update
-    where it moved, 0 where held, at least ``newton_tolerance`` (as ``ImplicitSolver.advance``
-    stores it). Writes the solver's ``patient`` and ``patient_update``, ``marked`` (the patient
-    worlds, for the host), and counts the patient and the non-finite worlds into ``gate``."""
-    w = wp.tid()
-    row = loads[w]
-    limit = wp.float64(1.0) + tolerance
-    moved = row[1] <= wp.float64(0.0)
-    p = int(0)
-    if row[3] != wp.float64(1.0):
-        wp.atomic_add(gate, GATE_NONFINITE, 1)
-    elif row[2] > limit and (unconverged[w] != 0 or diverged[w] != 0):
-        error = row[4]
-        certainly = wp.isfinite(error) and row[2] - wp.float64(2.0) * error > limit
-        if not (certainly and moved):
-            p = 1
-            wp.atomic_add(gate, GATE_PATIENT, 1)
-    target = wp.float64(0.0)
-    if moved:
-        target = update_fraction * row[5]
-    patient[w] = p
-    patient_update[w] = wp.float32(wp.max(target, newton_tolerance))
-    marked[w] = wp.int32(p)
-
-
-@wp.kernel
-def patient_re_solve_gate(gate: wp.array(dtype=wp.int32), cond: wp.array(dtype=wp.int32)):
-    """``cond[0]`` = 1 where the substep's first try has patient worlds and none non-finite (the
-    host raises on those before anything else): the graph re-solves them; then the re-solve and
-    its worlds are counted in ``gate``."""
-    go = wp.int32(0)
-    if gate[GATE_PATIENT] > 0 and gate[GATE_NONFINITE] == 0:
-        go = wp.int32(1)
-        gate[GATE_PATIENT_SOLVES] = gate[GATE_PATIENT_SOLVES] + 1
-        gate[GATE_PATIENT_WORLDS] = gate[GATE_PATIENT_WORLDS] + gate[GATE_PATIENT]
-    cond[0] = go
-
-
-@wp.kernel
-def begin_patient_re_solve(patient: wp.array(dtype=int), solve_worlds: wp.array(dtype=int)):
-    """Before a patient re-solve in a graph: it solves the patient worlds only (``advance(worlds=patient)``)."""
-    w = wp.tid()
-    solve_worlds[w] = patient[w]
-
-
-@wp.kernel
-def end_patient_re_solve(patient: wp.array(dtype=int), solve_worlds: wp.array(dtype=int)):
-    """After a patient re-solve in a graph: no world patient, every world solved by the next solve
-    (as ``ImplicitSolver.advance`` leaves and ``select_all_worlds`` sets them)."""
-    w = wp.tid()
-    patient[w] = 0
-    solve_worlds[w] = 1
-
-
-@wp.kernel
-def close_gate_if_limited(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64, gate: wp.array(dtype=wp.int32)):
-    """``gate[0] = 0`` where world w's first try needs the actuator force limit's decision on the
-    host (``wrist.force_limit.limited_substep``, ``PickupScene._patient_if_over``): its load
-    (``loads[w][2]``, ``solve_loads``) above 1 + ``tolerance`` (a retry or a patient re-solve), or
-    pad forces that are not finite (``loads[w][3]`` = 0: the host raises). NaN loads close it too."""
-    load = loads[wp.tid()]
-    if not (load[3] == wp.float64(1.0) and load[2] <= wp.float64(1.0) + tolerance):
-        gate[GATE_OPEN] = 0

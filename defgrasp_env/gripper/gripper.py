@@ -268,6 +268,13 @@ class Gripper:
         return self._limits
 
     @property
+    def move_fraction(self) -> wp.array:
+        """[W] float64 Warp array: the fraction of the planned substep motion that
+        :meth:`move_as_planned` applies (written by :meth:`plan_substep` and :meth:`move`; a
+        caller's kernel may write it in between: the force limit on the device)."""
+        return self._fraction
+
+    @property
     def q(self) -> np.ndarray:
         return self._numpy("_q")
 
