@@ -1,9 +1,9 @@
-"""A control period as one graph (``PickupScene._period_on_device``): the scene's substeps replayed
-on the device while no world's first try needs the actuator force limit's decision, the rest
-substep by substep from the host. The reference is the same scene stepping every substep from the
-host (``period_graphs = False``): the same kernels in the same order, so on the CPU every output
-must be equal bit for bit, through periods the graph takes whole and periods it hands to the host
-after substep k (odd k included: the states alternate)."""
+"""A control period as one graph (``period_graph.PeriodGraph``): the scene's substeps replayed on
+the device with the actuator force limit's decisions (patient re-solves, retries with less
+motion) taken there by the host's rules (``limit_kernels``). The reference is the same scene
+stepping every substep from the host (``period_graphs = False``): the same kernels and decisions
+in the same order, so on the CPU every output must be equal bit for bit; the decision kernels are
+also checked one by one against the host's functions."""
 
 from __future__ import annotations
 
@@ -81,22 +81,32 @@ def test_a_period_on_the_device_gives_the_bits_of_substeps_from_the_host(substep
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
 def test_the_gate_closes_exactly_where_the_host_would_raise(device):
-    """``close_gate_if_nonfinite`` against the host (``SolveLoads.from_rows`` raises on non-finite
-    pad forces): loads under, at, over and far over the limit keep it open (the limit's decisions
-    are on the device), non-finite pad forces or a NaN load close it."""
+    """``count_nonfinite`` + ``close_gate_if_nonfinite`` against the host (``SolveLoads.from_rows``
+    raises on non-finite pad forces, whatever the load): loads under, at, over and far over the
+    limit, inf and NaN keep the gate open where the host reads them (the limit's decisions are on
+    the device), non-finite pad forces close it; the count stays until the period's next open."""
+    from defgrasp_env.envs.limit_loads import SolveLoads
+
     if device != "cpu" and not wp.is_cuda_available():
         pytest.skip("no CUDA device")
-    cases = [  # (load, finite, gate stays open)
-        (0.0, 1.0, True), (1.0, 1.0, True), (1.0 + FORCE_TOLERANCE, 1.0, True), (1e6, 1.0, True),
-        (np.inf, 1.0, True), (np.nan, 1.0, False), (0.5, 0.0, False),
-    ]
-    for load, finite, stays_open in cases:
-        for others in (0, 3):  # the world alone, or among worlds that pass
-            rows = [(0.2, 0.0, 0.5, 1.0, 0.0, 0.0)] * others + [(0.9, 1.0, load, finite, 0.0, 0.0)]
-            loads = wp.array(np.array(rows, dtype=np.float64), dtype=solve_load_row, device=device)
-            gate = wp.array(np.array([1, 7], dtype=np.int32), dtype=wp.int32, device=device)
-            wp.launch(lk.close_gate_if_nonfinite, dim=len(rows), inputs=[loads], outputs=[gate], device=device)
-            assert gate.numpy().tolist() == [int(stays_open), 7], (load, finite, others)
+    for load in (0.0, 1.0, 1.0 + FORCE_TOLERANCE, 1e6, np.inf, np.nan):
+        for finite in (1.0, 0.0):
+            for others in (0, 3):  # the world alone, or among worlds that pass
+                rows = np.array([(0.2, 0.0, 0.5, 1.0, 0.0, 0.0)] * others + [(0.9, 1.0, load, finite, 0.0, 0.0)])
+                try:
+                    SolveLoads.from_rows(rows)
+                    raises = False
+                except FloatingPointError:
+                    raises = True
+                loads = wp.array(rows, dtype=solve_load_row, device=device)
+                gate = wp.zeros(lk.GATE_SIZE, dtype=wp.int32, device=device)
+                wp.launch(lk.open_period_gate, dim=1, inputs=[], outputs=[gate], device=device)
+                wp.launch(lk.count_nonfinite, dim=len(rows), inputs=[loads], outputs=[gate], device=device)
+                wp.launch(lk.mark_substep, dim=1, inputs=[2], outputs=[gate], device=device)
+                wp.launch(lk.close_gate_if_nonfinite, dim=1, inputs=[], outputs=[gate], device=device)
+                got = gate.numpy()
+                assert got[lk.GATE_OPEN] == int(not raises) and got[lk.GATE_NONFINITE] == int(raises), (load, finite)
+                assert got[lk.GATE_SUBSTEP] == 2
 
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
@@ -173,6 +183,9 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
     assert np.array_equal(state.scale.numpy(), host_scale)
     assert np.array_equal(load_of(device_trials[-1]), host_load)
     assert gate.numpy()[lk.GATE_SOLVES] == len(host_trials) - 1
+    # the worlds each retry re-solves: those whose fraction changed since their last solve
+    changed_worlds = sum(int(np.count_nonzero(b != a)) for a, b in zip(host_trials, host_trials[1:]))
+    assert gate.numpy()[lk.GATE_WORLD_SOLVES] == changed_worlds > 0
 
 
 @pytest.mark.cuda
@@ -292,9 +305,9 @@ def test_the_graphs_patient_re_solve_is_the_hosts(device):
     not patient; ``advance``'s stored target, at least the Newton tolerance, in float32) world by
     world over random loads: under and over the limit, with and without their error, moved or not
     (fraction 0, 1 or a retry's), converged or not, patient already or not, a diverged update (inf
-    error); a first try clears the patient marks; non-finite worlds are counted, never patient;
-    ``patient_gate`` opens only where a world is patient and none non-finite, and counts the
-    re-solve."""
+    error); a first try clears the patient marks; non-finite worlds are never patient;
+    ``patient_gate`` opens only where a world is patient and no solve was non-finite, and counts
+    the re-solve."""
     if device != "cpu" and not wp.is_cuda_available():
         pytest.skip("no CUDA device")
     from defgrasp_env.envs.limit_loads import PATIENT_UPDATE_FRACTION, SolveLoads
@@ -337,14 +350,20 @@ def test_the_graphs_patient_re_solve_is_the_hosts(device):
         got_patient, got_update, counted, gate, cond = launch(rows, first)
         assert np.array_equal(got_patient != 0, patient)
         assert np.array_equal(got_update, np.maximum(target, tol).astype(np.float32))
-        assert counted[lk.GATE_PATIENT] == patient.sum() and counted[lk.GATE_NONFINITE] == 0 and cond == 1
+        assert counted[lk.GATE_PATIENT] == patient.sum() and cond == 1
         assert gate[lk.GATE_SOLVES] == 1 and gate[lk.GATE_WORLD_SOLVES] == patient.sum()
         assert gate[lk.GATE_PATIENT] == 0  # cleared for the next choice
     bad = rows.copy()
-    bad[[5, 9], 3] = 0.0  # non-finite pad forces: the host raises, nothing is re-solved on the device
-    got_patient, _, counted, gate, cond = launch(bad, True)
-    assert counted[lk.GATE_NONFINITE] == 2 and cond == 0 and gate[lk.GATE_SOLVES] == 0
+    bad[[5, 9], 3] = 0.0  # non-finite pad forces: never patient (the host raises on them)
+    got_patient, _, counted, _, _ = launch(bad, True)
+    first_patient, _ = loads.patient_re_solve(fraction, allowed)
     assert got_patient[[5, 9]].tolist() == [0, 0]
+    assert counted[lk.GATE_PATIENT] == first_patient.sum() - first_patient[[5, 9]].sum()
+    stopped = wp.zeros(lk.GATE_SIZE, dtype=wp.int32, device=device)
+    stopped.assign(np.array([1, 0, 0, 0, 3, 1] + [0] * (lk.GATE_SIZE - 6), np.int32))  # 3 patient, a non-finite solve
+    cond = wp.ones(1, dtype=wp.int32, device=device)
+    wp.launch(lk.patient_gate, dim=1, inputs=[], outputs=[stopped, cond], device=device)
+    assert cond.numpy()[0] == 0 and stopped.numpy()[lk.GATE_SOLVES] == 0 and stopped.numpy()[lk.GATE_NONFINITE] == 1
     calm = rows.copy()
     calm[:, 2] = 0.5  # none over: no re-solve
     got_patient, _, _, gate, cond = launch(calm, True)

@@ -54,9 +54,9 @@ def choose_patient(loads: wp.array(dtype=solve_load_row), fraction: wp.array(dty
     substep's first try, which clears those marks): world w is patient where its load
     (``loads[w][2]``) is over 1 + ``tolerance``, unless it moved and reads over even less twice
     its error; its update target is ``update_fraction`` x its deciding update where it moved, 0
-    where not, at least ``newton_tolerance`` (as ``ImplicitSolver.advance`` stores it). Writes the
-    solver's ``patient`` and ``patient_update``; counts the patient and the non-finite worlds into
-    ``gate``."""
+    where not, at least ``newton_tolerance`` (as ``ImplicitSolver.advance`` stores it); a world
+    with non-finite pad forces never (``count_nonfinite`` stops the substep). Writes the solver's
+    ``patient`` and ``patient_update``; counts the patient worlds into ``gate``."""
     w = wp.tid()
     if first != 0:
         patient_solved[w] = 0
@@ -64,9 +64,8 @@ def choose_patient(loads: wp.array(dtype=solve_load_row), fraction: wp.array(dty
     limit = wp.float64(1.0) + tolerance
     moved = fraction[w] > wp.float64(0.0)
     p = int(0)
-    if row[3] != wp.float64(1.0):
-        wp.atomic_add(gate, GATE_NONFINITE, 1)
-    elif row[2] > limit and (unconverged[w] != 0 or diverged[w] != 0) and patient_solved[w] == 0:
+    if row[3] == wp.float64(1.0) and row[2] > limit and (unconverged[w] != 0 or diverged[w] != 0) \
+            and patient_solved[w] == 0:
         error = row[4]
         certainly = wp.isfinite(error) and row[2] - wp.float64(2.0) * error > limit
         if not (certainly and moved):
@@ -80,16 +79,25 @@ def choose_patient(loads: wp.array(dtype=solve_load_row), fraction: wp.array(dty
 
 
 @wp.kernel
+def count_nonfinite(loads: wp.array(dtype=solve_load_row), gate: wp.array(dtype=wp.int32)):
+    """Counts into ``gate`` the worlds whose solve left non-finite pad forces (``loads[w][3]`` not
+    1), where the host raises (``SolveLoads.from_rows``): launched after every solve's loads, the
+    count stays until the period's next open, and every later decision stands still on it."""
+    if loads[wp.tid()][3] != wp.float64(1.0):
+        wp.atomic_add(gate, GATE_NONFINITE, 1)
+
+
+@wp.kernel
 def patient_gate(gate: wp.array(dtype=wp.int32), cond: wp.array(dtype=wp.int32)):
-    """``cond[0]`` = 1 where the last ``choose_patient`` found patient worlds and none non-finite
-    (the host raises on those): the graph re-solves them, counted as a solve of that many worlds."""
+    """``cond[0]`` = 1 where the last ``choose_patient`` found patient worlds and no solve of the
+    period left non-finite pad forces (the host raises there): the graph re-solves them, counted as
+    a solve of that many worlds."""
     go = wp.int32(0)
     if gate[GATE_PATIENT] > 0 and gate[GATE_NONFINITE] == 0:
         go = wp.int32(1)
         gate[GATE_SOLVES] = gate[GATE_SOLVES] + 1
         gate[GATE_WORLD_SOLVES] = gate[GATE_WORLD_SOLVES] + gate[GATE_PATIENT]
     gate[GATE_PATIENT] = 0
-    gate[GATE_NONFINITE] = 0
     cond[0] = go
 
 
@@ -116,8 +124,10 @@ def end_patient_solve(patient: wp.array(dtype=int), patient_solved: wp.array(dty
 def regula_falsi(lo: wp.float64, hi: wp.float64, f_lo: wp.float64, f_hi: wp.float64, limit: wp.float64):
     """``wrist.force_limit.next_scale``: the fraction in (lo, hi) where the load, linear between
     (lo, f_lo) and (hi, f_hi), reaches ``limit``, 10 % of the bracket away from either end."""
-    frac = (limit - f_lo) / wp.max(f_hi - f_lo, wp.float64(1e-12))
-    return lo + (hi - lo) * wp.min(wp.max(frac, wp.float64(0.1)), wp.float64(0.9))
+    span = f_hi - f_lo
+    frac = (limit - f_lo) / wp.where(span < wp.float64(1e-12), wp.float64(1e-12), span)  # NaN stays, as in numpy
+    frac = wp.where(frac < wp.float64(0.1), wp.float64(0.1), wp.where(frac > wp.float64(0.9), wp.float64(0.9), frac))
+    return lo + (hi - lo) * frac
 
 
 @wp.struct
@@ -153,7 +163,7 @@ def limit_begin(loads: wp.array(dtype=solve_load_row), fraction: wp.array(dtype=
     s.scale[w] = f
     if row[2] > wp.float64(1.0) * (wp.float64(1.0) + tolerance) and f > wp.float64(0.0):
         s.lo[w] = wp.float64(0.0)
-        s.f_lo[w] = wp.min(row[0], wp.float64(1.0))
+        s.f_lo[w] = wp.where(row[0] > wp.float64(1.0), wp.float64(1.0), row[0])  # np.minimum: NaN stays
         s.hi[w] = f
         s.f_hi[w] = row[2]
         s.side[w] = wp.float64(0.0)
@@ -167,12 +177,12 @@ def limit_begin(loads: wp.array(dtype=solve_load_row), fraction: wp.array(dtype=
 @wp.kernel
 def limit_gate(gate: wp.array(dtype=wp.int32), limiting: wp.array(dtype=wp.int32), retry: wp.array(dtype=wp.int32),
                final: wp.array(dtype=wp.int32)):
-    """After ``limit_begin``: the limit acts where a world is over (``limiting``), retries while
-    one searches (``retry``), and ends with a solve of the scales unless a retry is accepted as is
-    (``final``)."""
+    """After ``limit_begin``: the limit acts where a world is over (``limiting``; not after a
+    non-finite solve), retries while one searches (``retry``), and ends with a solve of the scales
+    unless a retry is accepted as is (``final``)."""
     go = wp.int32(0)
     again = wp.int32(0)
-    if gate[GATE_OVER] > 0:
+    if gate[GATE_OVER] > 0 and gate[GATE_NONFINITE] == 0:
         go = wp.int32(1)
         if gate[GATE_SEARCHING] > 0:
             again = wp.int32(1)
@@ -210,13 +220,14 @@ def limit_trial(use_scale: int, s: LimitState, fraction: wp.array(dtype=wp.float
 @wp.kernel
 def solve_gate(gate: wp.array(dtype=wp.int32), cond: wp.array(dtype=wp.int32)):
     """A limit's solve (counted, also with no world to solve: the host counts it so) solves the
-    worlds ``limit_trial`` changed: ``cond[0]`` = 1 where there are any."""
+    worlds ``limit_trial`` changed: ``cond[0]`` = 1 where there are any (and no solve of the
+    period left non-finite pad forces)."""
     n = gate[GATE_CHANGED]
     gate[GATE_SOLVES] = gate[GATE_SOLVES] + 1
     gate[GATE_WORLD_SOLVES] = gate[GATE_WORLD_SOLVES] + n
     gate[GATE_CHANGED] = 0
     go = wp.int32(0)
-    if n > 0:
+    if n > 0 and gate[GATE_NONFINITE] == 0:
         go = wp.int32(1)
     cond[0] = go
 
@@ -267,9 +278,10 @@ def limit_update(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64, s
 def retry_gate(retries: int, gate: wp.array(dtype=wp.int32), retry: wp.array(dtype=wp.int32),
                final: wp.array(dtype=wp.int32)):
     """After a retry's update: accepted as is where every world's trial is its scale (no final
-    solve); else retry again while fewer than ``retries`` ran and a world searches."""
+    solve; nor after a non-finite solve: the host raises); else retry again while fewer than
+    ``retries`` ran and a world searches."""
     gate[GATE_RETRIES] = gate[GATE_RETRIES] + 1
-    if gate[GATE_UNEQUAL] == 0:
+    if gate[GATE_UNEQUAL] == 0 or gate[GATE_NONFINITE] != 0:
         final[0] = 0
         retry[0] = 0
     elif gate[GATE_RETRIES] < retries and gate[GATE_SEARCHING] > 0:
@@ -281,9 +293,8 @@ def retry_gate(retries: int, gate: wp.array(dtype=wp.int32), retry: wp.array(dty
 
 
 @wp.kernel
-def close_gate_if_nonfinite(loads: wp.array(dtype=solve_load_row), gate: wp.array(dtype=wp.int32)):
-    """``gate`` closed where the accepted solve's pad forces are not finite in world w (or its load
-    is NaN): the period stops there and the host raises (``SolveLoads.from_rows``)."""
-    row = loads[wp.tid()]
-    if not (row[3] == wp.float64(1.0) and not wp.isnan(row[2])):
+def close_gate_if_nonfinite(gate: wp.array(dtype=wp.int32)):
+    """``gate`` closed where a solve of the substep left non-finite pad forces (``count_nonfinite``):
+    the period stops there and the host raises (``SolveLoads.from_rows`` on the last loads)."""
+    if gate[GATE_NONFINITE] != 0:
         gate[GATE_OPEN] = 0

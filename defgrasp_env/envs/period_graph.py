@@ -109,6 +109,11 @@ class PeriodGraph:
                     self._substep, k, count, states[k % 2], states[(k + 1) % 2], h))
         return capture.graph
 
+    def _loads(self, state: State) -> None:
+        """A solve's loads (the scene's ``launch_loads``) and its non-finite worlds counted."""
+        self._launch_loads(state)
+        self._launch("count non-finite", lk.count_nonfinite, self.num_worlds, [self.loads], [self.gate])
+
     def _launch(self, name: str, kernel, dim: int, inputs: list, outputs: list) -> None:
         self._launches.launch(("period", name, *(v for v in inputs if isinstance(v, (int, float)))), kernel, dim,
                               inputs, outputs)
@@ -121,13 +126,13 @@ class PeriodGraph:
         self.gripper.plan_substep(k, count, h)
         self.gripper.move_as_planned()
         self.solver.launch_advance(src, dst, self.control, h, full_outputs=last)
-        self._launch_loads(dst)
+        self._loads(dst)
         self._patient(src, dst, h, last, first=True)
         self._launch("limit begin", lk.limit_begin, w, [self.loads, self.gripper.move_fraction, FORCE_TOLERANCE,
                                                          self._limit], [self.gate])
         self._launch("limit gate", lk.limit_gate, 1, [], [self.gate, cond["limit"], cond["retry"], cond["final"]])
         wp.capture_if(cond["limit"], on_true=functools.partial(self._limited, src, dst, h, last))
-        self._launch("non-finite", lk.close_gate_if_nonfinite, w, [self.loads], [self.gate])
+        self._launch("non-finite", lk.close_gate_if_nonfinite, 1, [], [self.gate])
         wp.capture_if(self.gate, on_true=functools.partial(self._accept, k, dst))
 
     def _patient(self, src: State, dst: State, h: float, last: bool, first: bool) -> None:
@@ -143,7 +148,7 @@ class PeriodGraph:
         def solve():  # the last move stays: the host's re-solve moves by the same fraction
             self._launch("begin patient", lk.begin_patient_solve, w, [s.patient], [s.solve_worlds])
             self.solver.launch_advance(src, dst, self.control, h, full_outputs=last, patient=True)
-            self._launch_loads(dst)
+            self._loads(dst)
             end()
 
         def end():  # also where none ran: patient marks never outlive the choice
@@ -177,5 +182,5 @@ class PeriodGraph:
         wp.capture_if(cond["solve"], on_true=functools.partial(self.solver.launch_advance, src, dst, self.control, h,
                                                                full_outputs=last))
         self._launch("select all", lk.select_all_worlds, w, [], [s.solve_worlds])
-        self._launch_loads(dst)
+        self._loads(dst)
         self._patient(src, dst, h, last, first=False)
