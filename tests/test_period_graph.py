@@ -203,6 +203,25 @@ def test_a_period_on_the_device_agrees_with_substeps_from_the_host_on_cuda():
     np.testing.assert_allclose(graphed_out["4/gripper/q"], host_out["4/gripper/q"], atol=1e-6)
 
 
+@pytest.mark.cuda
+def test_the_force_limit_holds_inside_the_period_graph_on_cuda():
+    """On CUDA (float atomics: no bitwise reference) the pressing stiff cuboid's periods run whole
+    in the graph with the limit's retries and patient re-solves (world-solves beyond one per world
+    and substep), and its bounds hold as on the host: wrist force within the limit + tolerance
+    plus 40 N for what the limit does not bound (the object's impact; the same run on the CPU reads
+    152 N against 165), everything finite."""
+    if not wp.is_cuda_available():
+        pytest.skip("no CUDA device")
+    from defgrasp_env.wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT
+
+    out, graphed, count = _run(True, 4, 40, "cuda:0", modulus=1e7)
+    assert (graphed[1:] == count).all(), graphed
+    assert (out["extra_world_solves"] > 0).sum() >= 5, out["extra_world_solves"]
+    wrist = np.array([out[f"{k}/info/wrist_force"] for k in range(40)])
+    assert np.isfinite(wrist).all() and wrist.max() <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + 40.0
+    assert np.isfinite(out["state/positions"]).all()
+
+
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
 def test_an_unconverged_solves_load_counts_its_force_error(device):
     """``solve_loads`` against the host's ``actuator_load``: a converged solve's load is the pads'
