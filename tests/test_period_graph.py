@@ -116,7 +116,7 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
     per world a load that grows with the motion fraction (0 up to a touch, then steeply: a pad
     pressing into an object; some already at the limit at the start, some held, some never over),
     the same trials, solve by solve, and the same accepted scales and loads, bit for bit on the
-    CPU (float64 on both sides)."""
+    CPU (float64 on both sides; within 1e-12 on CUDA, whose compiler may fuse a multiply-add)."""
     if device != "cpu" and not wp.is_cuda_available():
         pytest.skip("no CUDA device")
     from defgrasp_env.wrist.force_limit import MAX_RETRIES, limited_substep
@@ -178,10 +178,12 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
     if final.numpy()[0]:
         limit_solve(1)
     assert len(device_trials) == len(host_trials) >= 4
+    # CUDA may fuse the regula falsi's multiply-add (one rounding less): within 1e-12 there
+    same = np.array_equal if device == "cpu" else functools.partial(np.allclose, rtol=1e-12, atol=1e-15)
     for host, dev in zip(host_trials, device_trials):
-        assert np.array_equal(host, dev)
-    assert np.array_equal(state.scale.numpy(), host_scale)
-    assert np.array_equal(load_of(device_trials[-1]), host_load)
+        assert same(host, dev)
+    assert same(state.scale.numpy(), host_scale)
+    assert same(load_of(device_trials[-1]), host_load)
     assert gate.numpy()[lk.GATE_SOLVES] == len(host_trials) - 1
     # the worlds each retry re-solves: those whose fraction changed since their last solve
     changed_worlds = sum(int(np.count_nonzero(b != a)) for a, b in zip(host_trials, host_trials[1:]))
