@@ -2,8 +2,12 @@
 
 Each node meets each box through one face per substep, chosen at the substep start by continuous
 collision detection of the node's motion relative to the box (``contact_face``); the penalty then
-pushes the node out through that face only, so a box that moves further than its half thickness in
-a substep cannot push nodes out of its far side (the nearest face of a deep node is the wrong one).
+pushes the node out through that face, or through a side face of that face's extent where the node
+is nearer to it, never through the opposite face, so a box that moves further than its half
+thickness in a substep cannot push nodes out of its far side (the nearest face of a deep node is the
+wrong one); the depth is continuous where a node slides past the face's edge (``face_contact``: it
+jumped from 0 to the full depth there until 2026-12-07, which stalled Newton in violent impacts:
+benchmarks/RESULTS.md, "the contact fuzz's cylinder at the default limits").
 
 Normal: energy k/2 d^2 for penetration depth d, so the normal force is k d and its Hessian k n n^T,
 stiffening cubically beyond a knee depth (``penalty_force``); k per node (``Model.node_contact_stiffness``).
@@ -132,17 +136,36 @@ def contact_face(start: wp.vec3, guess: wp.vec3, half: wp.vec3):
 
 
 @wp.func
-def face_penetration(local: wp.vec3, half: wp.vec3, n: wp.vec3):
-    """Depth (m, > 0 inside) of a point (box frame) behind the face with outward normal ``n`` (a
-    box axis), counted only inside the face's lateral extent; the point is pushed out through
-    that face however deep it is, never through the opposite one."""
+def face_contact(local: wp.vec3, half: wp.vec3, n: wp.vec3):
+    """(depth, outward normal), box frame, of a point behind the face with outward normal ``n`` (a
+    box axis): its depth behind that face (however deep, never through the opposite one), or its
+    distance to a side face of that face's lateral extent where smaller (then that side's normal),
+    so that the depth falls to 0 at the lateral edge of the face instead of jumping from 0 to the
+    full depth there; depth <= 0: no contact (in front of the face or beside its extent). The
+    normal is minus the depth's gradient: the contact force is ``penalty_force(depth)`` along it,
+    its Hessian ``penalty_stiffness(depth)`` times its outer product (``evaluate_node``)."""
     depth = float(-1.0)
     for j in range(3):
         if n[j] != 0.0:
             depth = half[j] - n[j] * local[j]
-    for j in range(3):
-        if n[j] == 0.0 and wp.abs(local[j]) >= half[j]:
-            depth = -1.0
+    normal = n
+    if depth > 0.0:
+        for j in range(3):
+            if n[j] == 0.0:
+                side = half[j] - wp.abs(local[j])
+                if side <= 0.0:
+                    depth = -1.0
+                elif side < depth:
+                    depth = side
+                    normal = wp.vec3(0.0)
+                    normal[j] = wp.sign(local[j])
+    return depth, normal
+
+
+@wp.func
+def face_penetration(local: wp.vec3, half: wp.vec3, n: wp.vec3):
+    """Depth (m, > 0 inside) of ``face_contact``."""
+    depth, normal = face_contact(local, half, n)
     return depth
 
 
@@ -327,10 +350,10 @@ def evaluate_node(
         rot1 = pad_rot1[pad]
         local = wp.quat_rotate_inv(rot1, xi - pad_pos1[pad])
         n_local = lag_normal[i * slots + 1 + k]
-        depth = face_penetration(local, pad_half[pad], n_local)
+        depth, n_face = face_contact(local, pad_half[pad], n_local)
         f_pad = wp.vec3(0.0)
         if depth > 0.0:
-            n = wp.quat_rotate(rot1, n_local)
+            n = wp.quat_rotate(rot1, n_face)
             f_n = penalty_force(k_i, depth, knee)
             f_pad = f_n * n
             hess += penalty_stiffness(k_i, depth, knee) * wp.outer(n, n)
@@ -445,9 +468,9 @@ def keep_pad_depth_node(
             guess = guess + wp.dot(start - guess, n) * n
             moved = 1
         else:
-            depth = face_penetration(guess, pad_half[pad], n)
+            depth, n_face = face_contact(guess, pad_half[pad], n)
             if depth > 0.0:
-                guess = guess + depth * n
+                guess = guess + depth * n_face
                 moved = 1
         if moved == 1:
             kept = pad_pos1[pad] + wp.quat_rotate(pad_rot1[pad], guess)
@@ -536,9 +559,9 @@ def clamp_depth_node(
         rot = pad_rot1[pad]
         local = wp.quat_rotate_inv(rot, x[i] - pad_pos1[pad])
         n = lag_normal[i * slots + 1 + k]
-        depth = face_penetration(local, pad_half[pad], n)
+        depth, n_face = face_contact(local, pad_half[pad], n)
         if depth > bound:
-            moved = pad_pos1[pad] + wp.quat_rotate(rot, local + (depth - target) * n)
+            moved = pad_pos1[pad] + wp.quat_rotate(rot, local + (depth - target) * n_face)
             x[i] = wp.cw_mul(fr, moved) + wp.cw_mul(wp.vec3(1.0) - fr, x[i])
             clamped[w] = 1
     xi = x[i]
