@@ -103,3 +103,65 @@ def test_the_normal_is_minus_the_gradient_of_the_depth():
     sided = clear & (normal[:, 2] == 0.0)  # where a side is the nearest face
     assert clear.sum() > 300 and sided.sum() > 50, (clear.sum(), sided.sum())
     np.testing.assert_allclose(-grad[clear], normal[clear], atol=1e-3)
+
+
+def _node_contact(x: np.ndarray, x_start: np.ndarray, lag_force: float):
+    """(energy as a function of positions [N, 3], the residual [N, 3] of ``contact.evaluate_nodes``)
+    of N nodes of one world against one pad box at y = 0.05 m (identity pose, not moving), each node's
+    lagged face the +x face with a lagged normal force ``lag_force`` (N, friction), mass 1 g,
+    dt = 10 ms, no gravity: the residual is minus the energy's gradient (inertia, penalty, friction)."""
+    from defgrasp_env.sim.kernels import contact as kc
+    from defgrasp_env.sim.kernels import energy as ke
+
+    n = len(x)
+    dev = "cpu"
+    arr = lambda a, dtype: wp.array(np.asarray(a), dtype=dtype, device=dev)  # noqa: E731
+    pos = arr([[0.0, 0.05, 0.0]], wp.vec3)
+    rot = arr([[0.0, 0.0, 0.0, 1.0]], wp.quat)
+    lag_normal = np.zeros((n, 2, 3), np.float32)
+    lag_normal[:, 0] = (0.0, 1.0, 0.0)
+    lag_normal[:, 1] = (1.0, 0.0, 0.0)
+    lag_fn = np.zeros((n, 2), np.float32)
+    lag_fn[:, 1] = lag_force
+    common = [arr(x_start.astype(np.float32), wp.vec3), arr(np.zeros((n, 3), np.float32), wp.vec3),
+              arr(np.full(n, 1e-3, np.float32), float), arr(np.zeros(n, np.int32), int), arr([1], int),
+              arr(np.zeros((n, 3), np.float32), wp.vec3), wp.vec3(0.0, 0.0, 0.0), 0.01, pos, rot, pos, rot,
+              arr([HALF.astype(np.float32)], wp.vec3), 1, arr(lag_fn.reshape(-1), float),
+              arr(lag_normal.reshape(-1, 3), wp.vec3), arr(np.full(n, 1e4, np.float32), float), 5e-4, 0.0, 0.5, 1e-3]
+
+    def energy(xx):
+        out = wp.zeros(1, dtype=wp.float64, device=dev)
+        wp.launch(ke.node_energy, n, [arr(xx.astype(np.float32), wp.vec3), *common, out], device=dev)
+        return float(out.numpy()[0])
+
+    outs = [wp.zeros(n, dtype=wp.vec3, device=dev), wp.zeros(n, dtype=wp.mat33, device=dev),
+            wp.zeros(n, dtype=wp.mat33, device=dev), wp.zeros(n, dtype=wp.vec3, device=dev),
+            wp.zeros(n, dtype=wp.vec3, device=dev), wp.zeros(1, dtype=float, device=dev),
+            wp.zeros(1, dtype=wp.vec3, device=dev), wp.zeros(1, dtype=float, device=dev)]
+    wp.launch(kc.evaluate_nodes, n, [arr(x.astype(np.float32), wp.vec3), *common, 1, *outs], device=dev)
+    return energy, outs[0].numpy().astype(np.float64)
+
+
+def test_the_contact_force_is_minus_the_gradient_of_the_energy_at_a_faces_edge():
+    """Nodes 2 mm behind the +x face at 0.4-3 mm from its +y edge (the side face nearest for the
+    first ones), with and without a lagged friction force (2 N, nodes slid 0.3 mm along z since the
+    substep start): ``evaluate_nodes``' residual equals minus the central difference of
+    ``node_energy`` (step 1e-5 m, at least 0.4 mm from where the counted face changes; float32
+    positions of ~5e-2 m round by ~4e-9 m, 0.04 % of the step: within 1 % of the force plus
+    0.05 N). With the force along the lagged face's normal instead of the returned one this fails
+    at the nodes nearest the edge."""
+    side = np.array([0.0004, 0.001, 0.0015, 0.003, 0.006])
+    x = np.stack([np.full_like(side, HALF[0] - 0.002), 0.05 + HALF[1] - side, np.zeros_like(side)], axis=1)
+    for lag_force, slid in ((0.0, 0.0), (2.0, 3e-4)):
+        x_start = x - np.array([0.0, 0.0, slid])
+        energy, residual = _node_contact(x, x_start, lag_force)
+        assert np.abs(residual[:3, 1]).min() > 1.0  # the edge's nodes pushed out along +y
+        step = 1e-5
+        for i in range(len(x)):
+            for j in range(3):
+                xp, xm = x.copy(), x.copy()
+                xp[i, j] += step
+                xm[i, j] -= step
+                fd = -(energy(xp) - energy(xm)) / (2 * step)
+                assert abs(fd - residual[i, j]) < 0.01 * np.abs(residual[i]).max() + 0.05, (lag_force, i, j, fd,
+                                                                                           residual[i, j])

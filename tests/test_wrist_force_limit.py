@@ -111,12 +111,14 @@ def test_held_world_stays_stopped_in_one_solve():
     assert force_held[0] <= limit * (1 + FORCE_TOLERANCE)
 
 
-@pytest.mark.parametrize("name, modulus, sideways, turn", [
-    ("cuboid", 1e6, 0.7, 0.0), ("sphere", 1e7, 0.3, 0.0), ("cuboid", 1e6, 0.7, 0.4),
-    pytest.param("sphere", 3e6, 0.3, 0.3, marks=pytest.mark.xfail(strict=True, reason=(
-        "known since the continuous face depth (2026-12-07): the held press settles at 172 N, 7 N over the limit's "
-        "tolerance (160 N before); with pad edge contact off it reads 152 N: near the pads' edges the edge points and "
-        "the side-face push both act (benchmarks/RESULTS.md)")))])
+#: the one case whose held press is known to settle over the limit's tolerance: 172 N since the continuous
+#: face depth (2026-12-07; 160 N before; 152 N with pad edge contact off: near the pads' edges the edge
+#: points and the side-face push both act, benchmarks/RESULTS.md)
+HELD_OVER_TOLERANCE = ("sphere", 3e6, 0.3, 0.3)
+
+
+@pytest.mark.parametrize("name, modulus, sideways, turn", [("cuboid", 1e6, 0.7, 0.0), ("sphere", 1e7, 0.3, 0.0),
+                                                          ("cuboid", 1e6, 0.7, 0.4), HELD_OVER_TOLERANCE])
 def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch, name, modulus, sideways, turn):
     """The closed gripper pushed down (and sideways) onto an object on the ground for 26 control
     steps, then lifted: what an RL policy does while learning, also turning its wrist about the
@@ -169,7 +171,11 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
     assert tried_solves >= 1.4 * held_solves, (held_solves, tried_solves)
     heights = [AGENT_POS.get(r[0], "wrist_position")[1] for r in held_rows[31:]]
     np.testing.assert_allclose(np.diff(heights), 0.3 * 0.05, rtol=1e-3)  # lifting at full speed at once
-    assert max(r[2] for r in held_rows) <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE)  # last: see the xfail
+    worst, bound = max(r[2] for r in held_rows), DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE)
+    if (name, modulus, sideways, turn) == HELD_OVER_TOLERANCE:  # every other check above holds for it too
+        assert worst > bound, f"the held press keeps the bound now ({worst:.1f} N): drop HELD_OVER_TOLERANCE"
+        pytest.xfail(f"known gap: held at {worst:.1f} N > {bound:.0f} N (HELD_OVER_TOLERANCE)")
+    assert worst <= bound, worst
 
 
 def test_a_patient_solve_is_not_repeated_from_the_same_input(monkeypatch):

@@ -163,6 +163,17 @@ def face_contact(local: wp.vec3, half: wp.vec3, n: wp.vec3):
 
 
 @wp.func
+def start_face_normal(x_start: wp.vec3, pos0: wp.vec3, rot0: wp.quat, half: wp.vec3, n: wp.vec3):
+    """Outward normal (box frame) of the face that held a node at the substep start (``face_contact``
+    at its start position in the box's start frame; ``n``, the lagged face, where it was not inside):
+    the plane in which the lagged friction acts and the start depth the guess keeps."""
+    depth, normal = face_contact(wp.quat_rotate_inv(rot0, x_start - pos0), half, n)
+    if depth > 0.0:
+        return normal
+    return n
+
+
+@wp.func
 def face_penetration(local: wp.vec3, half: wp.vec3, n: wp.vec3):
     """Depth (m, > 0 inside) of ``face_contact``."""
     depth, normal = face_contact(local, half, n)
@@ -363,7 +374,8 @@ def evaluate_node(
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
             slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
-            n_lag = wp.quat_rotate(rot1, n_local)
+            n_lag = wp.quat_rotate(rot1, start_face_normal(x_start[i], pad_pos0[pad], pad_rot0[pad], pad_half[pad],
+                                                           n_local))
             f_fric, h_fric = friction_force(pad_mu, lag_fn, slip, n_lag, eps)
             f_pad += f_fric
             hess += h_fric
@@ -465,7 +477,8 @@ def keep_pad_depth_node(
         moved = int(0)
         if lag_normal_force[i * slots + 1 + k] > 0.0:
             start = wp.quat_rotate_inv(pad_rot0[pad], x_start[i] - pad_pos0[pad])
-            guess = guess + wp.dot(start - guess, n) * n
+            held = start_face_normal(x_start[i], pad_pos0[pad], pad_rot0[pad], pad_half[pad], n)
+            guess = guess + wp.dot(start - guess, held) * held
             moved = 1
         else:
             depth, n_face = face_contact(guess, pad_half[pad], n)

@@ -8,7 +8,7 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 
 import warp as wp
 
-from .contact import face_penetration, pad_slip, penalty_energy
+from .contact import face_penetration, pad_slip, penalty_energy, start_face_normal
 from .elastic import deformation_gradient, polar_rotation, spare_tet
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
@@ -87,7 +87,8 @@ def node_energy_row(
         lag_fn = lag_normal_force[i * slots + 1 + k]
         if lag_fn > 0.0:
             slip = pad_slip(xi, x_start[i], pad_pos0[pad], pad_rot0[pad], pad_pos1[pad], rot1)
-            n_lag = wp.quat_rotate(rot1, n_local)
+            n_lag = wp.quat_rotate(rot1, start_face_normal(x_start[i], pad_pos0[pad], pad_rot0[pad], pad_half[pad],
+                                                           n_local))
             e += friction_potential(pad_mu, lag_fn, slip, n_lag, eps)
     wp.atomic_add(energy, w, wp.float64(e))
 
