@@ -47,11 +47,17 @@ from defgrasp_env.wrist.force_limit import DEFAULT_WRIST_FORCE_LIMIT, FORCE_TOLE
 
 
 
-def test_torus_sweep_pinch():
-    r = run_cell("torus", 1e7, 10, sequences=("sweep",))
+def _within_default_limits(r: dict) -> None:
+    """A fuzz cell's largest tip and wrist forces (``run_cell``) within the default limits' bounds
+    (grip and wrist limit x (1 + tolerance), plus the cell's impact margin)."""
     grip = GripperConfig().grip_force_limit
     assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
     assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
+
+
+def test_torus_sweep_pinch():
+    r = run_cell("torus", 1e7, 10, sequences=("sweep",))
+    _within_default_limits(r)
     assert r["crossed"] == 0 and r["diverged"] == 0 and r["unflagged"] == 0
 
 
@@ -64,9 +70,7 @@ def test_cylinder_sweep_at_the_default_limits():
     line search's shortest step went uphill) and was kept at 966 N tip / 882 N wrist. Measured
     since: 261 N / 185 N (bounds 270 / 248 N with the impact margin)."""
     r = run_cell("cylinder", 3e6, 10, sequences=("sweep",))
-    grip = GripperConfig().grip_force_limit
-    assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
-    assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
+    _within_default_limits(r)
 
 
 @pytest.mark.slow
@@ -110,9 +114,7 @@ def test_patient_re_solves_settle_the_limits_decision_not_convergence(monkeypatc
     def run():
         iterations[0] = 0
         r = run_cell(name, 1e7, 10, sequences=("sweep", "dive"))
-        grip = GripperConfig().grip_force_limit
-        assert r["tip"] <= tip_force_bound(grip, DEFAULT_WRIST_FORCE_LIMIT) * (1 + FORCE_TOLERANCE) + r["impact"], r
-        assert r["wrist"] <= DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE) + r["impact"], r
+        _within_default_limits(r)
         assert r["crossed"] == 0 and r["diverged"] == 0 and r["unflagged"] == 0, r
         return iterations[0]
 

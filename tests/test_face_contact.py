@@ -1,6 +1,6 @@
 """A node's depth behind its lagged pad face is continuous where it slides past the face's edge.
 
-``kernels.contact.face_contact`` gives a node the depth behind the face it was pushed through at the
+``kernels.pad_faces.face_contact`` gives a node the depth behind the face it was pushed through at the
 substep start (``lag_normal``), however deep, never through the opposite face. Until 2026-12-07 that
 depth counted only inside the face's lateral extent and jumped from nothing to the full depth at
 its edge: a node swept around a pad's side and back in front of it met a wall of energy. In a
@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from defgrasp_env.sim.kernels.contact import face_contact
+from defgrasp_env.sim.kernels.pad_faces import face_contact
 
 # A pad collision box of the env's size (pad plus backing: 16.35 x 37.5 x 22 mm).
 HALF = np.array([0.008175, 0.01875, 0.011])

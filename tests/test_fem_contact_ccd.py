@@ -1,6 +1,6 @@
 """FEM core, intersection-free pad contact: a pad that moves further than its half thickness in a
 substep must not push nodes out of its far side (continuous collision detection picks the face
-each node meets, ``kernels.contact.contact_face``), and no node may end deeper than 1 mm.
+each node meets, ``kernels.pad_faces.contact_face``), and no node may end deeper than 1 mm.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from defgrasp_env.sim.kernels.contact import contact_face
+from defgrasp_env.sim.kernels.pad_faces import contact_face
 from defgrasp_env.sim.materials import Material
 from defgrasp_env.sim.meshing import make_object_mesh
 from defgrasp_env.sim.model import build_model

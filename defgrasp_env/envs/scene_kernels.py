@@ -13,7 +13,7 @@ from typing import Any
 import warp as wp
 
 from ..gripper.kernels import actuator_load
-from ..sim.kernels.contact import box_penetration
+from ..sim.kernels.pad_faces import box_penetration
 from ..sim.kernels.elastic import spare_tet
 from ..sim.kernels.world_rows import scatter_rows  # noqa: F401  (the scene's row writes)
 

@@ -1,6 +1,6 @@
 """How far the kinematic pad boxes can move in a control period, and how many substeps that needs.
 
-With continuous contact detection (``kernels.contact.contact_face``) a pad cannot push nodes out of
+With continuous contact detection (``kernels.pad_faces.contact_face``) a pad cannot push nodes out of
 its far side however far it moves in a substep, but the contact face is found along the straight
 relative motion of each node, and one Newton solve has to absorb the whole move; both stay accurate
 while a pad point travels at most ``MAX_PAD_TRAVEL`` per substep (well under the 16 mm thickness of

@@ -8,7 +8,8 @@ Coulomb law (f0(s) = s^2/eps - s^3/(3 eps^2) + eps/3 below eps, s beyond). Sums 
 
 import warp as wp
 
-from .contact import face_penetration, pad_slip, penalty_energy, start_face_normal
+from .contact import pad_slip, penalty_energy
+from .pad_faces import face_penetration, start_face_normal
 from .elastic import deformation_gradient, polar_rotation, spare_tet
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
