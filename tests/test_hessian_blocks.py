@@ -54,6 +54,18 @@ def row_product(p: wp.array(dtype=wp.vec3), node_blocks: wp.array(dtype=wp.vec2i
     out[i] = khb.hessian_row_product(i, p, node_blocks, block_node, values)
 
 
+@wp.kernel
+def block_at_a_time(p: wp.array(dtype=wp.vec3), node_blocks: wp.array(dtype=wp.vec2i), block_node: wp.array(dtype=int),
+                    values: wp.array(dtype=wp.mat33), out: wp.array(dtype=wp.vec3)):
+    """The row product summed a block at a time (what ``hessian_row_product`` unrolls)."""
+    i = wp.tid()
+    span = node_blocks[i]
+    s = wp.vec3(0.0)
+    for k in range(span[0], span[1]):
+        s += values[k] * (p[block_node[k]] - p[i])
+    out[i] = s
+
+
 def deform(model, state, rng) -> None:
     """Bend, stretch and squash every world's object (some tets compressed beyond 30 %, some
     twisted): a state far from rest, where the rotations and twist factors matter."""
@@ -105,7 +117,8 @@ def assert_products_agree(got, ref):
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
 def test_rows_equal_the_tet_by_tet_product_in_a_packed_model(device):
     """Rows against tets on a rope, a cuboid and a torus of different materials, a translation's
-    product exactly zero, and the blocks' symmetry; on CUDA too (one thread a row there as here)."""
+    product exactly zero, the unrolled product against a block at a time (the same bits on the
+    CPU), and the blocks' symmetry; on CUDA too (one thread a row there as here)."""
     meshes = [make_object_mesh(name) for name in ("rope", "cuboid", "torus")]
     materials = [Material(youngs_modulus=e, poisson_ratio=nu) for e, nu in ((1e4, 0.45), (1e6, 0.3), (1e5, 0.49))]
     model = build_model(meshes, materials, poses=[((0.1 * w, 0.05, 0.0), (0.0, 0.0, 0.0, 1.0)) for w in range(3)],
@@ -117,6 +130,16 @@ def test_rows_equal_the_tet_by_tet_product_in_a_packed_model(device):
     zero = wp.zeros(n, dtype=wp.vec3, device=device)
     wp.launch(row_product, n, inputs=[shift, h.node_blocks, h.block_node, h.values, zero], device=device)
     assert not zero.numpy().any()
+    once = wp.zeros(n, dtype=wp.vec3, device=device)  # unrolled by four: the same sums in the same order
+    p = wp.array(np.random.default_rng(3).standard_normal((n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
+    lengths = np.diff(h.node_blocks.numpy(), axis=1).ravel()
+    assert {0, 1, 2, 3} <= set(lengths % 4)  # rows with every remainder of the unrolled passes
+    wp.launch(block_at_a_time, n, inputs=[p, h.node_blocks, h.block_node, h.values, once], device=device)
+    wp.launch(row_product, n, inputs=[p, h.node_blocks, h.block_node, h.values, zero], device=device)
+    if device == "cpu":
+        np.testing.assert_array_equal(zero.numpy(), once.numpy())
+    else:  # a GPU compiler may contract the two loops' multiply-adds differently
+        assert_products_agree(zero.numpy(), once.numpy())
     blocks = {}
     spans, cols, values = h.node_blocks.numpy(), h.block_node.numpy(), h.values.numpy()
     for i, (a, b) in enumerate(spans):
