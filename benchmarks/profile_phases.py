@@ -1,0 +1,211 @@
+"""Where a world's time goes inside its world-block kernels, phase by phase (a diagnosis, not a benchmark of record).
+
+    python benchmarks/profile_phases.py --device cuda:0 --object rope --youngs-modulus 1e4
+    python benchmarks/profile_phases.py --device cpu --object torus --youngs-modulus 1e7 --json phases.json
+
+Each world's substep runs in a few launches with a thread block per world (``kernels/world_start.py``,
+``world_evaluate.py``, ``world_cg.py``, ``world_newton_step.py``, ``world_finish.py``); inside a
+launch its phases are separated by block barriers, so on a GPU a lone world's phase costs its
+slowest thread's chain of memory round trips, which per-launch timers (``profile_kernels.py``)
+cannot split. This script copies the package to a temporary folder and instruments the copy (the
+shipped code is untouched): after every block barrier thread 0 of the block adds the cycles since
+its last stamp to that phase's sum (``clock64()`` on CUDA; on the CPU, where a block is one thread
+and a world's phases run one after another, the CPU's cycle counter). The native vector env
+(random actions, ``bench_env_step.py``'s defaults) is stepped ``--warmup`` times, the sums cleared,
+then ``--steps`` more steps. Printed per kernel: world-block launches per step, thousands of cycles
+per launch for each phase (named by the row functions it calls) and, for CG, per iteration.
+At W > 1 the sums are over every world's block: "per launch" is per world-block.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import re
+import shutil
+import sys
+import tempfile
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
+
+#: the instrumented kernels (module of ``sim/kernels``, kernel) in the order printed
+KERNELS = (("world_start", "start_world_blocks"), ("world_evaluate", "evaluate_world_blocks"),
+           ("world_cg", "cg_world_blocks"), ("world_newton_step", "newton_step_world_blocks"),
+           ("world_finish", "finish_world_blocks"))
+SLOTS = 32  # per kernel: phases, then its launches (SLOTS - 2) and loop iterations (SLOTS - 1)
+
+STAMP = '''
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+return (double)clock64();
+#else
+return (double)__builtin_readcyclecounter();
+#endif
+""")
+def phase_cycles() -> wp.float64: ...
+
+
+@wp.func
+def phase_stamp(sums: wp.array(dtype=wp.float64), k: int, lane: int, last: wp.float64) -> wp.float64:
+    """Thread 0 adds the cycles since ``last`` to ``sums[k]``; every thread gets the new stamp."""
+    now = phase_cycles()
+    if lane == 0:
+        wp.atomic_add(sums, k, now - last)
+    return now
+'''
+_CALL = re.compile(r"(?<![.\w])([a-z_][a-z0-9_]*)\(")
+_NOT_ROW_FUNCTIONS = {"range", "block_barrier", "int", "float"}
+
+
+def _instrument_kernel(source: str, kernel: str, base: int) -> tuple[str, list[str]]:
+    """``source`` with ``kernel`` stamped after each block barrier; the phases' names."""
+    lines, out, labels, called, where = source.split("\n"), [], [], [], None
+    for line in lines:
+        if line.startswith(f"def {kernel}("):
+            where = "signature"
+        elif where == "signature" and line == "):":
+            out.append("    phase_sums: wp.array(dtype=wp.float64),")
+            where = "body"
+        elif where == "body" and line.startswith(("def ", "@wp.")):
+            where = None
+        out.append(line)
+        if where != "body":
+            continue
+        stripped = line.strip()
+        if stripped == "lane = tid - w * threads":
+            out += ["    phase_last = phase_cycles()", "    if lane == 0:",
+                    f"        wp.atomic_add(phase_sums, {base + SLOTS - 2}, wp.float64(1.0))"]
+        elif stripped.startswith("for _it in range("):
+            indent = " " * (len(line) - len(line.lstrip()) + 4)
+            out += [f"{indent}if lane == 0:",
+                    f"{indent}    wp.atomic_add(phase_sums, {base + SLOTS - 1}, wp.float64(1.0))"]
+        elif stripped == "block_barrier()":
+            indent = line[: len(line) - len(line.lstrip())]
+            out.append(f"{indent}phase_last = phase_stamp(phase_sums, {base + len(labels)}, lane, phase_last)")
+            labels.append(" + ".join(dict.fromkeys(called)) or "(barrier)")
+            called = []
+        else:
+            called += [name for name in _CALL.findall(stripped) if name not in _NOT_ROW_FUNCTIONS]
+    if not labels or len(labels) > SLOTS - 2:
+        raise RuntimeError(f"profile_phases: {kernel} has {len(labels)} block barriers; expected 1 to {SLOTS - 2} "
+                           "(the world-block kernels changed: update this script)")
+    return "\n".join(out), labels
+
+
+def instrumented_copy(dst: pathlib.Path) -> dict[str, list[str]]:
+    """``defgrasp_env`` copied under ``dst`` with the world-block kernels stamped and their launches
+    given the phase sums (``sim/solver_launches.phase_sums(device)``); the phases' names by kernel."""
+    package = dst / "defgrasp_env"
+    shutil.copytree(ROOT / "defgrasp_env", package, ignore=shutil.ignore_patterns("__pycache__"))
+    kernels = package / "sim" / "kernels"
+    (kernels / "block_sync.py").write_text((kernels / "block_sync.py").read_text() + STAMP)
+    labels = {}
+    for i, (module, kernel) in enumerate(KERNELS):
+        path = kernels / f"{module}.py"
+        source = path.read_text().replace("from .block_sync import block_barrier",
+                                          "from .block_sync import block_barrier, phase_cycles, phase_stamp")
+        source, labels[kernel] = _instrument_kernel(source, kernel, i * SLOTS)
+        path.write_text(source)
+    launches = package / "sim" / "solver_launches.py"
+    source = launches.read_text()
+    for module, kernel in KERNELS:
+        alias = re.search(rf"c\.blocks\((\w+)\.{kernel},", source)
+        if alias is None:
+            raise RuntimeError(f"profile_phases: no c.blocks(<module>.{kernel}, ...) launch in solver_launches.py")
+        depth, i = 0, alias.start() + len("c.blocks")
+        while True:  # the launch's closing parenthesis
+            depth += {"(": 1, ")": -1}.get(source[i], 0)
+            if depth == 0:
+                break
+            i += 1
+        source = source[:i] + ", phase_sums(c.model.device)" + source[i:]
+    source += ('\n\n_PHASE_SUMS: dict = {}\n\n\ndef phase_sums(device):\n'
+               f'    """The phase sums [{len(KERNELS) * SLOTS}] float64 of ``device`` (profile_phases.py)."""\n'
+               f'    return _PHASE_SUMS.setdefault(str(device), wp.zeros({len(KERNELS) * SLOTS}, dtype=wp.float64, '
+               'device=device))\n')
+    launches.write_text(source)
+    return labels
+
+
+def profile(device: str, worlds: int, obj: str, modulus: float, warmup: int, steps: int,
+            labels: dict[str, list[str]]) -> dict:
+    """Step the instrumented package's vector env and read its phase sums (import it first)."""
+    import gymnasium as gym
+    import numpy as np
+    import warp as wp
+
+    import defgrasp_env  # noqa: F401  (the instrumented copy: first on sys.path)
+    from defgrasp_env.sim.solver_launches import phase_sums
+
+    env = gym.make_vec("DeformablePickup-v0", num_envs=worlds, vectorization_mode="vector_entry_point",
+                       device=device, object=obj, youngs_modulus=modulus)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    newton = cg = 0
+    for k in range(warmup + steps):
+        if k == warmup:
+            wp.synchronize_device(device)
+            phase_sums(device).zero_()
+        _, _, _, _, info = env.step(rng.uniform(-1, 1, (worlds, 7)).astype(np.float32))
+        if k >= warmup:
+            newton += int(np.sum(info["newton_iterations"]))
+            cg += int(np.sum(info["cg_iterations"]))
+    wp.synchronize_device(device)
+    sums = phase_sums(device).numpy()
+    env.close()
+    out = {"device": device, "worlds": worlds, "object": obj, "youngs_modulus": modulus, "steps": steps,
+           "reported_newton_iterations": newton, "reported_cg_iterations": cg, "kernels": {}}
+    for i, (_, kernel) in enumerate(KERNELS):
+        base = i * SLOTS
+        launches, iterations = float(sums[base + SLOTS - 2]), float(sums[base + SLOTS - 1])
+        per = iterations if kernel == "cg_world_blocks" else launches
+        out["kernels"][kernel] = {
+            "launches": launches, "iterations": iterations,
+            "phases": [[name, float(sums[base + k]) / max(per, 1.0) / 1e3] for k, name in enumerate(labels[kernel])]}
+    return out
+
+
+def report(result: dict) -> str:
+    lines = [f"{result['object']} E = {result['youngs_modulus']:g} Pa, W = {result['worlds']}, {result['device']}, "
+             f"{result['steps']} steps: thousands of cycles per world-block launch (CG: per iteration)"]
+    for kernel, k in result["kernels"].items():
+        per_step = k["launches"] / result["steps"]
+        head = f"{kernel}: {per_step:.1f} launches a step"
+        if kernel == "cg_world_blocks":
+            head += f", {k['iterations'] / max(k['launches'], 1.0):.1f} iterations a launch"
+        total = sum(v for _, v in k["phases"])
+        lines.append(f"  {head}; {total:.1f} k cycles")
+        lines += [f"    {v:9.2f}  {name}" for name, v in k["phases"]]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--device", default="cuda:0")
+    ap.add_argument("--worlds", type=int, default=1)
+    ap.add_argument("--object", default="cuboid")
+    ap.add_argument("--youngs-modulus", type=float, default=1e5)
+    ap.add_argument("--warmup", type=int, default=10)
+    ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--json", default=None, help="also write the numbers to this file")
+    args = ap.parse_args(argv)
+    if args.worlds < 1 or args.steps < 1 or args.warmup < 0:
+        ap.error(f"--worlds and --steps must be >= 1 and --warmup >= 0, got {args.worlds}, {args.steps}, {args.warmup}")
+    if "defgrasp_env" in sys.modules:
+        raise RuntimeError("profile_phases imports an instrumented copy of defgrasp_env: run it in a fresh process")
+    with tempfile.TemporaryDirectory(prefix="defgrasp-phases-") as tmp:
+        labels = instrumented_copy(pathlib.Path(tmp))
+        sys.path.insert(0, tmp)
+        result = profile(args.device, args.worlds, args.object, args.youngs_modulus, args.warmup, args.steps, labels)
+    print(report(result))
+    if args.json:
+        pathlib.Path(args.json).write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,50 @@
+"""``benchmarks/profile_phases.py``: the world-block kernels' phases stamped in a copy of the package,
+checked against the solver's own report (each Newton iteration one evaluation launch, CG's
+iterations), with the shipped package left as it was."""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from profile_phases import KERNELS, _instrument_kernel  # noqa: E402
+
+
+def test_phases_match_the_solvers_report(tmp_path):
+    """A lone cuboid, 2 steps after 1 (random actions, no contact yet: one solve a substep): the
+    evaluation's launches are the reported Newton iterations and CG's loop passes the reported CG
+    iterations; every kernel runs once a solve (4 substeps a step), every phase's cycles are >= 0
+    and each kernel's sum > 0 (the CPU's cycle counter), the phases are named by their row
+    functions; the repository's package is not touched."""
+    launches = ROOT / "defgrasp_env" / "sim" / "solver_launches.py"
+    before = launches.read_text()
+    out = tmp_path / "phases.json"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    subprocess.run([sys.executable, str(ROOT / "benchmarks" / "profile_phases.py"), "--device", "cpu",
+                    "--warmup", "1", "--steps", "2", "--json", str(out)], check=True, env=env, cwd=tmp_path,
+                   capture_output=True, timeout=600)
+    r = json.loads(out.read_text())
+    k = r["kernels"]
+    assert k["evaluate_world_blocks"]["launches"] == r["reported_newton_iterations"] > 0
+    assert k["cg_world_blocks"]["iterations"] == r["reported_cg_iterations"] > 0
+    assert [k[name]["launches"] for _, name in KERNELS[:1] + KERNELS[-1:]] == [8.0, 8.0]
+    for name, kernel in k.items():
+        cycles = [v for _, v in kernel["phases"]]
+        assert min(cycles) >= 0.0 and sum(cycles) > 0.0, name
+    names = " ".join(n for n, _ in k["evaluate_world_blocks"]["phases"])
+    assert "assemble_hessian_row" in names and "evaluate_tet" in names
+    assert [n for n, _ in k["cg_world_blocks"]["phases"]][1] == "node_product"
+    assert launches.read_text() == before
+
+
+def test_a_kernel_the_script_does_not_know_is_refused():
+    source = "def other_world_blocks(\n    threads: int,\n):\n    tid = wp.tid()\n    lane = tid - w * threads\n"
+    with pytest.raises(RuntimeError, match="other_world_blocks has 0 block barriers"):
+        _instrument_kernel(source, "other_world_blocks", 0)
