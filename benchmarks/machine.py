@@ -6,6 +6,7 @@ folder first on ``sys.path``).
 
 from __future__ import annotations
 
+import argparse
 import os
 import pathlib
 import platform
@@ -55,3 +56,17 @@ def append_results(text: str, path: str | os.PathLike = RESULTS) -> None:
     with open(path, "a", encoding="utf-8") as fh:
         fh.write(text)
     print(f"appended to {path}")
+
+
+def env_profile_arguments(description: str, device: str, steps: int) -> argparse.ArgumentParser:
+    """The arguments of the diagnoses that step the native vector env with random actions
+    (``profile_kernels.py``, ``profile_phases.py``): its device, worlds, object and Young's modulus
+    (Pa), the untimed warm-up steps and the measured steps."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--device", default=device)
+    ap.add_argument("--worlds", type=int, default=1)
+    ap.add_argument("--object", default="cuboid")
+    ap.add_argument("--youngs-modulus", type=float, default=1e5)
+    ap.add_argument("--warmup", type=int, default=10)
+    ap.add_argument("--steps", type=int, default=steps)
+    return ap

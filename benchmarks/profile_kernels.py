@@ -14,7 +14,6 @@ graphs replay, and their sum of kernel times is a lower bound of the graph-on st
 
 from __future__ import annotations
 
-import argparse
 import collections
 import os
 import pathlib
@@ -31,6 +30,7 @@ import warp as wp  # noqa: E402
 
 import defgrasp_env  # noqa: E402,F401
 from bench_env_step import solver_config  # noqa: E402
+from machine import env_profile_arguments  # noqa: E402
 
 
 def make(device: str, worlds: int, obj: str, modulus: float, graphs: bool):
@@ -76,13 +76,7 @@ def kernel_times(device: str, worlds: int, obj: str, modulus: float, warmup: int
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--device", default="cuda:0")
-    ap.add_argument("--worlds", type=int, default=1)
-    ap.add_argument("--object", default="cuboid")
-    ap.add_argument("--youngs-modulus", type=float, default=1e5)
-    ap.add_argument("--warmup", type=int, default=10)
-    ap.add_argument("--steps", type=int, default=20)
+    ap = env_profile_arguments(__doc__.split("\n")[0], "cuda:0", steps=20)
     ap.add_argument("--top", type=int, default=40)
     args = ap.parse_args(argv)
     if not wp.get_device(args.device).is_cuda:

@@ -19,7 +19,6 @@ At W > 1 the sums are over every world's block: "per launch" is per world-block.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import pathlib
@@ -27,6 +26,8 @@ import re
 import shutil
 import sys
 import tempfile
+
+from machine import env_profile_arguments  # this folder: first on sys.path (python benchmarks/profile_phases.py)
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
@@ -184,13 +185,7 @@ def report(result: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--device", default="cuda:0")
-    ap.add_argument("--worlds", type=int, default=1)
-    ap.add_argument("--object", default="cuboid")
-    ap.add_argument("--youngs-modulus", type=float, default=1e5)
-    ap.add_argument("--warmup", type=int, default=10)
-    ap.add_argument("--steps", type=int, default=30)
+    ap = env_profile_arguments(__doc__.split("\n")[0], "cuda:0", steps=30)
     ap.add_argument("--json", default=None, help="also write the numbers to this file")
     args = ap.parse_args(argv)
     if args.worlds < 1 or args.steps < 1 or args.warmup < 0:
