@@ -8,13 +8,17 @@ Each world's substep runs in a few launches with a thread block per world (``ker
 launch its phases are separated by block barriers, so on a GPU a lone world's phase costs its
 slowest thread's chain of memory round trips, which per-launch timers (``profile_kernels.py``)
 cannot split. This script copies the package to a temporary folder and instruments the copy (the
-shipped code is untouched): after every block barrier thread 0 of the block adds the cycles since
-its last stamp to that phase's sum (``clock64()`` on CUDA; on the CPU, where a block is one thread
-and a world's phases run one after another, the CPU's cycle counter). The native vector env
-(random actions, ``bench_env_step.py``'s defaults) is stepped ``--warmup`` times, the sums cleared,
-then ``--steps`` more steps. Printed per kernel: world-block launches per step, thousands of cycles
-per launch for each phase (named by the row functions it calls) and, for CG, per iteration.
-At W > 1 the sums are over every world's block: "per launch" is per world-block.
+shipped code is untouched): after every block barrier, and after one more at each kernel's end,
+thread 0 of the block adds the ticks since its last stamp to that phase's sum and counts the run
+(on CUDA ``clock64()``, SM cycles; on the CPU, where a block is one thread and a world's phases run
+one after another, the x86 time-stamp counter, reference ticks rather than core cycles, or ARM's
+virtual counter). The native vector env (random actions, ``bench_env_step.py``'s defaults) is
+stepped ``--warmup`` times, the sums cleared, then ``--steps`` more steps. Printed per kernel: the
+world-block launches a step (those that ran to the kernel's end: a world that does not iterate
+returns at once), and per phase (named by the row functions it calls) its runs a launch and
+thousands of ticks a run (CG's phases run once an iteration). A phase's time runs from the stamp
+before it: where a branch skipped a barrier (a substep without full outputs, no pad edge points),
+that code's time is in the next phase that ran. At W > 1 the sums are over every world's block.
 """
 
 from __future__ import annotations
@@ -36,26 +40,36 @@ os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
 KERNELS = (("world_start", "start_world_blocks"), ("world_evaluate", "evaluate_world_blocks"),
            ("world_cg", "cg_world_blocks"), ("world_newton_step", "newton_step_world_blocks"),
            ("world_finish", "finish_world_blocks"))
-SLOTS = 32  # per kernel: phases, then its launches (SLOTS - 2) and loop iterations (SLOTS - 1)
+#: per kernel: the cycles of its phases (up to PHASES), their runs (PHASES on), its launches that ran to
+#: their end (SLOTS - 2) and its loop's passes (SLOTS - 1, CG's iterations)
+SLOTS, PHASES = 32, 14
 
 STAMP = '''
 
 @wp.func_native("""
 #if defined(__CUDA_ARCH__)
 return (double)clock64();
+#elif defined(__aarch64__)
+unsigned long long ticks;
+asm volatile("mrs %0, cntvct_el0" : "=r"(ticks));
+return (double)ticks;
+#elif defined(__x86_64__) || defined(__i386__)
+return (double)__builtin_ia32_rdtsc();
 #else
-return (double)__builtin_readcyclecounter();
+return 0.0;
 #endif
 """)
 def phase_cycles() -> wp.float64: ...
 
 
 @wp.func
-def phase_stamp(sums: wp.array(dtype=wp.float64), k: int, lane: int, last: wp.float64) -> wp.float64:
-    """Thread 0 adds the cycles since ``last`` to ``sums[k]``; every thread gets the new stamp."""
+def phase_stamp(sums: wp.array(dtype=wp.float64), k: int, runs: int, lane: int, last: wp.float64) -> wp.float64:
+    """Thread 0 adds the cycles since ``last`` to ``sums[k]`` and counts the run in ``sums[runs]``;
+    every thread gets the new stamp."""
     now = phase_cycles()
     if lane == 0:
         wp.atomic_add(sums, k, now - last)
+        wp.atomic_add(sums, runs, wp.float64(1.0))
     return now
 '''
 _CALL = re.compile(r"(?<![.\w])([a-z_][a-z0-9_]*)\(")
@@ -63,37 +77,54 @@ _NOT_ROW_FUNCTIONS = {"range", "block_barrier", "int", "float"}
 
 
 def _instrument_kernel(source: str, kernel: str, base: int) -> tuple[str, list[str]]:
-    """``source`` with ``kernel`` stamped after each block barrier; the phases' names."""
-    lines, out, labels, called, where = source.split("\n"), [], [], [], None
-    for line in lines:
+    """``source`` with ``kernel`` stamped after each block barrier and at its end (after one more
+    barrier: every return and loop exit in these kernels is the same for a whole block); the
+    phases' names (the row functions called since the barrier before)."""
+    out, labels, called, where = [], [], [], None
+
+    def stamp(indent: str) -> None:
+        k = len(labels)
+        out.append(f"{indent}phase_last = phase_stamp(phase_sums, {base + k}, {base + PHASES + k}, lane, phase_last)")
+        labels.append(" + ".join(dict.fromkeys(called)) or "(barrier)")
+        called.clear()
+
+    def end_body() -> None:
+        while out and not out[-1].strip():
+            out.pop()
+        out.append("    block_barrier()")
+        stamp("    ")
+        out.extend(["    if lane == 0:", f"        wp.atomic_add(phase_sums, {base + SLOTS - 2}, wp.float64(1.0))",
+                    "", ""])
+
+    for line in source.split("\n"):
+        if where == "body" and line.startswith(("def ", "@wp.")):
+            end_body()
+            where = None
         if line.startswith(f"def {kernel}("):
             where = "signature"
         elif where == "signature" and line == "):":
             out.append("    phase_sums: wp.array(dtype=wp.float64),")
             where = "body"
-        elif where == "body" and line.startswith(("def ", "@wp.")):
-            where = None
         out.append(line)
         if where != "body":
             continue
         stripped = line.strip()
         if stripped == "lane = tid - w * threads":
-            out += ["    phase_last = phase_cycles()", "    if lane == 0:",
-                    f"        wp.atomic_add(phase_sums, {base + SLOTS - 2}, wp.float64(1.0))"]
+            out.append("    phase_last = phase_cycles()")
         elif stripped.startswith("for _it in range("):
             indent = " " * (len(line) - len(line.lstrip()) + 4)
             out += [f"{indent}if lane == 0:",
                     f"{indent}    wp.atomic_add(phase_sums, {base + SLOTS - 1}, wp.float64(1.0))"]
         elif stripped == "block_barrier()":
-            indent = line[: len(line) - len(line.lstrip())]
-            out.append(f"{indent}phase_last = phase_stamp(phase_sums, {base + len(labels)}, lane, phase_last)")
-            labels.append(" + ".join(dict.fromkeys(called)) or "(barrier)")
-            called = []
+            stamp(line[: len(line) - len(line.lstrip())])
         else:
-            called += [name for name in _CALL.findall(stripped) if name not in _NOT_ROW_FUNCTIONS]
-    if not labels or len(labels) > SLOTS - 2:
-        raise RuntimeError(f"profile_phases: {kernel} has {len(labels)} block barriers; expected 1 to {SLOTS - 2} "
-                           "(the world-block kernels changed: update this script)")
+            called.extend(name for name in _CALL.findall(stripped) if name not in _NOT_ROW_FUNCTIONS)
+    if where == "body":
+        end_body()
+        out.pop()
+    if len(labels) < 2 or len(labels) > PHASES:
+        raise RuntimeError(f"profile_phases: {kernel} has {len(labels) - 1} block barriers; expected 1 to "
+                           f"{PHASES - 1} (the world-block kernels changed: update this script)")
     return "\n".join(out), labels
 
 
@@ -126,8 +157,10 @@ def instrumented_copy(dst: pathlib.Path) -> dict[str, list[str]]:
         source = source[:i] + ", phase_sums(c.model.device)" + source[i:]
     source += ('\n\n_PHASE_SUMS: dict = {}\n\n\ndef phase_sums(device):\n'
                f'    """The phase sums [{len(KERNELS) * SLOTS}] float64 of ``device`` (profile_phases.py)."""\n'
-               f'    return _PHASE_SUMS.setdefault(str(device), wp.zeros({len(KERNELS) * SLOTS}, dtype=wp.float64, '
-               'device=device))\n')
+               '    key = str(wp.get_device(device))\n'
+               '    if key not in _PHASE_SUMS:\n'
+               f'        _PHASE_SUMS[key] = wp.zeros({len(KERNELS) * SLOTS}, dtype=wp.float64, device=key)\n'
+               '    return _PHASE_SUMS[key]\n')
     launches.write_text(source)
     return labels
 
@@ -163,24 +196,28 @@ def profile(device: str, worlds: int, obj: str, modulus: float, warmup: int, ste
     for i, (_, kernel) in enumerate(KERNELS):
         base = i * SLOTS
         launches, iterations = float(sums[base + SLOTS - 2]), float(sums[base + SLOTS - 1])
-        per = iterations if kernel == "cg_world_blocks" else launches
-        out["kernels"][kernel] = {
-            "launches": launches, "iterations": iterations,
-            "phases": [[name, float(sums[base + k]) / max(per, 1.0) / 1e3] for k, name in enumerate(labels[kernel])]}
+        phases = []
+        for k, name in enumerate(labels[kernel]):
+            runs = float(sums[base + PHASES + k])
+            phases.append({"name": name, "runs": runs, "kcycles_per_run": float(sums[base + k]) / max(runs, 1.0) / 1e3,
+                           "kcycles_per_launch": float(sums[base + k]) / max(launches, 1.0) / 1e3})
+        out["kernels"][kernel] = {"launches": launches, "iterations": iterations, "phases": phases}
     return out
 
 
 def report(result: dict) -> str:
     lines = [f"{result['object']} E = {result['youngs_modulus']:g} Pa, W = {result['worlds']}, {result['device']}, "
-             f"{result['steps']} steps: thousands of cycles per world-block launch (CG: per iteration)"]
+             f"{result['steps']} steps; per world-block launch that ran to its end: each phase's runs and thousands "
+             "of cycles a run (a phase runs from the stamp before: where a branch skipped a barrier, its time is in "
+             "the next phase that ran)"]
     for kernel, k in result["kernels"].items():
-        per_step = k["launches"] / result["steps"]
-        head = f"{kernel}: {per_step:.1f} launches a step"
-        if kernel == "cg_world_blocks":
-            head += f", {k['iterations'] / max(k['launches'], 1.0):.1f} iterations a launch"
-        total = sum(v for _, v in k["phases"])
-        lines.append(f"  {head}; {total:.1f} k cycles")
-        lines += [f"    {v:9.2f}  {name}" for name, v in k["phases"]]
+        head = f"{kernel}: {k['launches'] / result['steps']:.1f} launches a step"
+        if k["iterations"]:
+            head += f", {k['iterations'] / max(k['launches'], 1.0):.1f} loop passes a launch"
+        total = sum(p["kcycles_per_launch"] for p in k["phases"])
+        lines.append(f"  {head}; {total:.1f} k cycles a launch")
+        lines += [f"    {p['runs'] / max(k['launches'], 1.0):5.1f} x {p['kcycles_per_run']:9.2f}  {p['name']}"
+                  for p in k["phases"]]
     return "\n".join(lines)
 
 

@@ -134,12 +134,13 @@ def test_rows_equal_the_tet_by_tet_product_in_a_packed_model(device):
     p = wp.array(np.random.default_rng(3).standard_normal((n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
     lengths = np.diff(h.node_blocks.numpy(), axis=1).ravel()
     assert {0, 1, 2, 3} <= set(lengths % 4)  # rows with every remainder of the unrolled passes
+    unrolled = wp.zeros(n, dtype=wp.vec3, device=device)
     wp.launch(block_at_a_time, n, inputs=[p, h.node_blocks, h.block_node, h.values, once], device=device)
-    wp.launch(row_product, n, inputs=[p, h.node_blocks, h.block_node, h.values, zero], device=device)
+    wp.launch(row_product, n, inputs=[p, h.node_blocks, h.block_node, h.values, unrolled], device=device)
     if device == "cpu":
-        np.testing.assert_array_equal(zero.numpy(), once.numpy())
+        np.testing.assert_array_equal(unrolled.numpy(), once.numpy())
     else:  # a GPU compiler may contract the two loops' multiply-adds differently
-        assert_products_agree(zero.numpy(), once.numpy())
+        assert_products_agree(unrolled.numpy(), once.numpy())
     blocks = {}
     spans, cols, values = h.node_blocks.numpy(), h.block_node.numpy(), h.values.numpy()
     for i, (a, b) in enumerate(spans):
