@@ -79,6 +79,56 @@ def test_a_period_on_the_device_gives_the_bits_of_substeps_from_the_host(substep
     assert not differ, differ[:10]
 
 
+def _sideways_press(period_graphs: bool, monkeypatch=None):
+    """The closed gripper pressed down and sideways onto a cylinder (E = 3e6) on the ground while its
+    wrist turns back and forth (``test_wrist_force_limit``'s sustained push): stopped pads the
+    object still pushes over the limit back off. Returns every observation and info array, on the
+    host path (``monkeypatch`` given) the number of substeps a world backed off in, and the
+    substeps the period graph ran."""
+    from defgrasp_env.envs import scene as scene_module
+    from defgrasp_env.layout import DELTA_ACTION, ENV_STATE
+
+    backed = []
+    if monkeypatch is not None:
+        limited = scene_module.limited_substep
+
+        def counting(*args, **kwargs):
+            result = limited(*args, **kwargs)
+            backed.append(int((result[2] < 0.0).sum()))
+            return result
+        monkeypatch.setattr(scene_module, "limited_substep", counting)
+    env = gym.make("DeformablePickup-v0", object="cylinder", youngs_modulus=3e6)
+    obs, _ = env.reset(seed=1)
+    scene = env.unwrapped.scene
+    scene.period_graphs = period_graphs
+    out = {}
+    for t in range(32):
+        offset = ENV_STATE.get(obs["environment_state"], "feature_position") - scene.gripper.tcp_positions()[0]
+        toward = np.clip(offset / 0.015, -1.0, 1.0)
+        push = np.clip([toward[0] + 0.7, -1.0 if t > 5 else 0.0, toward[2]], -1.0, 1.0)
+        action = DELTA_ACTION.pack(linear_velocity=push, angular_velocity=[0.0, 0.3 * (-1.0) ** t, 0.0], jaw=[1.0])
+        obs, _, _, _, info = env.step(action.astype(np.float32))
+        out.update({f"{t}/obs/{name}": np.asarray(v) for name, v in obs.items()})
+        out.update({f"{t}/info/{name}": np.asarray(v) for name, v in info.items()})
+    out["positions"] = scene.state.positions.numpy().copy()
+    graphed = scene.device_substeps
+    env.close()
+    return out, sum(backed), graphed
+
+
+def test_a_back_off_on_the_device_gives_the_hosts_bits(monkeypatch):
+    """The force limit's back-off (``limit_kernels.back_off_begin``, ``Gripper.aim_back_off``) in
+    the period graph against the host's ``limited_substep``: the cylinder pressed sideways while
+    turning backs off in several substeps (4), and every observation, info and node position is equal
+    bit for bit on the CPU."""
+    host, backed, on_device = _sideways_press(False, monkeypatch)
+    graphed, _, graphed_substeps = _sideways_press(True)
+    assert on_device == 0 and graphed_substeps == 31 * 4, graphed_substeps  # every period but the first
+    assert backed >= 3, backed
+    differ = [k for k in host if not np.array_equal(graphed[k], host[k], equal_nan=True)]
+    assert not differ, differ[:10]
+
+
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=pytest.mark.cuda)])
 def test_the_gate_closes_exactly_where_the_host_would_raise(device):
     """``count_nonfinite`` + ``close_gate_if_nonfinite`` against the host (``SolveLoads.from_rows``
@@ -114,16 +164,17 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
     """``limit_begin`` / ``limit_trial`` / ``limit_update`` / ``retry_gate`` driven as the period
     graph drives them, against ``wrist.force_limit.limited_substep`` on the same synthetic solves:
     per world a load that grows with the motion fraction (0 up to a touch, then steeply: a pad
-    pressing into an object; some already at the limit at the start, some held, some never over),
+    pressing into an object; some already at the limit at the start, some held, some never over,
+    some pressed over the limit already at fraction 0, which back off),
     the same trials, solve by solve, and the same accepted scales and loads, bit for bit on the
     CPU (float64 on both sides; within 1e-12 on CUDA, whose compiler may fuse a multiply-add)."""
     if device != "cpu" and not wp.is_cuda_available():
         pytest.skip("no CUDA device")
-    from defgrasp_env.wrist.force_limit import MAX_RETRIES, limited_substep
+    from defgrasp_env.wrist.force_limit import BACK_OFF, MAX_RETRIES, limited_substep
 
     rng = np.random.default_rng(11)
     w = 300
-    touch, slope = rng.uniform(0.0, 1.2, w), rng.uniform(0.3, 30.0, w)
+    touch, slope = rng.uniform(-0.6, 1.2, w), rng.uniform(0.3, 30.0, w)  # touch < 0: pressed already
     start = np.where(rng.random(w) < 0.15, 1.0, rng.uniform(0.0, 0.9, w))
     held = rng.random(w) < 0.1
 
@@ -138,6 +189,7 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
 
     _, host_load, host_scale = limited_substep(solve, start, held=held)
     assert 50 < (load_of(np.where(held, 0.0, 1.0)) > 1.0 + FORCE_TOLERANCE).sum() < w - 50  # both sides
+    assert (host_scale < 0.0).sum() > 20 and (host_scale > 0.0).sum() > 20  # backed off, and moved
 
     arr = functools.partial(wp.array, device=device)
     state = lk.LimitState()
@@ -171,12 +223,19 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
         loads = loads_of(trial)  # the solve: only the changed worlds' loads could differ, and they are a function
         return trial
 
-    while retry.numpy()[0]:
-        limit_solve(0)
-        launch(lk.limit_update, w, [loads, FORCE_TOLERANCE, state], [gate])
-        launch(lk.retry_gate, 1, [MAX_RETRIES], [gate, retry, final])
-    if final.numpy()[0]:
-        limit_solve(1)
+    def limited():  # period_graph's ``_limited``
+        while retry.numpy()[0]:
+            limit_solve(0)
+            launch(lk.limit_update, w, [loads, FORCE_TOLERANCE, state], [gate])
+            launch(lk.retry_gate, 1, [MAX_RETRIES], [gate, retry, final])
+        if final.numpy()[0]:
+            limit_solve(1)
+
+    limited()
+    launch(lk.back_off_begin, w, [loads, FORCE_TOLERANCE, BACK_OFF, state], [gate])
+    launch(lk.limit_gate, 1, [], [gate, limiting, retry, final])
+    assert limiting.numpy()[0] == 1  # stopped worlds that still read over back off
+    limited()
     assert len(device_trials) == len(host_trials) >= 4
     # CUDA may fuse the regula falsi's multiply-add (one rounding less): within 1e-12 there
     same = np.array_equal if device == "cpu" else functools.partial(np.allclose, rtol=1e-12, atol=1e-15)

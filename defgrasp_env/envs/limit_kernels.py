@@ -2,8 +2,9 @@
 as one graph (``period_graph.PeriodGraph``): the device twins of the host's rules, world by world
 in float64 with the same operations, so that on the CPU the graph's results are the host's bit for
 bit: the patient re-solve (``limit_loads.SolveLoads.patient_re_solve`` as the scene's
-``_patient_if_over`` applies it) and the retries with less motion (``wrist.force_limit.limited_substep``:
-Illinois regula falsi on the measured load).
+``_patient_if_over`` applies it), the retries with less motion and the back-off of a stopped world
+that still reads over (``wrist.force_limit.limited_substep``: Illinois regula falsi on the measured
+load).
 
 Per world the limit's state lives in [W] float64 arrays (``LimitState``); what the graph's
 conditional nodes test is counted into the int32 ``gate`` (``GATE_*``) and turned into one-element
@@ -175,6 +176,28 @@ def limit_begin(loads: wp.array(dtype=solve_load_row), fraction: wp.array(dtype=
 
 
 @wp.kernel
+def back_off_begin(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64, back_off: wp.float64,
+                   s: LimitState, gate: wp.array(dtype=wp.int32)):
+    """``limited_substep`` after the stop (the accepted solve of the first try or of the retries,
+    its loads): a world stopped or held (scale at most 0) whose load is still over 1 + ``tolerance``
+    backs off: it brackets [-``back_off``, 0] (no load assumed at the far end), its scale the stop
+    until a back-off reads within the limit; counts those worlds into ``gate`` as over and
+    searching."""
+    w = wp.tid()
+    row = loads[w]
+    s.searching[w] = 0
+    if s.scale[w] <= wp.float64(0.0) and row[2] > wp.float64(1.0) * (wp.float64(1.0) + tolerance):
+        s.lo[w] = -back_off
+        s.f_lo[w] = wp.float64(0.0)
+        s.hi[w] = s.scale[w]
+        s.f_hi[w] = row[2]
+        s.side[w] = wp.float64(0.0)
+        s.searching[w] = 1
+        wp.atomic_add(gate, GATE_OVER, 1)
+        wp.atomic_add(gate, GATE_SEARCHING, 1)
+
+
+@wp.kernel
 def limit_gate(gate: wp.array(dtype=wp.int32), limiting: wp.array(dtype=wp.int32), retry: wp.array(dtype=wp.int32),
                final: wp.array(dtype=wp.int32)):
     """After ``limit_begin``: the limit acts where a world is over (``limiting``; not after a
@@ -242,8 +265,8 @@ def select_all_worlds(solve_worlds: wp.array(dtype=int)):
 def limit_update(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64, s: LimitState,
                  gate: wp.array(dtype=wp.int32)):
     """``limited_substep``'s bracket update after a retry: a searching world whose trial read at
-    most 1 + ``tolerance`` keeps it as its low end (done from 1 - ``tolerance`` up), else as its high
-    end, with the Illinois halving of a stale end; its scale is its low end; counts into ``gate``
+    most 1 + ``tolerance`` keeps it as its low end and its scale (done from 1 - ``tolerance`` up),
+    else as its high end, with the Illinois halving of a stale end; counts into ``gate``
     the worlds whose trial is not their scale and those still searching."""
     w = wp.tid()
     one = wp.float64(1.0)
@@ -265,7 +288,8 @@ def limit_update(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64, s
             s.hi[w] = t
             s.f_hi[w] = load
             s.side[w] = wp.float64(1.0)
-        s.scale[w] = s.lo[w]
+        if low:
+            s.scale[w] = t
         if done:
             s.searching[w] = 0
     if s.trial[w] != s.scale[w]:

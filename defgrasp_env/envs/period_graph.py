@@ -26,7 +26,7 @@ from ..sim.launch_cache import LaunchCache
 from ..sim.launch_lock import scoped_capture
 from ..sim.solver import ImplicitSolver
 from ..sim.state import Control, State
-from ..wrist.force_limit import FORCE_TOLERANCE, MAX_RETRIES
+from ..wrist.force_limit import BACK_OFF, FORCE_TOLERANCE, MAX_RETRIES
 from . import limit_loads
 from . import limit_kernels as lk
 
@@ -76,7 +76,7 @@ class PeriodGraph:
             return None
         gripper = self.gripper
         key = (count, h, id(states[0]), id(states[1]), gripper.driver.config, gripper.wrist_force_limit,
-               gripper_module.HOLD_COSINE, limit_loads.PATIENT_UPDATE_FRACTION, FORCE_TOLERANCE, MAX_RETRIES)
+               gripper_module.HOLD_COSINE, limit_loads.PATIENT_UPDATE_FRACTION, FORCE_TOLERANCE, MAX_RETRIES, BACK_OFF)
         graph = self._graphs.get(key)
         if graph is None:
             if key not in self._recorded:
@@ -120,7 +120,8 @@ class PeriodGraph:
 
     def _substep(self, k: int, count: int, src: State, dst: State, h: float) -> None:
         """Substep ``k`` of ``count`` from ``src`` into ``dst``: plan, first try, patient re-solve,
-        the limit's retries where a world is over, and acceptance unless a pad force is non-finite."""
+        the limit's retries where a world is over, its back-off where a stopped world still is, and
+        acceptance unless a pad force is non-finite."""
         w, cond, last = self.num_worlds, self._cond, k == count - 1
         self._launch("mark", lk.mark_substep, 1, [k], [self.gate])
         self.gripper.plan_substep(k, count, h)
@@ -131,6 +132,11 @@ class PeriodGraph:
         self._launch("limit begin", lk.limit_begin, w, [self.loads, self.gripper.move_fraction, FORCE_TOLERANCE,
                                                          self._limit], [self.gate])
         self._launch("limit gate", lk.limit_gate, 1, [], [self.gate, cond["limit"], cond["retry"], cond["final"]])
+        wp.capture_if(cond["limit"], on_true=functools.partial(self._limited, src, dst, h, last))
+        self._launch("back off begin", lk.back_off_begin, w, [self.loads, FORCE_TOLERANCE, BACK_OFF, self._limit],
+                     [self.gate])
+        self.gripper.aim_back_off(dst.pad_force)  # every world (the host aims where one backs off: read only there)
+        self._launch("back off gate", lk.limit_gate, 1, [], [self.gate, cond["limit"], cond["retry"], cond["final"]])
         wp.capture_if(cond["limit"], on_true=functools.partial(self._limited, src, dst, h, last))
         self._launch("non-finite", lk.close_gate_if_nonfinite, 1, [], [self.gate])
         wp.capture_if(self.gate, on_true=functools.partial(self._accept, k, dst))

@@ -373,11 +373,15 @@ class PickupScene:
         solve's state becomes current, its report is folded in and the gripper senses its pad
         forces."""
         solved = np.where(loads.held, 0.0, 1.0)  # the fraction [W] each world's last solve of this substep moved by
+        aimed = False  # the back-off aimed (from the solves before the first back-off: the stopped ones)
 
         def solve(fraction):
             # a retry re-solves only the worlds whose fraction changed: the others' last solve
             # (in the other state, untouched since) is what a new one would give
-            nonlocal solved
+            nonlocal solved, aimed
+            if not aimed and (fraction < 0.0).any():
+                self.gripper.aim_back_off(self._next_state.pad_force)
+                aimed = True
             number, loads = self._solve_substep(fraction, h, worlds=fraction != solved, last=last)
             solved = np.array(fraction, dtype=np.float64)
             return self._patient_if_over(number, loads, fraction, h, last)

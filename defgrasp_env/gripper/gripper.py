@@ -84,10 +84,10 @@ def pad_reach() -> float:
     return float(np.linalg.norm(corners, axis=-1).max())
 
 
-def _move_pads_inputs(q_before, q_plan, gap_before, gap_plan, fraction) -> list:
+def _move_pads_inputs(q_before, q_plan, gap_before, gap_plan, fraction, back_off) -> list:
     """The inputs of ``gripper.kernels.move_pads``: the substep's start and plan, the fraction of it
-    to apply, and the pad boxes' size, backing and ground clearance."""
-    return [q_before, q_plan, gap_before, gap_plan, fraction, wp.vec3d(*PAD_BOX_HALF_EXTENTS), PAD_BACKING,
+    to apply, the flange's full back-off, and the pad boxes' size, backing and ground clearance."""
+    return [q_before, q_plan, gap_before, gap_plan, fraction, back_off, wp.vec3d(*PAD_BOX_HALF_EXTENTS), PAD_BACKING,
             GROUND_CLEARANCE]
 
 
@@ -104,8 +104,9 @@ def lift_above_ground(q: np.ndarray, gap: np.ndarray, device="cpu"):
                wp.zeros(n, dtype=wp.vec4d, device=d), wp.zeros(2 * n, dtype=wp.vec3, device=d),
                wp.zeros(2 * n, dtype=wp.quat, device=d)]
     whole = wp.ones(n, dtype=wp.float64, device=d)
-    wp.launch(gk.move_pads, dim=n, inputs=_move_pads_inputs(q_in, q_in, gap_in, gap_in, whole), outputs=outputs,
-              device=d)
+    still = wp.zeros(n, dtype=wp.vec3d, device=d)
+    wp.launch(gk.move_pads, dim=n, inputs=_move_pads_inputs(q_in, q_in, gap_in, gap_in, whole, still),
+              outputs=outputs, device=d)
     quat = outputs[3].numpy()
     return outputs[0].numpy(), outputs[2].numpy(), np.repeat(quat[:, None, :], 2, axis=1)
 
@@ -190,6 +191,7 @@ class Gripper:
         self._gap_plan = wp.zeros(n, dtype=f64, device=d)
         self._force_before = wp.zeros(n, dtype=f64, device=d)
         self._fraction = wp.ones(n, dtype=f64, device=d)
+        self._back_off = wp.zeros(n, dtype=wp.vec3d, device=d)  # m, world: the flange's full back-off
         self._limits = wp.zeros(n, dtype=wp.vec2d, device=d)
         self._pad_center = wp.zeros((n, 2), dtype=wp.vec3d, device=d)
         self._pad_quat = wp.array(np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)), dtype=wp.vec4d, device=d)
@@ -421,16 +423,25 @@ class Gripper:
         return limits[:, 0], limits[:, 1] > 0.0
 
     def move(self, fraction: np.ndarray | None = None) -> None:
-        """Apply the planned substep: ``fraction`` [W] (in [0, 1]; default 1) of the wrist's planned
-        substep motion and of the jaw's planned closing (a planned opening is applied whole: it only
-        lowers the forces), with the wrist lifted so that the pads stay above the ground; writes the
-        pad box poses to move to (``pad_targets``, :meth:`pad_target_poses`). May be called again (a
-        retry from the same start, ``wrist.force_limit``) with another fraction."""
+        """Apply the planned substep: ``fraction`` [W] (in [-1, 1]; default 1; negative: the flange
+        backed off, :meth:`aim_back_off`) of the wrist's planned substep motion and of the jaw's
+        planned closing (a planned opening is applied whole: it only lowers the forces), with the
+        wrist lifted so that the pads stay above the ground; writes the pad box poses to move to
+        (``pad_targets``, :meth:`pad_target_poses`). May be called again (a retry from the same
+        start, ``wrist.force_limit``) with another fraction."""
         if fraction is None or np.all(np.asarray(fraction) == 1.0):
             self._fraction.fill_(1.0)
         else:
             self._fraction.assign(np.asarray(fraction, dtype=np.float64).reshape(self.num_worlds))
         self._move_by_fraction()
+
+    def aim_back_off(self, pad_force: wp.array) -> None:
+        """The direction and length of this substep's back-off (a :meth:`move` with a negative
+        fraction f slides the flange by -f times it, ``wrist.force_limit``), from a solve's pad
+        forces ``pad_force`` [W*2] (vec3, N, world: the object's force on each pad, the stopped
+        solve's): along their sum, the length of the planned slide (``kernels.aim_back_off``)."""
+        self._launch(("aim back off", id(pad_force)), gk.aim_back_off, [pad_force, self._q_before, self._q_plan],
+                     [self._back_off], keep=(pad_force,))
 
     def move_as_planned(self) -> None:
         """:meth:`move` with the force limit's first try, set on the device by :meth:`plan_substep`
@@ -442,7 +453,7 @@ class Gripper:
     def _move_by_fraction(self) -> None:
         """The move kernel with the fraction array as it is."""
         self._launch("move", gk.move_pads, _move_pads_inputs(self._q_before, self._q_plan, self._gap_before,
-                                                              self._gap_plan, self._fraction),
+                                                              self._gap_plan, self._fraction, self._back_off),
                      [self._q, self._gap, self._pad_center, self._pad_quat, *self.pad_targets])
         self._changed()
 
@@ -459,9 +470,9 @@ class Gripper:
         (float32 or float64; vec3 / vec3d) on the gripper's device or array-likes [W, 2] / [W, 2, 3]:
         the readouts and the grip-stiffness estimate follow them. ``record_limit``: the last
         :meth:`move` was the force limit's accepted one (its fraction the limit's scale): a world
-        that tried to move (not held, :meth:`held_at_limit`) and was stopped (fraction 0) remembers
-        the push it tried, one that moved forgets, a held one keeps the push that stopped it (so a
-        command turning step by step releases it)."""
+        that tried to move (not held, :meth:`held_at_limit`) and was stopped (fraction 0) or backed
+        off (a negative fraction) remembers the push it tried, one that moved forgets, a held one
+        keeps the push that stopped it (so a command turning step by step releases it)."""
         n, d = self.num_worlds, self.device
         if not isinstance(pad_normal_force, wp.array):
             pad_normal_force = wp.array(np.asarray(pad_normal_force, dtype=np.float64).reshape(2 * n),

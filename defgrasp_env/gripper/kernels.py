@@ -273,22 +273,28 @@ def plan_substep(q: wp.array(dtype=vec6d), gap: wp.array(dtype=wp.float64), tip_
 @wp.kernel
 def move_pads(q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d), gap_before: wp.array(dtype=wp.float64),
               gap_plan: wp.array(dtype=wp.float64), fraction: wp.array(dtype=wp.float64),
-              half_extents: wp.vec3d, backing: wp.float64, clearance: wp.float64,
+              back_off: wp.array(dtype=wp.vec3d), half_extents: wp.vec3d, backing: wp.float64, clearance: wp.float64,
               q: wp.array(dtype=vec6d), gap: wp.array(dtype=wp.float64), pad_center: wp.array2d(dtype=wp.vec3d),
               pad_quat: wp.array(dtype=wp.vec4d), target_positions: wp.array(dtype=wp.vec3),
               target_orientations: wp.array(dtype=wp.quat)):
     """Apply ``fraction[w]`` of world w's planned wrist motion and jaw closing (a planned opening
-    whole), lift the flange so that no pad-box corner (half extents ``half_extents``, the pad's box
-    reaching ``backing`` m behind its face) is below ``clearance``, and write the joints, gap and
-    the pads' box poses: float64 (``pad_center`` [W, 2], ``pad_quat`` [W]) and float32 for the FEM
-    (``target_positions`` / ``target_orientations`` [W*2], pad 0 then 1 per world)."""
+    whole; a negative fraction f backs the flange off by -f ``back_off[w]`` (m, world:
+    ``aim_back_off``) from the substep start, orientation and jaw as they were), lift the flange so
+    that no pad-box corner (half extents ``half_extents``, the pad's box reaching ``backing`` m
+    behind its face) is below ``clearance``, and write the joints, gap and the pads' box poses:
+    float64 (``pad_center`` [W, 2], ``pad_quat`` [W]) and float32 for the FEM (``target_positions``
+    / ``target_orientations`` [W*2], pad 0 then 1 per world)."""
     w = wp.tid()
     f = fraction[w]
     qb = q_before[w]
     qw = q_plan[w]
     g0 = gap_before[w]
     g = gap_plan[w]
-    if f < _F(1.0):
+    if f < _F(0.0):  # a back-off: the flange slides by -f back_off, orientation and jaw kept
+        b = back_off[w] * (-f)
+        qw = vec6d(qb[0] + b[0], qb[1] + b[1], qb[2] + b[2], qb[3], qb[4], qb[5])
+        g = wp.max(g, g0)
+    elif f < _F(1.0):
         qw = qb + (qw - qb) * f
         if g < g0:
             g = g0 + (g - g0) * f
@@ -316,6 +322,28 @@ def move_pads(q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d), ga
 
 
 @wp.kernel
+def aim_back_off(pad_force: wp.array(dtype=wp.vec3), q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d),
+                 back_off: wp.array(dtype=wp.vec3d)):
+    """World w's full back-off (``move_pads`` at fraction -1), from a solve's pads forces
+    ``pad_force[2w], [2w+1]`` (N, world: the object's force on each pad): the flange slides along
+    their sum (the wrist yields to the push, as a back-driven motor does) by the length of the
+    substep's planned slide; none where they cancel or no slide is planned."""
+    w = wp.tid()
+    a = pad_force[2 * w]
+    b = pad_force[2 * w + 1]
+    net = wp.vec3d(wp.float64(a[0]) + wp.float64(b[0]), wp.float64(a[1]) + wp.float64(b[1]),
+                   wp.float64(a[2]) + wp.float64(b[2]))
+    qb = q_before[w]
+    qp = q_plan[w]
+    slide = wp.length(wp.vec3d(qp[0] - qb[0], qp[1] - qb[1], qp[2] - qb[2]))
+    size = wp.length(net)
+    out = wp.vec3d()
+    if size > _F(0.0):
+        out = net * (slide / size)
+    back_off[w] = out
+
+
+@wp.kernel
 def sense_pads(normal_force: wp.array(dtype=Any), total_force: wp.array(dtype=Any), read_total: wp.int32,
                gap: wp.array(dtype=wp.float64), gap_before: wp.array(dtype=wp.float64),
                force_before: wp.array(dtype=wp.float64), target_gap: wp.array(dtype=wp.float64),
@@ -326,9 +354,10 @@ def sense_pads(normal_force: wp.array(dtype=Any), total_force: wp.array(dtype=An
     """World w after its accepted solve: the pad normal forces ``normal_force[2w], [2w+1]`` (N) and,
     if ``read_total``, the object's total force on each pad ``total_force`` (N, world) become the
     gripper's readings; the grip-stiffness estimate follows them (``driver.update_grip_stiffness``);
-    if ``record_limit``, the force limit's outcome is remembered (``Gripper.sense(record_limit=True)``:
-    the substep's fraction 0 in a world that tried to move keeps the planned push it tried, a held
-    world keeps its push, a world that moved forgets)."""
+    if ``record_limit``, the force limit's outcome is remembered
+    (``Gripper.sense(record_limit=True)``: the substep's fraction 0 (or a back-off, below 0) in a
+    world that tried to move keeps the planned push it tried, a held world keeps its push, a world
+    that moved forgets)."""
     w = wp.tid()
     f0 = wp.float64(normal_force[2 * w])
     f1 = wp.float64(normal_force[2 * w + 1])
@@ -342,7 +371,7 @@ def sense_pads(normal_force: wp.array(dtype=Any), total_force: wp.array(dtype=An
                                              (f0 + f1) / _F(2.0), target_gap[w])
     if record_limit != 0 and limits[w][1] == _F(0.0):
         push = wp.vec3d()
-        if fraction[w] == _F(0.0):
+        if fraction[w] <= _F(0.0):
             qb = q_before[w]
             qp = q_plan[w]
             push = wp.vec3d(qp[0] - qb[0], qp[1] - qb[1], qp[2] - qb[2])

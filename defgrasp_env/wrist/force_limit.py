@@ -13,23 +13,34 @@ Within a substep the forces are limited here: a pad's normal force can be at mos
 limit plus the wrist limit (the jaw squeezes with at most the one, the arm pushes with at most the
 other; both add at most on one pad), and the wrist force at most the wrist limit. ``actuator_load``
 is the largest ratio of a force to its limit (1 = at a limit). Per substep the actuators move by a
-fraction ``scale`` in [0, 1] of the substep's planned motion (the wrist's, and the jaw's closing):
-1 when the load stays within ``1 + tolerance``; else the fraction found by bracketing (Illinois
-regula falsi on the measured load, a few extra solves of that substep) that brings the load to 1;
-and 0 (wrist and closing jaw stop) when the load was at 1 before the substep or no fraction is
-found. So a jaw that closes fast on a stiff object pinned against the ground (or the other pad), or
-a wrist that pushes a pad into one, stops within the substep, before the penalty contact reads kN.
+fraction ``scale`` in [-1, 1] of the substep's planned motion (the wrist's slide and turn, and the
+jaw's closing): 1 when the load stays within ``1 + tolerance``; else the fraction found by
+bracketing (Illinois regula falsi on the measured load, a few extra solves of that substep) that
+brings the load to 1; and 0 (wrist and closing jaw stop) when the load was at 1 before the substep
+or no fraction is found. So a jaw that closes fast on a stiff object pinned against the ground (or
+the other pad), or a wrist that pushes a pad into one, stops within the substep, before the penalty
+contact reads kN. Where the stopped actuators still read over the limit (the object pushes back: a
+compressed stiff object, or its momentum against a pad that stopped), the wrist yields as a
+back-driven motor does: it backs off along the force the object exerts on the pads (a negative
+fraction f: -f x ``BACK_OFF`` lengths of the planned slide; orientation and jaw kept,
+``Gripper.aim_back_off``), by the least that brings the load to the limit, bracketed the same way;
+where no back-off reads within the limit, the stop stands (backing off along the reversed plan
+instead made a sphere, E = 1e6, pressed while turning read 4x the limit). Before, a stopped pad
+could not yield: a stiff cylinder (E = 3e6) swept at the default limits read 1.1-1.3 kN on one for
+four substeps, converged (with the tets' rotation seed of ``sim.kernels.elastic.frame_rotation``:
+the bounds rested on particular trajectories; ``benchmarks/RESULTS.md``).
 A world that stays at its limit under the same push (``held``: ``Gripper.held_at_limit``, e.g. a
 learner pressing the object into the ground for seconds) stays stopped in one solve per substep
 instead of trying its motion again (a solve over the limit, a patient re-solve and the stopped
 re-solve: 2.75-3 solves per substep, ~15x the time of a free step on the CPU, and on the GPU the
 batch's slowest world), like a protective stop that holds until the load drops below the limit or
 the command turns away (``Gripper.held_at_limit``: the same flange push within ~26 degrees, with or
-without a turn of the wrist). Where the try would have been stopped anyway (a push into a stiff object) the result is the
-same, bit for bit (tests/test_wrist_force_limit.py, also the rope); where a try's patient re-solve
-would have read within the tolerance, the held wrist stays where it stopped instead of creeping on
-in 10 % load steps (a first version that held on any push with a positive component along the
-stopped one changed the recorded operator stream's rope episode so: it kept its grasp).
+without a turn of the wrist). Where the try would have been stopped anyway (a push into a stiff
+object) the result is the same, bit for bit (tests/test_wrist_force_limit.py, also the rope);
+where a try's patient re-solve would have read within the tolerance, the held wrist stays where it
+stopped instead of creeping on in 10 % load steps (a first version that held on any push with a
+positive component along the stopped one changed the recorded operator stream's rope episode so: it
+kept its grasp).
 Pure functions on arrays (shapes [W] per world); the scene supplies ``solve``.
 """
 
@@ -44,6 +55,9 @@ DEFAULT_WRIST_FORCE_LIMIT = 150.0
 #: Relative overshoot of a limit accepted without a re-solve, and the extra solves at most.
 FORCE_TOLERANCE = 0.1
 MAX_RETRIES = 6
+#: The most a stopped wrist backs off in a substep when the object still pushes it over its limit,
+#: in lengths of the substep's planned slide (``limited_substep``: fraction down to -BACK_OFF).
+BACK_OFF = 1.0
 
 
 def wrist_force(pad_force: np.ndarray) -> np.ndarray:
@@ -84,9 +98,9 @@ def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], lo
 
     Args:
         solve: ``solve(scale)`` runs the substep from the same start state with the actuators moved
-            by the fraction ``scale`` [W] of their planned motion; returns (result, load [W]), the
-            load as ``actuator_load`` (1 = at a limit) and ``result`` anything the caller needs
-            (solver report, forces).
+            by the fraction ``scale`` [W] of their planned motion (negative: backed off along it);
+            returns (result, load [W]), the load as ``actuator_load`` (1 = at a limit) and
+            ``result`` anything the caller needs (solver report, forces).
         load_before: load [W] at the substep start.
         held: [W] bool (default none): worlds that stay stopped (scale 0) without trying their
             planned motion: those at a limit whose actuators the limit stopped before on a motion in
@@ -95,21 +109,44 @@ def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], lo
         first: (result, load) of the first try, ``solve(scale)`` with ``scale`` 0 where ``held`` and
             1 elsewhere, when the caller ran it already (default: run here).
     Returns:
-        (result, load [W], scale [W]) of the accepted solve, which is always the last one run.
+        (result, load [W], scale [W]) of the accepted solve, which is always the last one run;
+        ``scale`` in [-``BACK_OFF``, 1].
     """
     limit = 1.0
     load_before = np.asarray(load_before, dtype=np.float64)
     scale = np.ones_like(load_before) if held is None else np.where(held, 0.0, 1.0)
     result, load = solve(scale) if first is None else first
     over = (load > limit * (1.0 + tolerance)) & (scale > 0.0)  # a held world has no motion to take back
-    if not over.any():
-        return result, load, scale
-    # stop at once where the actuators already pressed at the limit; else bracket [0, 1]
-    lo, f_lo = np.zeros_like(scale), np.minimum(load_before, limit)
-    hi, f_hi = scale.copy(), load.copy()
+    if over.any():
+        # stop at once where the actuators already pressed at the limit; else bracket [0, 1]
+        searching = over & (load_before < limit)
+        bracket = (np.zeros_like(scale), np.minimum(load_before, limit), scale.copy(), load.copy())
+        scale = np.where(over, 0.0, scale)
+        result, load = _bracket(solve, result, load, scale, bracket, searching, tolerance, retries)
+    # stopped (or held) and still over: the object pushes back on the stopped pads (a compressed
+    # stiff object, its momentum); the wrist yields, backing off by at most ``BACK_OFF``, the least
+    # that brings the load to the limit (bracket [-BACK_OFF, 0], no load assumed at its far end);
+    # where no back-off reads within the limit, the stop stands
+    over = (load > limit * (1.0 + tolerance)) & (scale <= 0.0)
+    if over.any():
+        bracket = (np.full_like(scale, -BACK_OFF), np.zeros_like(scale), scale.copy(), load.copy())
+        result, load = _bracket(solve, result, load, scale, bracket, over, tolerance, retries)
+    return result, load, scale
+
+
+def _bracket(solve, result, load, scale: np.ndarray, bracket: tuple, searching: np.ndarray, tolerance: float,
+             retries: int):
+    """``limited_substep``'s search: Illinois regula falsi on the measured load, per searching world
+    [W] bool, in its ``bracket`` (lo, f_lo, hi, f_hi) [W] each (lo reads at most the limit, hi over
+    it), for the largest fraction that reads within 1 +- ``tolerance``; ``scale`` [W] (updated in
+    place) is each world's accepted fraction: a searching world's last trial that read at most the
+    limit (its start where none did: lo's load may be assumed, not measured). At most ``retries``
+    solves, then a solve of the scales unless the last retry solved them already. Returns (result,
+    load) of the last solve, which is the accepted one."""
+    limit = 1.0
+    lo, f_lo, hi, f_hi = (np.array(a, dtype=np.float64) for a in bracket)
+    searching = searching.copy()
     side = np.zeros_like(scale)  # Illinois: halve the stale end's excess after two moves of one side
-    searching = over & (load_before < limit)
-    scale = np.where(over, 0.0, scale)
     for _ in range(retries):
         if not searching.any():
             break
@@ -123,8 +160,8 @@ def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], lo
         lo, f_lo = np.where(low, trial, lo), np.where(low, load, f_lo)
         hi, f_hi = np.where(high, trial, hi), np.where(high, load, f_hi)
         side = np.where(low, -1.0, np.where(high, 1.0, side))
-        scale = np.where(searching, lo, scale)
+        scale[:] = np.where(low, trial, scale)
         searching &= ~done
         if np.array_equal(trial, scale):
-            return result, load, scale   # the last solve is the accepted one in every world
-    return (*solve(scale), scale)
+            return result, load   # the last solve is the accepted one in every world
+    return solve(scale.copy())
