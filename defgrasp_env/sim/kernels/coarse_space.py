@@ -137,6 +137,35 @@ def coarse_assemble_nodes(
 
 
 @wp.func
+def most_shared_aggregate(a0: int, a1: int, a2: int, a3: int):
+    """The aggregate that most of a tet's four vertices (aggregates ``a0`` .. ``a3``) belong to;
+    the first vertex's among equals."""
+    best = a0
+    most = int(0)
+    for v in range(4):
+        a = a0
+        if v == 1:
+            a = a1
+        elif v == 2:
+            a = a2
+        elif v == 3:
+            a = a3
+        n = int(0)
+        if a == a0:
+            n += 1
+        if a == a1:
+            n += 1
+        if a == a2:
+            n += 1
+        if a == a3:
+            n += 1
+        if n > most:
+            most = n
+            best = a
+    return best
+
+
+@wp.func
 def coarse_assemble_tet(
     t: int,
     tets: wp.array(dtype=wp.vec4i),
@@ -161,9 +190,12 @@ def coarse_assemble_tet(
     if spare_tet(idx):
         return
     a0 = node_aggregate[idx[0]]
+    a1 = node_aggregate[idx[1]]
+    a2 = node_aggregate[idx[2]]
+    a3 = node_aggregate[idx[3]]
     all_free = free[idx[0]] + free[idx[1]] + free[idx[2]] + free[idx[3]]
-    if (a0 == node_aggregate[idx[1]] and a0 == node_aggregate[idx[2]] and a0 == node_aggregate[idx[3]]
-            and all_free[0] + all_free[1] + all_free[2] == 12.0):
+    every_axis = all_free[0] + all_free[1] + all_free[2] == 12.0
+    if a0 == a1 and a0 == a2 and a0 == a3 and every_axis:
         return
     dm_inv = rest_inv[t]
     b1 = row(dm_inv, 0)
@@ -176,10 +208,20 @@ def coarse_assemble_tet(
     mu = tet_mu[t]
     lam = tet_lambda[t]
     v0 = rest_volume[t]
+    # with every axis free, each column of the tet's Hessian sums to zero over its vertices (a uniform
+    # translation strains nothing: b0 + b1 + b2 + b3 = 0), so E[a, c] = -sum over b != c of E[a, b]:
+    # only the vertices outside the aggregate c that holds most of the tet's vertices are
+    # differentiated, each column added to its own aggregate's block and taken from c's (a rope's
+    # straddling tet: 1.3 vertices of 4 on average)
+    c = -1
+    if every_axis:
+        c = most_shared_aggregate(a0, a1, a2, a3)
     for v in range(4):
         bv = pick_vertex(b0, b1, b2, b3, v)
         fv = free[idx[v]]
         av = node_aggregate[idx[v]]
+        if av == c:
+            continue
         for j in range(3):
             if fv[j] != 0.0:
                 e = wp.vec3(0.0)
@@ -191,6 +233,8 @@ def coarse_assemble_tet(
                     au = node_aggregate[idx[u]]
                     for k in range(3):
                         wp.atomic_add(matrix, w, 3 * au + k, 3 * av + j, wp.float64(col[k]))
+                        if c >= 0:
+                            wp.atomic_add(matrix, w, 3 * au + k, 3 * c + j, -wp.float64(col[k]))
 
 
 @wp.kernel
