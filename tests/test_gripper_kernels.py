@@ -166,9 +166,12 @@ def test_a_back_off_slides_the_flange_along_the_net_pad_force_by_the_planned_sli
     """``aim_back_off`` then ``move_pads`` at negative fractions against numpy: the flange moves
     from the substep start by -f x the planned slide's length along the sum of the pad forces
     (the object's push), its orientation stays at the start's and the jaw at its start gap (a
-    planned closing is not applied; a planned opening is); pad forces that cancel (a pure squeeze)
-    or no planned slide give no back-off."""
+    planned closing is not applied; a planned opening is); pad forces whose sum is within
+    ``min_force`` (a squeeze) or no planned slide give no back-off. A back-off past a joint limit
+    stops at it, and the pads are where the returned joints put them (the same kernel moving
+    those joints as planned, independently)."""
     from defgrasp_env.gripper.gripper import PAD_BACKING, PAD_BOX_HALF_EXTENTS, GROUND_CLEARANCE
+    from defgrasp_env.wrist.spec import JOINT_LOWER, JOINT_UPPER
 
     rng = np.random.default_rng(5)
     n = 64
@@ -177,7 +180,10 @@ def test_a_back_off_slides_the_flange_along_the_net_pad_force_by_the_planned_sli
     q_plan = q_before + np.concatenate([rng.normal(0.0, 0.01, (n, 3)), rng.normal(0.0, 0.05, (n, 3))], axis=1)
     q_plan[:4, :3] = q_before[:4, :3]                      # no slide planned (a turn only)
     forces = rng.normal(0.0, 50.0, (n, 2, 3))
-    forces[4:8, 1] = -forces[4:8, 0]                        # a pure squeeze: the net force cancels
+    forces[4:8, 1] = -forces[4:8, 0] + rng.normal(0.0, 1.0, (4, 3))  # a squeeze: the net force within 10 N
+    q_before[8:12, 0] = JOINT_UPPER[0] - 0.001                 # at the x limit, pushed on past it
+    forces[8:12] = np.abs(forces[8:12]) * [1.0, 0.0, 0.0] + [40.0, 0.0, 0.0]
+    min_force = 10.0
     gap_before = rng.uniform(GAP_MIN + 0.01, GAP_MAX - 0.01, n)
     gap_plan = gap_before + rng.uniform(-0.005, 0.005, n)
     fraction = -rng.uniform(0.05, 1.0, n)
@@ -186,25 +192,34 @@ def test_a_back_off_slides_the_flange_along_the_net_pad_force_by_the_planned_sli
     arr = lambda a, t: wp.array(a, dtype=t, device=d)  # noqa: E731
     qb, qp = arr(q_before, gk.vec6d), arr(q_plan, gk.vec6d)
     back_off = wp.zeros(n, dtype=wp.vec3d, device=d)
-    wp.launch(gk.aim_back_off, n, inputs=[arr(forces.reshape(2 * n, 3).astype(np.float32), wp.vec3), qb, qp],
-              outputs=[back_off], device=d)
-    outputs = [wp.zeros(n, dtype=gk.vec6d, device=d), wp.zeros(n, dtype=F, device=d),
-               wp.zeros((n, 2), dtype=wp.vec3d, device=d), wp.zeros(n, dtype=wp.vec4d, device=d),
-               wp.zeros(2 * n, dtype=wp.vec3, device=d), wp.zeros(2 * n, dtype=wp.quat, device=d)]
-    wp.launch(gk.move_pads, n, inputs=[qb, qp, arr(gap_before, F), arr(gap_plan, F), arr(fraction, F), back_off,
-                                       wp.vec3d(*PAD_BOX_HALF_EXTENTS), PAD_BACKING, GROUND_CLEARANCE],
-              outputs=outputs, device=d)
-    q, gap = outputs[0].numpy(), outputs[1].numpy()
+    wp.launch(gk.aim_back_off, n, inputs=[arr(forces.reshape(2 * n, 3).astype(np.float32), wp.vec3), qb, qp,
+                                          min_force], outputs=[back_off], device=d)
+
+    def move(q_start, q_to, gap_start, gap_to, f, aim):
+        outputs = [wp.zeros(n, dtype=gk.vec6d, device=d), wp.zeros(n, dtype=F, device=d),
+                   wp.zeros((n, 2), dtype=wp.vec3d, device=d), wp.zeros(n, dtype=wp.vec4d, device=d),
+                   wp.zeros(2 * n, dtype=wp.vec3, device=d), wp.zeros(2 * n, dtype=wp.quat, device=d)]
+        wp.launch(gk.move_pads, n, inputs=[arr(q_start, gk.vec6d), arr(q_to, gk.vec6d), arr(gap_start, F),
+                                           arr(gap_to, F), arr(f, F), aim, wp.vec3d(*PAD_BOX_HALF_EXTENTS),
+                                           PAD_BACKING, GROUND_CLEARANCE], outputs=outputs, device=d)
+        return [o.numpy() for o in outputs]
+
+    q, gap, centers = move(q_before, q_plan, gap_before, gap_plan, fraction, back_off)[:3]
+    still = move(q, q, gap, gap, np.ones(n), wp.zeros(n, dtype=wp.vec3d, device=d))
+    np.testing.assert_array_equal(still[2], centers)  # the pads where the joints put them
 
     net = forces.astype(np.float32).astype(np.float64).sum(axis=1)
     slide = np.linalg.norm(q_plan[:, :3] - q_before[:, :3], axis=1)
     size = np.linalg.norm(net, axis=1)
-    step = np.where(size[:, None] > 0.0, net * (slide / np.where(size > 0.0, size, 1.0))[:, None], 0.0)
-    expected = q_before[:, :3] - fraction[:, None] * step
+    aim = (size > min_force) & (slide > 0.0)
+    step = np.where(aim[:, None], net * (slide / np.where(aim, size, 1.0))[:, None], 0.0)
+    expected = np.clip(q_before[:, :3] - fraction[:, None] * step, JOINT_LOWER[:3], JOINT_UPPER[:3])
     np.testing.assert_allclose(q[:, :3], expected, rtol=1e-12, atol=1e-12)
+    assert (q[8:12, 0] == JOINT_UPPER[0]).all()                      # stopped at the limit
     np.testing.assert_array_equal(q[:, 3:], q_before[:, 3:])
     np.testing.assert_array_equal(gap, np.maximum(gap_plan, gap_before))
     np.testing.assert_array_equal(q[:8, :3], q_before[:8, :3])        # nothing to back off along
+    assert not aim[:8].any() and aim[8:].all()
     assert (np.linalg.norm(q[8:, :3] - q_before[8:, :3], axis=1) > 0.0).all()
     # the back-off is along the push: the pads move the way the object pushes them
-    assert (np.einsum("ij,ij->i", q[8:, :3] - q_before[8:, :3], net[8:]) > 0.0).all()
+    assert (np.einsum("ij,ij->i", q[12:, :3] - q_before[12:, :3], net[12:]) > 0.0).all()

@@ -165,7 +165,8 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
     graph drives them, against ``wrist.force_limit.limited_substep`` on the same synthetic solves:
     per world a load that grows with the motion fraction (0 up to a touch, then steeply: a pad
     pressing into an object; some already at the limit at the start, some held, some never over,
-    some pressed over the limit already at fraction 0, which back off),
+    some pressed over the limit already at fraction 0, which back off where they can, some of
+    them still over at the far end of the back-off, where the stop stands),
     the same trials, solve by solve, and the same accepted scales and loads, bit for bit on the
     CPU (float64 on both sides; within 1e-12 on CUDA, whose compiler may fuse a multiply-add)."""
     if device != "cpu" and not wp.is_cuda_available():
@@ -174,7 +175,9 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
 
     rng = np.random.default_rng(11)
     w = 300
-    touch, slope = rng.uniform(-0.6, 1.2, w), rng.uniform(0.3, 30.0, w)  # touch < 0: pressed already
+    touch = np.where(rng.random(w) < 0.3, rng.uniform(-1.6, 0.0, w), rng.uniform(0.0, 1.2, w))  # < 0: pressed
+    slope = rng.uniform(0.3, 30.0, w)
+    aimed = np.where(rng.random(w) < 0.2, 0.0, 1.0)[:, None] * rng.normal(0.0, 0.01, (w, 3))  # 0: cannot back off
     start = np.where(rng.random(w) < 0.15, 1.0, rng.uniform(0.0, 0.9, w))
     held = rng.random(w) < 0.1
 
@@ -187,9 +190,14 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
         host_trials.append(np.array(fraction))
         return None, load_of(fraction)
 
-    _, host_load, host_scale = limited_substep(solve, start, held=held)
+    _, host_load, host_scale = limited_substep(solve, start, held=held,
+                                               can_back_off=lambda over: over & aimed.any(axis=1))
     assert 50 < (load_of(np.where(held, 0.0, 1.0)) > 1.0 + FORCE_TOLERANCE).sum() < w - 50  # both sides
     assert (host_scale < 0.0).sum() > 20 and (host_scale > 0.0).sum() > 20  # backed off, and moved
+    stop_over = (load_of(np.zeros(w)) > 1.0 + FORCE_TOLERANCE) & (host_scale == 0.0)
+    assert stop_over.sum() > 20  # the stop stands: no back-off possible, or none within the limit
+    assert (stop_over & aimed.any(axis=1)).sum() > 5 and (stop_over & ~aimed.any(axis=1)).sum() > 5
+    np.testing.assert_array_equal(host_load[stop_over], load_of(np.zeros(w))[stop_over])
 
     arr = functools.partial(wp.array, device=device)
     state = lk.LimitState()
@@ -232,7 +240,7 @@ def test_the_limits_retries_on_the_device_are_the_hosts(device):
             limit_solve(1)
 
     limited()
-    launch(lk.back_off_begin, w, [loads, FORCE_TOLERANCE, BACK_OFF, state], [gate])
+    launch(lk.back_off_begin, w, [loads, arr(aimed, dtype=wp.vec3d), FORCE_TOLERANCE, BACK_OFF, state], [gate])
     launch(lk.limit_gate, 1, [], [gate, limiting, retry, final])
     assert limiting.numpy()[0] == 1  # stopped worlds that still read over back off
     limited()

@@ -69,6 +69,37 @@ def test_stiff_contact_is_stopped_at_the_limit(stiffness):
     np.testing.assert_array_equal(calls[-1], scale)
 
 
+def test_a_stopped_wrist_still_over_the_limit_backs_off_to_it():
+    """Worlds stopped at the limit whose stop still reads over it (the object pushes back): world 0
+    a spring that relaxes as the wrist backs off (force = preload + k x scale x travel, also for
+    scale < 0) backs off to within the tolerance of the limit, by the least amount the bracketing
+    finds (within 1 - tol .. 1 + tol, never past where the spring reads 0); world 1 the same but no
+    way to back off (``can_back_off`` False: no slide planned, or the pads only squeeze) stays
+    stopped; world 2 a preload that no back-off relieves keeps its stop, re-solved last at scale 0
+    (the accepted solve is the last one run); world 3 held and over backs off too."""
+    limit, k, travel = 150.0, 1e5, 0.01
+    preload = np.array([300.0, 300.0, 300.0, 250.0])
+    relaxes = np.array([True, True, False, True])
+    calls = []
+
+    def solve(scale):
+        calls.append(scale.copy())
+        force = np.where(relaxes, np.maximum(preload + k * travel * np.minimum(scale, 0.0), 0.0), preload)
+        force = force + k * np.maximum(scale * travel, 0.0)  # any forward motion presses harder
+        return force, force / limit
+
+    held = np.array([False, False, False, True])
+    force, load, scale = limited_substep(solve, np.ones(4), held=held,
+                                         can_back_off=lambda over: over & np.array([True, False, True, True]))
+    assert scale[0] < 0.0 and abs(load[0] - 1.0) <= FORCE_TOLERANCE
+    assert scale[0] > -(preload[0] / (k * travel))            # it did not back off past the spring's relief
+    assert scale[1] == 0.0 and force[1] == preload[1]         # cannot back off: the stop stands
+    assert scale[2] == 0.0 and force[2] == preload[2]         # no back-off helps: the stop stands
+    assert scale[3] < 0.0 and abs(load[3] - 1.0) <= FORCE_TOLERANCE
+    np.testing.assert_array_equal(calls[-1], scale)          # the last solve is the accepted one
+    assert len(calls) <= 1 + (1 + 6) + (1 + 6)                # first try, stop, back-off search
+
+
 def test_env_wrist_pressing_down_is_limited():
     """The env's wrist drives the closed gripper (closed first, in the air, for 0.6 s) straight
     down at 2 m/s onto an E = 1e7 cuboid

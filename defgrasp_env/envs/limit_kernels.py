@@ -63,7 +63,7 @@ def choose_patient(loads: wp.array(dtype=solve_load_row), fraction: wp.array(dty
         patient_solved[w] = 0
     row = loads[w]
     limit = wp.float64(1.0) + tolerance
-    moved = fraction[w] > wp.float64(0.0)
+    moved = fraction[w] != wp.float64(0.0)
     p = int(0)
     if row[3] == wp.float64(1.0) and row[2] > limit and (unconverged[w] != 0 or diverged[w] != 0) \
             and patient_solved[w] == 0:
@@ -176,17 +176,20 @@ def limit_begin(loads: wp.array(dtype=solve_load_row), fraction: wp.array(dtype=
 
 
 @wp.kernel
-def back_off_begin(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64, back_off: wp.float64,
-                   s: LimitState, gate: wp.array(dtype=wp.int32)):
+def back_off_begin(loads: wp.array(dtype=solve_load_row), aimed: wp.array(dtype=wp.vec3d), tolerance: wp.float64,
+                   back_off: wp.float64, s: LimitState, gate: wp.array(dtype=wp.int32)):
     """``limited_substep`` after the stop (the accepted solve of the first try or of the retries,
     its loads): a world stopped or held (scale at most 0) whose load is still over 1 + ``tolerance``
-    backs off: it brackets [-``back_off``, 0] (no load assumed at the far end), its scale the stop
-    until a back-off reads within the limit; counts those worlds into ``gate`` as over and
-    searching."""
+    and whose wrist can back off (``aimed[w]``, ``Gripper.aim_back_off``, not zero: the scene's
+    ``_aim_back_off``) backs off: it brackets [-``back_off``, 0] (no load assumed at the far end),
+    its scale the stop until a back-off reads within the limit; counts those worlds into ``gate``
+    as over and searching."""
     w = wp.tid()
     row = loads[w]
     s.searching[w] = 0
-    if s.scale[w] <= wp.float64(0.0) and row[2] > wp.float64(1.0) * (wp.float64(1.0) + tolerance):
+    a = aimed[w]
+    can = a[0] != wp.float64(0.0) or a[1] != wp.float64(0.0) or a[2] != wp.float64(0.0)
+    if s.scale[w] <= wp.float64(0.0) and row[2] > wp.float64(1.0) * (wp.float64(1.0) + tolerance) and can:
         s.lo[w] = -back_off
         s.f_lo[w] = wp.float64(0.0)
         s.hi[w] = s.scale[w]
@@ -200,9 +203,9 @@ def back_off_begin(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64,
 @wp.kernel
 def limit_gate(gate: wp.array(dtype=wp.int32), limiting: wp.array(dtype=wp.int32), retry: wp.array(dtype=wp.int32),
                final: wp.array(dtype=wp.int32)):
-    """After ``limit_begin``: the limit acts where a world is over (``limiting``; not after a
-    non-finite solve), retries while one searches (``retry``), and ends with a solve of the scales
-    unless a retry is accepted as is (``final``)."""
+    """After ``limit_begin`` (or ``back_off_begin``): the limit acts where a world is over
+    (``limiting``; not after a non-finite solve), retries while one searches (``retry``), and ends
+    with a solve of the scales unless a retry is accepted as is (``final``)."""
     go = wp.int32(0)
     again = wp.int32(0)
     if gate[GATE_OVER] > 0 and gate[GATE_NONFINITE] == 0:

@@ -10,8 +10,9 @@ decision, not convergence: a world that moved and reads under the limit (over on
 iterates until its update is ``PATIENT_UPDATE_FRACTION`` of the one that settles the reading (a
 stiff torus touching a pad at 0.1 N read 1.1-2.4 with its error and took 60 extra iterations a
 substep to converge to 0.001); a world that did not move (stopped or held) keeps its solve
-whatever it reads, so it iterates to the Newton tolerance (skipping it let a stiff cylinder's
-stopped pad be accepted at 832 N).
+whatever it reads (or backs off from it, on its forces), so it iterates to the Newton tolerance
+(skipping it let a stiff cylinder's stopped pad be accepted at 832 N). A back-off (a negative
+fraction) moved: one read over is rejected, one read under is kept, as a try with less motion.
 """
 
 from __future__ import annotations
@@ -70,7 +71,7 @@ class SolveLoads:
         1 + ``FORCE_TOLERANCE`` except a world that moved and is :meth:`certainly_over`; the
         target is ``PATIENT_UPDATE_FRACTION`` x ``deciding`` where it moved, 0 (the Newton
         tolerance) where it did not."""
-        moved = np.asarray(fraction) > 0.0
+        moved = np.asarray(fraction) != 0.0
         over = self.load > 1.0 + FORCE_TOLERANCE
         patient = over & ~(self.certainly_over() & moved) & np.asarray(allowed, dtype=bool)
         return patient, np.where(moved, PATIENT_UPDATE_FRACTION * self.deciding, 0.0)

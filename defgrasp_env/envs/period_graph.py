@@ -133,9 +133,9 @@ class PeriodGraph:
                                                          self._limit], [self.gate])
         self._launch("limit gate", lk.limit_gate, 1, [], [self.gate, cond["limit"], cond["retry"], cond["final"]])
         wp.capture_if(cond["limit"], on_true=functools.partial(self._limited, src, dst, h, last))
-        self._launch("back off begin", lk.back_off_begin, w, [self.loads, FORCE_TOLERANCE, BACK_OFF, self._limit],
-                     [self.gate])
-        self.gripper.aim_back_off(dst.pad_force)  # every world (the host aims where one backs off: read only there)
+        self.gripper.aim_back_off(dst.pad_force)  # every world, as the host does where one may back off
+        self._launch("back off begin", lk.back_off_begin, w, [self.loads, self.gripper.back_off_aim, FORCE_TOLERANCE,
+                                                               BACK_OFF, self._limit], [self.gate])
         self._launch("back off gate", lk.limit_gate, 1, [], [self.gate, cond["limit"], cond["retry"], cond["final"]])
         wp.capture_if(cond["limit"], on_true=functools.partial(self._limited, src, dst, h, last))
         self._launch("non-finite", lk.close_gate_if_nonfinite, 1, [], [self.gate])

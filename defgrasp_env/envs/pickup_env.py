@@ -67,9 +67,10 @@ class DeformablePickupEnv(gym.Env):
     the object (``wrist_force``) within ``wrist_force_limit`` (default 150 N, a UR e-Series default
     safety limit) and each pad's normal
     force within ``gripper.grip_force_limit`` + ``wrist_force_limit``, both +10 %
-    (``wrist.force_limit``; forces of a converged solve; wrist and jaw stop, they do not yield, so a
-    stopped pad still takes the impact of an object it threw, and a pad embedded in an object reads
-    its clamp: README, known gaps); between substeps the jaw holds the grip force at
+    (``wrist.force_limit``; forces of a converged solve; wrist and jaw stop, and a stopped wrist
+    the object still pushes over the limit backs off along that push; a stopped pad still takes the
+    impact of an object it threw within the substep, and a pad embedded in an object reads its
+    clamp: README, known gaps); between substeps the jaw holds the grip force at
     ``gripper.grip_force_limit``. No node goes through a pad at any legal speed; a state
     with a node deeper than 1 mm in a pad or the ground is flagged (``sim_penetrated``).
 

@@ -373,27 +373,30 @@ class PickupScene:
         solve's state becomes current, its report is folded in and the gripper senses its pad
         forces."""
         solved = np.where(loads.held, 0.0, 1.0)  # the fraction [W] each world's last solve of this substep moved by
-        aimed = False  # the back-off aimed (from the solves before the first back-off: the stopped ones)
 
         def solve(fraction):
             # a retry re-solves only the worlds whose fraction changed: the others' last solve
             # (in the other state, untouched since) is what a new one would give
-            nonlocal solved, aimed
-            if not aimed and (fraction < 0.0).any():
-                self.gripper.aim_back_off(self._next_state.pad_force)
-                aimed = True
+            nonlocal solved
             number, loads = self._solve_substep(fraction, h, worlds=fraction != solved, last=last)
             solved = np.array(fraction, dtype=np.float64)
             return self._patient_if_over(number, loads, fraction, h, last)
 
         last = k == self.substeps - 1
         first = self._patient_if_over(number, loads, solved, h, last)
-        number, _, _ = limited_substep(solve, loads.start, held=loads.held, first=first)
+        number, _, _ = limited_substep(solve, loads.start, held=loads.held, first=first, can_back_off=self._aim_back_off)
         if number != self._solves:
             raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
                                "the last solve's state, report and the gripper's move are kept")
         self.state, self._next_state = self._next_state, self.state
         self._accept_launches(k, self.state)
+
+    def _aim_back_off(self, over: np.ndarray) -> np.ndarray:
+        """[W] bool: the worlds whose wrist can back off (``Gripper.aim_back_off``, aimed in every
+        world from the stopped solves in the other state), of the stopped ones still ``over`` the
+        limit (``limited_substep``'s ``can_back_off``)."""
+        self.gripper.aim_back_off(self._next_state.pad_force)
+        return np.asarray(over, dtype=bool) & np.any(self.gripper.back_off != 0.0, axis=1)
 
     def _accept_launches(self, k: int, accepted: State) -> None:
         """Substep ``k``'s accepted solve (in ``accepted``): its report folded in, its pad forces

@@ -33,7 +33,7 @@ import warp as wp
 from ..sim.launch_cache import LaunchCache
 from ..transforms import quat_rotate, quat_to_matrix, unit_quat
 from ..wrist import fk_analytic
-from ..wrist.force_limit import wrist_force
+from ..wrist.force_limit import FORCE_TOLERANCE, wrist_force
 from . import kernels as gk
 from .driver import GripperConfig, GripperDriver
 from .linkage import GAP_MAX, GAP_MIN, _finite, pad_boxes, pad_centers, theta_from_gap
@@ -439,9 +439,24 @@ class Gripper:
         """The direction and length of this substep's back-off (a :meth:`move` with a negative
         fraction f slides the flange by -f times it, ``wrist.force_limit``), from a solve's pad
         forces ``pad_force`` [W*2] (vec3, N, world: the object's force on each pad, the stopped
-        solve's): along their sum, the length of the planned slide (``kernels.aim_back_off``)."""
-        self._launch(("aim back off", id(pad_force)), gk.aim_back_off, [pad_force, self._q_before, self._q_plan],
-                     [self._back_off], keep=(pad_force,))
+        solve's): along their sum, the length of the planned slide; none where the sum is within
+        the wrist limit's tolerance (``FORCE_TOLERANCE`` x the limit: a squeeze) or no slide is
+        planned (``kernels.aim_back_off``)."""
+        min_force = FORCE_TOLERANCE * self.wrist_force_limit
+        self._launch(("aim back off", id(pad_force), min_force), gk.aim_back_off,
+                     [pad_force, self._q_before, self._q_plan, min_force], [self._back_off], keep=(pad_force,))
+        self._host.pop("_back_off", None)
+
+    @property
+    def back_off_aim(self) -> wp.array:
+        """[W] vec3d Warp array: :meth:`aim_back_off`'s result on the device (m, world)."""
+        return self._back_off
+
+    @property
+    def back_off(self) -> np.ndarray:
+        """[W, 3] m (world): the flange's full back-off last aimed (:meth:`aim_back_off`; zeros
+        where none), a host copy."""
+        return self._numpy("_back_off")
 
     def move_as_planned(self) -> None:
         """:meth:`move` with the force limit's first try, set on the device by :meth:`plan_substep`

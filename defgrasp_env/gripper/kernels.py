@@ -279,7 +279,8 @@ def move_pads(q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d), ga
               target_orientations: wp.array(dtype=wp.quat)):
     """Apply ``fraction[w]`` of world w's planned wrist motion and jaw closing (a planned opening
     whole; a negative fraction f backs the flange off by -f ``back_off[w]`` (m, world:
-    ``aim_back_off``) from the substep start, orientation and jaw as they were), lift the flange so
+    ``aim_back_off``) from the substep start within the joint limits, orientation and jaw as they
+    were), lift the flange so
     that no pad-box corner (half extents ``half_extents``, the pad's box reaching ``backing`` m
     behind its face) is below ``clearance``, and write the joints, gap and the pads' box poses:
     float64 (``pad_center`` [W, 2], ``pad_quat`` [W]) and float32 for the FEM (``target_positions``
@@ -290,9 +291,9 @@ def move_pads(q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d), ga
     qw = q_plan[w]
     g0 = gap_before[w]
     g = gap_plan[w]
-    if f < _F(0.0):  # a back-off: the flange slides by -f back_off, orientation and jaw kept
+    if f < _F(0.0):  # a back-off: the flange slides by -f back_off (within the joint limits), orientation and jaw kept
         b = back_off[w] * (-f)
-        qw = vec6d(qb[0] + b[0], qb[1] + b[1], qb[2] + b[2], qb[3], qb[4], qb[5])
+        qw = clamp_joints(vec6d(qb[0] + b[0], qb[1] + b[1], qb[2] + b[2], qb[3], qb[4], qb[5]))
         g = wp.max(g, g0)
     elif f < _F(1.0):
         qw = qb + (qw - qb) * f
@@ -323,11 +324,12 @@ def move_pads(q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d), ga
 
 @wp.kernel
 def aim_back_off(pad_force: wp.array(dtype=wp.vec3), q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d),
-                 back_off: wp.array(dtype=wp.vec3d)):
-    """World w's full back-off (``move_pads`` at fraction -1), from a solve's pads forces
+                 min_force: wp.float64, back_off: wp.array(dtype=wp.vec3d)):
+    """World w's full back-off (``move_pads`` at fraction -1), from a solve's pad forces
     ``pad_force[2w], [2w+1]`` (N, world: the object's force on each pad): the flange slides along
     their sum (the wrist yields to the push, as a back-driven motor does) by the length of the
-    substep's planned slide; none where they cancel or no slide is planned."""
+    substep's planned slide; none where the sum is at most ``min_force`` (N: a squeeze, whose
+    direction the wrist cannot relieve) or no slide is planned."""
     w = wp.tid()
     a = pad_force[2 * w]
     b = pad_force[2 * w + 1]
@@ -338,7 +340,7 @@ def aim_back_off(pad_force: wp.array(dtype=wp.vec3), q_before: wp.array(dtype=ve
     slide = wp.length(wp.vec3d(qp[0] - qb[0], qp[1] - qb[1], qp[2] - qb[2]))
     size = wp.length(net)
     out = wp.vec3d()
-    if size > _F(0.0):
+    if size > min_force and slide > _F(0.0):
         out = net * (slide / size)
     back_off[w] = out
 

@@ -22,8 +22,8 @@ the other pad), or a wrist that pushes a pad into one, stops within the substep,
 contact reads kN. Where the stopped actuators still read over the limit (the object pushes back: a
 compressed stiff object, or its momentum against a pad that stopped), the wrist yields as a
 back-driven motor does: it backs off along the force the object exerts on the pads (a negative
-fraction f: -f x ``BACK_OFF`` lengths of the planned slide; orientation and jaw kept,
-``Gripper.aim_back_off``), by the least that brings the load to the limit, bracketed the same way;
+fraction f in [-``BACK_OFF``, 0]: -f planned slide lengths; orientation and jaw kept; none where the
+pads only squeeze or no slide is planned: ``Gripper.aim_back_off``), by the least that brings the load to the limit, bracketed the same way;
 where no back-off reads within the limit, the stop stands (backing off along the reversed plan
 instead made a sphere, E = 1e6, pressed while turning read 4x the limit). Before, a stopped pad
 could not yield: a stiff cylinder (E = 3e6) swept at the default limits read 1.1-1.3 kN on one for
@@ -31,7 +31,7 @@ four substeps, converged (with the tets' rotation seed of ``sim.kernels.elastic.
 the bounds rested on particular trajectories; ``benchmarks/RESULTS.md``).
 A world that stays at its limit under the same push (``held``: ``Gripper.held_at_limit``, e.g. a
 learner pressing the object into the ground for seconds) stays stopped in one solve per substep
-instead of trying its motion again (a solve over the limit, a patient re-solve and the stopped
+(more where the stop still reads over and it backs off) instead of trying its motion again (a solve over the limit, a patient re-solve and the stopped
 re-solve: 2.75-3 solves per substep, ~15x the time of a free step on the CPU, and on the GPU the
 batch's slowest world), like a protective stop that holds until the load drops below the limit or
 the command turns away (``Gripper.held_at_limit``: the same flange push within ~26 degrees, with or
@@ -52,7 +52,8 @@ import numpy as np
 
 #: Default wrist force limit (N): UR e-Series default safety force limit; ISO/TS 15066 hand ~140 N.
 DEFAULT_WRIST_FORCE_LIMIT = 150.0
-#: Relative overshoot of a limit accepted without a re-solve, and the extra solves at most.
+#: Relative overshoot of a limit accepted without a re-solve, and the extra solves at most per search
+#: (``limited_substep``'s retries with less motion, and again for a back-off; each + 1 final solve).
 FORCE_TOLERANCE = 0.1
 MAX_RETRIES = 6
 #: The most a stopped wrist backs off in a substep when the object still pushes it over its limit,
@@ -93,21 +94,27 @@ def next_scale(lo, hi, f_lo, f_hi, limit) -> np.ndarray:
 
 def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], load_before: np.ndarray,
                     tolerance: float = FORCE_TOLERANCE, retries: int = MAX_RETRIES, held: np.ndarray | None = None,
-                    first: tuple[object, np.ndarray] | None = None):
+                    first: tuple[object, np.ndarray] | None = None,
+                    can_back_off: Callable[[np.ndarray], np.ndarray] | None = None):
     """Run one substep with the actuator load limited to 1 (+ ``tolerance``).
 
     Args:
         solve: ``solve(scale)`` runs the substep from the same start state with the actuators moved
-            by the fraction ``scale`` [W] of their planned motion (negative: backed off along it);
+            by the fraction ``scale`` [W] of their planned motion (negative: the wrist backed off by
+            -scale of its back-off, ``Gripper.aim_back_off``);
             returns (result, load [W]), the load as ``actuator_load`` (1 = at a limit) and
             ``result`` anything the caller needs (solver report, forces).
         load_before: load [W] at the substep start.
-        held: [W] bool (default none): worlds that stay stopped (scale 0) without trying their
-            planned motion: those at a limit whose actuators the limit stopped before on a motion in
+        held: [W] bool (default none): worlds that start stopped (scale 0) without trying their
+            planned motion (and back off where that still reads over): those at a limit whose actuators the limit stopped before on a motion in
             the same direction (``Gripper.held_at_limit``). Trying it would read over the limit and
             stop them again, at the cost of a solve and a patient re-solve per substep.
         first: (result, load) of the first try, ``solve(scale)`` with ``scale`` 0 where ``held`` and
             1 elsewhere, when the caller ran it already (default: run here).
+        can_back_off: ``can_back_off(over)`` [W] bool: of the stopped worlds still ``over`` [W] bool
+            the limit, those whose wrist has a way to back off (the scene aims the back-off from
+            the stopped solve here: none where no slide is planned or the pads only squeeze);
+            default: all.
     Returns:
         (result, load [W], scale [W]) of the accepted solve, which is always the last one run;
         ``scale`` in [-``BACK_OFF``, 1].
@@ -128,6 +135,8 @@ def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], lo
     # that brings the load to the limit (bracket [-BACK_OFF, 0], no load assumed at its far end);
     # where no back-off reads within the limit, the stop stands
     over = (load > limit * (1.0 + tolerance)) & (scale <= 0.0)
+    if over.any() and can_back_off is not None:
+        over &= np.asarray(can_back_off(over), dtype=bool)
     if over.any():
         bracket = (np.full_like(scale, -BACK_OFF), np.zeros_like(scale), scale.copy(), load.copy())
         result, load = _bracket(solve, result, load, scale, bracket, over, tolerance, retries)
