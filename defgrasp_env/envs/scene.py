@@ -384,7 +384,8 @@ class PickupScene:
 
         last = k == self.substeps - 1
         first = self._patient_if_over(number, loads, solved, h, last)
-        number, _, _ = limited_substep(solve, loads.start, held=loads.held, first=first, can_back_off=self._aim_back_off)
+        number, _, _ = limited_substep(solve, loads.start, held=loads.held, first=first,
+                                       can_back_off=self._aim_back_off)
         if number != self._solves:
             raise RuntimeError(f"the actuator force limit accepted solve {number} of {self._solves}: only "
                                "the last solve's state, report and the gripper's move are kept")

@@ -23,24 +23,24 @@ contact reads kN. Where the stopped actuators still read over the limit (the obj
 compressed stiff object, or its momentum against a pad that stopped), the wrist yields as a
 back-driven motor does: it backs off along the force the object exerts on the pads (a negative
 fraction f in [-``BACK_OFF``, 0]: -f planned slide lengths; orientation and jaw kept; none where the
-pads only squeeze or no slide is planned: ``Gripper.aim_back_off``), by the least that brings the load to the limit, bracketed the same way;
-where no back-off reads within the limit, the stop stands (backing off along the reversed plan
-instead made a sphere, E = 1e6, pressed while turning read 4x the limit). Before, a stopped pad
-could not yield: a stiff cylinder (E = 3e6) swept at the default limits read 1.1-1.3 kN on one for
-four substeps, converged (with the tets' rotation seed of ``sim.kernels.elastic.frame_rotation``:
-the bounds rested on particular trajectories; ``benchmarks/RESULTS.md``).
-A world that stays at its limit under the same push (``held``: ``Gripper.held_at_limit``, e.g. a
-learner pressing the object into the ground for seconds) stays stopped in one solve per substep
-(more where the stop still reads over and it backs off) instead of trying its motion again (a solve over the limit, a patient re-solve and the stopped
-re-solve: 2.75-3 solves per substep, ~15x the time of a free step on the CPU, and on the GPU the
-batch's slowest world), like a protective stop that holds until the load drops below the limit or
-the command turns away (``Gripper.held_at_limit``: the same flange push within ~26 degrees, with or
-without a turn of the wrist). Where the try would have been stopped anyway (a push into a stiff
-object) the result is the same, bit for bit (tests/test_wrist_force_limit.py, also the rope);
-where a try's patient re-solve would have read within the tolerance, the held wrist stays where it
-stopped instead of creeping on in 10 % load steps (a first version that held on any push with a
-positive component along the stopped one changed the recorded operator stream's rope episode so: it
-kept its grasp).
+pads only squeeze or no slide is planned: ``Gripper.aim_back_off``), by the least that brings the
+load to the limit, bracketed the same way; where no back-off reads within the limit, the stop stands
+(backing off along the reversed plan instead made a sphere, E = 1e6, pressed while turning read 4x
+the limit). Before, a stopped pad could not yield: a stiff cylinder (E = 3e6) swept at the default
+limits read 1.1-1.3 kN on one for four substeps, converged (with the tets' rotation seed of
+``sim.kernels.elastic.frame_rotation``: the bounds rested on particular trajectories;
+``benchmarks/RESULTS.md``). A world that stays at its limit under the same push (``held``:
+``Gripper.held_at_limit``, e.g. a learner pressing the object into the ground for seconds) stays
+stopped in one solve per substep (more where the stop still reads over and it backs off) instead of
+trying its motion again (a solve over the limit, a patient re-solve and the stopped re-solve: 2.75-3
+solves per substep, ~15x the time of a free step on the CPU, and on the GPU the batch's slowest
+world), like a protective stop that holds until the load drops below the limit or the command turns
+away (``Gripper.held_at_limit``: the same flange push within ~26 degrees, with or without a turn of
+the wrist). Where the try would have been stopped anyway (a push into a stiff object) the result is
+the same, bit for bit (tests/test_wrist_force_limit.py, also the rope); where a try's patient
+re-solve would have read within the tolerance, the held wrist stays where it stopped instead of
+creeping on in 10 % load steps (a first version that held on any push with a positive component
+along the stopped one changed the recorded operator stream's rope episode so: it kept its grasp).
 Pure functions on arrays (shapes [W] per world); the scene supplies ``solve``.
 """
 
@@ -99,16 +99,17 @@ def limited_substep(solve: Callable[[np.ndarray], tuple[object, np.ndarray]], lo
     """Run one substep with the actuator load limited to 1 (+ ``tolerance``).
 
     Args:
-        solve: ``solve(scale)`` runs the substep from the same start state with the actuators moved
-            by the fraction ``scale`` [W] of their planned motion (negative: the wrist backed off by
-            -scale of its back-off, ``Gripper.aim_back_off``);
-            returns (result, load [W]), the load as ``actuator_load`` (1 = at a limit) and
-            ``result`` anything the caller needs (solver report, forces).
+        solve: ``solve(scale)`` runs the substep from the same start state with the actuators
+            moved by the fraction ``scale`` [W] of their planned motion (negative: the wrist backed
+            off by -scale of its back-off, ``Gripper.aim_back_off``); returns (result, load [W]),
+            the load as ``actuator_load`` (1 = at a limit) and ``result`` anything the caller needs
+            (solver report, forces).
         load_before: load [W] at the substep start.
         held: [W] bool (default none): worlds that start stopped (scale 0) without trying their
-            planned motion (and back off where that still reads over): those at a limit whose actuators the limit stopped before on a motion in
-            the same direction (``Gripper.held_at_limit``). Trying it would read over the limit and
-            stop them again, at the cost of a solve and a patient re-solve per substep.
+            planned motion (and back off where that still reads over): those at a limit whose
+            actuators the limit stopped before on a motion in the same direction
+            (``Gripper.held_at_limit``). Trying it would read over the limit and stop them again, at
+            the cost of a solve and a patient re-solve per substep.
         first: (result, load) of the first try, ``solve(scale)`` with ``scale`` 0 where ``held`` and
             1 elsewhere, when the caller ran it already (default: run here).
         can_back_off: ``can_back_off(over)`` [W] bool: of the stopped worlds still ``over`` [W] bool

@@ -137,31 +137,27 @@ def coarse_assemble_nodes(
 
 
 @wp.func
+def vertices_in(a: int, a0: int, a1: int, a2: int, a3: int):
+    """How many of a tet's four vertices (aggregates ``a0`` .. ``a3``) belong to aggregate ``a``."""
+    return wp.where(a == a0, 1, 0) + wp.where(a == a1, 1, 0) + wp.where(a == a2, 1, 0) + wp.where(a == a3, 1, 0)
+
+
+@wp.func
 def most_shared_aggregate(a0: int, a1: int, a2: int, a3: int):
     """The aggregate that most of a tet's four vertices (aggregates ``a0`` .. ``a3``) belong to;
     the first vertex's among equals."""
     best = a0
-    most = int(0)
-    for v in range(4):
-        a = a0
-        if v == 1:
-            a = a1
-        elif v == 2:
-            a = a2
-        elif v == 3:
-            a = a3
-        n = int(0)
-        if a == a0:
-            n += 1
-        if a == a1:
-            n += 1
-        if a == a2:
-            n += 1
-        if a == a3:
-            n += 1
-        if n > most:
-            most = n
-            best = a
+    most = vertices_in(a0, a0, a1, a2, a3)
+    n1 = vertices_in(a1, a0, a1, a2, a3)
+    if n1 > most:
+        best = a1
+        most = n1
+    n2 = vertices_in(a2, a0, a1, a2, a3)
+    if n2 > most:
+        best = a2
+        most = n2
+    if vertices_in(a3, a0, a1, a2, a3) > most:
+        best = a3
     return best
 
 

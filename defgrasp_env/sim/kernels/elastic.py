@@ -306,6 +306,6 @@ def seed_rotations(
 ):
     """Polar rotation of every tet (``polar_rotation``: Newton from ``frame_rotation``, the SVD only
     where that fails): the warm start of ``polar_rotation`` for a substep, so that results depend on
-    the state only, not on the solver's history. Seeded by the SVD alone before (2026-12-07), a CPU
-    world spent a third of a stiff torus's substep here (Warp's ``svd3``: ~1,200 ticks a tet)."""
+    the state only, not on the solver's history. Seeded by the SVD alone before (2026-12-07): on a
+    2-core Xeon 0.37 us a tet with Warp's ``svd3``, 0.22-0.26 us this way (benchmarks/RESULTS.md)."""
     seed_rotation_tet(wp.tid(), x, tets, rest_inv, tet_rotation)
