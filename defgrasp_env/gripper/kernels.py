@@ -280,18 +280,17 @@ def move_pads(q_before: wp.array(dtype=vec6d), q_plan: wp.array(dtype=vec6d), ga
     """Apply ``fraction[w]`` of world w's planned wrist motion and jaw closing (a planned opening
     whole; a negative fraction f backs the flange off by -f ``back_off[w]`` (m, world:
     ``aim_back_off``) from the substep start within the joint limits, orientation and jaw as they
-    were), lift the flange so
-    that no pad-box corner (half extents ``half_extents``, the pad's box reaching ``backing`` m
-    behind its face) is below ``clearance``, and write the joints, gap and the pads' box poses:
-    float64 (``pad_center`` [W, 2], ``pad_quat`` [W]) and float32 for the FEM (``target_positions``
-    / ``target_orientations`` [W*2], pad 0 then 1 per world)."""
+    were), lift the flange so that no pad-box corner (half extents ``half_extents``, the pad's box
+    reaching ``backing`` m behind its face) is below ``clearance``, and write the joints, gap and
+    the pads' box poses: float64 (``pad_center`` [W, 2], ``pad_quat`` [W]) and float32 for the FEM
+    (``target_positions`` / ``target_orientations`` [W*2], pad 0 then 1 per world)."""
     w = wp.tid()
     f = fraction[w]
     qb = q_before[w]
     qw = q_plan[w]
     g0 = gap_before[w]
     g = gap_plan[w]
-    if f < _F(0.0):  # a back-off: the flange slides by -f back_off (within the joint limits), orientation and jaw kept
+    if f < _F(0.0):  # a back-off: the flange slides by -f back_off within the joint limits; orientation, jaw kept
         b = back_off[w] * (-f)
         qw = clamp_joints(vec6d(qb[0] + b[0], qb[1] + b[1], qb[2] + b[2], qb[3], qb[4], qb[5]))
         g = wp.max(g, g0)
