@@ -9,6 +9,8 @@ os.environ.setdefault("HF_HOME", str(_CACHE / "hf"))
 os.environ.setdefault("HF_LEROBOT_HOME", str(_CACHE / "lerobot"))
 os.environ.setdefault("MPLCONFIGDIR", str(_CACHE / "mpl"))
 os.environ.setdefault("MPLBACKEND", "Agg")
+# Stable-Baselines3 makes a log folder at every learn() (tempdir/SB3-<time> unless this is set): one, ignored
+os.environ.setdefault("SB3_LOGDIR", str(_CACHE / "sb3"))
 
 import pytest  # noqa: E402
 
