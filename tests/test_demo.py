@@ -10,7 +10,7 @@ from defgrasp_env import demo
 from conftest import recording_cpu
 
 EVALUATION = (pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "figures"
-              / "ppo_cuboid_hold_stagger_h200_1p1m_last_eval64_15s_cpu.json")
+              / "ppo_cuboid_hold_stagger_h200_1p1m_last_eval64_15s_cpu_2026-12-07.json")
 
 
 def _rows(text: str) -> dict[str, list[str]]:
