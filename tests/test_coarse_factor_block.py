@@ -24,7 +24,7 @@ from defgrasp_env.sim.kernels.coarse_space import coarse_factor_block, coarse_fa
 # forward only, as the solver's kernel modules (the block barrier has no adjoint)
 wp.set_module_options({"enable_backward": False})
 
-SIZE = 24  # the rope's 8 aggregates x 3 translations
+SIZE = 48  # 8 aggregates x 6 rigid motions
 
 
 @wp.kernel
@@ -45,10 +45,10 @@ def _factor_worlds(active: wp.array(dtype=int), sizes: wp.array(dtype=int), matr
 
 
 def _problems(rng: np.random.Generator):
-    """Four worlds' coarse matrices [4, 24, 24] float64, right-hand sides [4, 24] float32 and sizes:
+    """Four worlds' coarse matrices [4, 48, 48] float64, right-hand sides [4, 48] float32 and sizes:
     a well-conditioned SPD matrix (a mass term plus a chain's coupling, as a rope's), one whose
     first aggregate is empty (zero rows: diagonal fixed to 1), one indefinite (its pivot fails part
-    way down) and a smaller one (12 unknowns in 24-wide arrays)."""
+    way down) and a smaller one (24 unknowns in 48-wide arrays)."""
     def spd(n):
         a = rng.normal(size=(n, n))
         return a @ a.T + n * np.eye(n)
@@ -56,13 +56,13 @@ def _problems(rng: np.random.Generator):
     m = np.zeros((4, SIZE, SIZE))
     m[0] = spd(SIZE)
     m[1] = spd(SIZE)
-    m[1, :3, :] = 0.0
-    m[1, :, :3] = 0.0
+    m[1, :6, :] = 0.0
+    m[1, :, :6] = 0.0
     m[2] = spd(SIZE)
     m[2, 10, 10] = -5.0 * m[2, 10, 10]
-    m[3, :12, :12] = spd(12)
+    m[3, :24, :24] = spd(24)
     rhs = rng.normal(size=(4, SIZE)).astype(np.float32)
-    return m, rhs, np.array([SIZE, SIZE, SIZE, 12], dtype=np.int32)
+    return m, rhs, np.array([SIZE, SIZE, SIZE, 24], dtype=np.int32)
 
 
 def _arrays(m, rhs):
@@ -97,12 +97,12 @@ def test_a_block_factors_the_coarse_matrix_with_the_bits_of_one_thread(threads, 
     assert factored.tolist() == [1, 1, 0, 1]
     inverse = serial["inverse"].numpy()
     m_fixed = m.copy()
-    m_fixed[1, :3, :3] = np.eye(3)
+    m_fixed[1, :6, :6] = np.eye(6)
     for w in (0, 1, 3):  # E^-1 E = I where the factor held; E^-1 = 0 (block Jacobi alone) where it failed
         n = sizes[w]
         np.testing.assert_allclose(inverse[w, :n, :n] @ m_fixed[w, :n, :n], np.eye(n), atol=1e-9)
     assert not inverse[2, :SIZE, :SIZE].any()
     coef = serial["coef"].numpy()
     np.testing.assert_allclose(coef[0], inverse[0] @ rhs[0].astype(np.float64), rtol=1e-5)
-    assert not block["rhs"][:, :12].any() and not block["matrix"][:, :12, :12].any()
+    assert not block["rhs"][:, :24].any() and not block["matrix"][:, :24, :24].any()
 

@@ -13,7 +13,7 @@ import warp as wp
 from defgrasp_env.sim.aggregates import bisect_nodes
 from defgrasp_env.sim.kernels import linear_solve as klin
 from defgrasp_env.sim.materials import Material
-from defgrasp_env.sim.meshing import make_object_mesh
+from defgrasp_env.sim.meshing import TetMesh, make_object_mesh
 from defgrasp_env.sim.model import build_model
 from defgrasp_env.sim.solver import ImplicitSolver, SolverConfig
 from defgrasp_env.sim.state import Control, State
@@ -64,11 +64,18 @@ def test_a_models_aggregates_do_not_depend_on_its_pose():
     assert np.array_equal(assembled.node_aggregate, model.node_aggregate)
 
 
-def test_compact_objects_are_one_aggregate():
-    """A sphere, a cuboid (and the torus, flat but not slender) keep one aggregate: their rigid
-    translations."""
+def test_compact_objects_are_cut_into_eight_blocks():
+    """A sphere, a cuboid and the torus are cut into 8 pieces of equal node counts (their rigid
+    motions carry a stiff object's near-rigid deformation), each piece around its own part of the
+    object: its nodes nearer their own piece's centre than any other piece's, on average."""
     for name in ("sphere", "cuboid", "torus"):
-        assert not bisect_nodes(make_object_mesh(name).nodes, 8).any()
+        x = np.asarray(make_object_mesh(name).nodes, dtype=np.float64)
+        index = bisect_nodes(x, 8)
+        counts = np.bincount(index, minlength=8)
+        assert len(counts) == 8 and counts.max() - counts.min() <= 1, (name, counts)
+        centres = np.stack([x[index == k].mean(axis=0) for k in range(8)])
+        nearest = np.argmin(np.linalg.norm(x[:, None] - centres[None], axis=2), axis=1)
+        assert np.mean(nearest == index) > 0.8, name
 
 
 def test_aggregates_of_a_tiny_mesh_and_bad_counts():
@@ -107,12 +114,14 @@ def squeezed_rope(fixed: bool):
 def test_coarse_matrix_is_the_galerkin_product(fixed):
     """The assembled coarse matrix equals T^T (A T) with A T computed column by column by the CG's
     Hessian-product kernel (the elastic Hessian's assembled rows + mass/contact nodes), to float32
-    rounding: with all axes free (inner tets skipped) and with prescribed axes (T masked, every tet
-    assembled)."""
+    rounding: T's columns the translations and the rotations of each aggregate about its anchor
+    node at the iterate, built here from the positions and ``Model.node_anchor``; with all axes
+    free (the within-aggregate rows' translation parts cancel exactly) and with prescribed axes
+    (T masked)."""
     model, solver, state, control = squeezed_rope(fixed)
     s, n, d = solver.scratch, model.num_nodes, model.device
     size = s.coarse_size
-    assert size == 24
+    assert size == 48
     run, _ = solver._substep_launches(DT, state, state, control)
     s.newton_active.fill_(1)
     s.coarse_matrix.zero_()
@@ -122,10 +131,15 @@ def test_coarse_matrix_is_the_galerkin_product(fixed):
     inverse = s.coarse_inverse.numpy()[0]
     free = model.free_axes.numpy()
     agg = s.node_aggregate.numpy()
+    x = state.positions.numpy().astype(np.float64)
+    lever = x - x[model.node_anchor]
+    np.testing.assert_allclose(s.coarse_lever.numpy(), lever, atol=1e-7)
     columns = np.zeros((size, n, 3))
-    for a in range(size // 3):
+    for a in range(size // 6):
         for k in range(3):
-            columns[3 * a + k, agg == a, k] = free[agg == a, k]
+            axis = np.eye(3)[k]
+            columns[6 * a + k, agg == a] = free[agg == a] * axis
+            columns[6 * a + 3 + k, agg == a] = free[agg == a] * np.cross(axis, lever[agg == a])
     at = np.zeros_like(columns)
     for c in range(size):
         direction = wp.array(columns[c].astype(np.float32), dtype=wp.vec3, device=d)
@@ -348,45 +362,30 @@ def test_an_inexact_solve_depends_on_its_input_alone():
 
 
 def test_each_world_solves_its_own_coarse_rows_with_the_same_bits():
-    """A batch's coarse arrays are as wide as its most aggregates (a rope's 8: 24 unknowns), and a
-    compact object's world (1 aggregate) solves only its own 3 (``SolverScratch.coarse_sizes``):
-    the rows beyond are empty, so eight worlds of five objects (ropes among them) under the expert,
-    its noisy variant and a gripper driven down into its object at 2 m/s (contact, the force limit's
-    retries and patient re-solves: more world-solves than world-substeps) step with the same bits
-    as with every world solving all 24 (the code before 2026-11-28)."""
-    import gymnasium as gym
+    """A batch's coarse arrays are as wide as its most aggregates (8: 48 unknowns), and a world of
+    fewer (a single tet: 4 nodes in pieces 0, 2, 4 and 6, so 42 unknowns, three empty pieces inside
+    them) solves only its own rows (``SolverScratch.coarse_sizes``): the rows beyond are empty, so
+    a tet and a cuboid dropped onto the ground (contact) step with the same bits as with every
+    world solving all 48."""
+    tet = TetMesh(nodes=0.03 * np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]),
+                  tets=np.array([[0, 1, 2, 3]], np.int32),
+                  surface=np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int32))
 
-    from contact_rollout import ExpertNoisyPress
-
-    def episode(full_width: bool):
-        objects = ["cuboid", "sphere", "torus", "cylinder", "rope", "rope", "torus", "cuboid"]
-        env = gym.make_vec("DeformablePickup-v0", num_envs=8, vectorization_mode="vector_entry_point",
-                           object="random", world_objects=objects, youngs_modulus=1e5, max_episode_steps=30,
-                           max_linear_speed=2.0)
-        obs, _ = env.reset(seed=3)
-        scratch = env.unwrapped.scene.solver.scratch
-        assert scratch.coarse_size == 24
-        assert scratch.coarse_sizes.numpy().tolist() == [3, 3, 3, 3, 24, 24, 3, 3]
+    def drop(full_width: bool):
+        model = build_model([tet, make_object_mesh("cuboid")], [Material(youngs_modulus=1e5)] * 2,
+                            poses=[((0.0, 0.01, 0.0), (0.0, 0.0, 0.0, 1.0)), ((0.2, 0.01, 0.0), (0.0, 0.0, 0.0, 1.0))],
+                            device="cpu")
+        state, control = State.from_model(model), Control.from_model(model)
+        solver = ImplicitSolver(model, SolverConfig(substeps=2))
+        assert solver.scratch.coarse_size == 48
+        assert solver.scratch.coarse_sizes.numpy().tolist() == [42, 48]
         if full_width:
-            scratch.coarse_sizes.fill_(scratch.coarse_size)
-        policy = ExpertNoisyPress(env, seed=2)
-        rows = []
-        for _ in range(16):
-            obs, reward, terminated, truncated, info = env.step(policy.actions(obs))
-            policy.episodes_ended(terminated, truncated)
-            rows.append((obs, reward, info["newton_iterations"], info["cg_iterations"], info["wrist_force"]))
-        scene = env.unwrapped.scene
-        positions = scene.state.positions.numpy().copy()
-        # more world-solves than one per world-substep: the force limit's retries or patient re-solves ran
-        assert scene.world_solves > 16 * 4 * 8, scene.world_solves
-        env.close()
-        return rows, positions
+            solver.scratch.coarse_sizes.fill_(48)
+        reports = [solver.step(state, state, control, dt=DT) for _ in range(8)]
+        assert max(float(r.penetration[1]) for r in reports) > 0.0  # the cuboid reached the ground
+        return state.positions.numpy(), [r.cg_iterations.tolist() for r in reports]
 
-    own, own_positions = episode(False)
-    full, full_positions = episode(True)
-    np.testing.assert_array_equal(own_positions, full_positions)
-    for (obs, *rest), (obs_full, *rest_full) in zip(own, full):
-        for name in obs:
-            np.testing.assert_array_equal(obs[name], obs_full[name])
-        for a, b in zip(rest, rest_full):
-            np.testing.assert_array_equal(a, b)
+    own, own_cg = drop(False)
+    full, full_cg = drop(True)
+    np.testing.assert_array_equal(own, full)
+    assert own_cg == full_cg and sum(c[0] for c in own_cg) > 0

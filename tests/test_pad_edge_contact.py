@@ -304,8 +304,9 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
     lagged, sliding 3 stick slips sideways) along random normal directions, which leave the
     tangential slip and so the friction force as they are (the friction block is the usual lagged
     approximation c (I - n n^T), not the exact Jacobian of a sliding force); (b)
-    ``coarse_assemble_edge_points`` gives T^T H T for node aggregates (T: unit translations of each
-    aggregate, some axes fixed), built column by column from the product, friction included."""
+    ``coarse_assemble_edge_points`` gives T^T H T for node aggregates (T: the unit translations and
+    rotations of each aggregate about an anchor node, some axes fixed), built column by column from
+    the product, friction included (E's lower triangle: all that is assembled)."""
     model, edges, x, xw, pads = _tilted_pad_pressed()
     n, slots = model.num_nodes, model.num_worlds * edges.points_per_world
     active = wp.ones(model.num_worlds, dtype=int, device="cpu")
@@ -350,25 +351,37 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
         np.testing.assert_allclose(hp, fd, atol=0.02 * np.abs(hp).max())
     if friction:  # the blocks, from the documented laws: s n n^T (penalty) + mu f_n f1(s)/s (I - n n^T)
         _expect_point_blocks(model, edges, x, x - shift * np.array([0.6, 0.0, 0.8]), pads)
-    # (b) coarse block: 3 aggregates by node id, axis z fixed on every 5th node
+    # (b) coarse block: 3 aggregates by node id, anchors their first nodes, axis z fixed on every 5th node
     aggregate = np.arange(n) % 3
+    anchor = np.arange(n) % 3
     free = np.ones((n, 3), np.float32)
     free[::5, 2] = 0.0
-    size = 3 * 3
+    size = 6 * 3
     matrix = wp.zeros((model.num_worlds, size, size), dtype=wp.float64, device="cpu")
     world = model.node_world.numpy()
     wp.launch(kph.coarse_assemble_edge_points, slots,
               [edges.triangles, active, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_block,
                wp.array(free, dtype=wp.vec3, device="cpu"),
-               wp.array(aggregate.astype(np.int32), dtype=int, device="cpu"), matrix], device="cpu")
+               wp.array(aggregate.astype(np.int32), dtype=int, device="cpu"),
+               wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu"),
+               wp.array(anchor.astype(np.int32), dtype=int, device="cpu"), matrix], device="cpu")
     got = matrix.numpy()[0]
+    lever = x.astype(np.float32).astype(np.float64)
+    lever = lever - lever[anchor]
     columns = np.zeros((size, n, 3))
     for a in range(3):
+        mine = (aggregate == a) & (world == 0)
         for k in range(3):
-            columns[3 * a + k, (aggregate == a) & (world == 0), k] = free[(aggregate == a) & (world == 0), k]
+            axis = np.eye(3)[k]
+            columns[6 * a + k, mine] = free[mine] * axis
+            columns[6 * a + 3 + k, mine] = free[mine] * np.cross(axis, lever[mine])
     expected = np.einsum("inj,knj->ik", columns, np.stack([product(c) for c in columns]) * free[None])
-    assert np.abs(expected).max() > 0
-    np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
+    assert np.abs(expected).max() > 0 and np.abs(np.tril(expected, -1)).max() > 0
+    assert np.all(np.triu(got, 1) == 0.0)
+    # scaled by the diagonal (rotation entries are ~lever^2 times the translations'): each entry to 1e-5
+    scale = 1.0 / np.sqrt(np.where(np.diag(expected) > 0, np.diag(expected), 1.0))
+    np.testing.assert_allclose(scale[:, None] * got * scale, scale[:, None] * np.tril(expected) * scale, rtol=1e-4,
+                               atol=1e-5)
 
 
 def _one_triangle_model():

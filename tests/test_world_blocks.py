@@ -169,8 +169,8 @@ def test_world_blocks_on_cuda_through_contact_and_resets():
 
 
 def _rope_steps(config: SolverConfig, steps: int = 14, device: str = "cpu"):
-    """A rope (8 coarse aggregates: 24 coarse unknowns) squeezed across its middle by the pads and
-    lifted, beside a squeezed cube (one aggregate), E = 1e5: per step the state rows and the report."""
+    """A rope (8 coarse aggregates: 48 coarse unknowns) squeezed across its middle by the pads and
+    lifted, beside a squeezed cube (8 aggregates too), E = 1e5: per step the state rows and the report."""
     rope, cube = make_object_mesh("rope"), make_object_mesh("cuboid")
     across = (0.0, float(np.sin(np.pi / 4)), 0.0, float(np.cos(np.pi / 4)))  # the rope along z, pads on +-x
     model = build_model([rope, cube], [Material(youngs_modulus=1e5)] * 2,
@@ -188,7 +188,7 @@ def _rope_steps(config: SolverConfig, steps: int = 14, device: str = "cpu"):
 
     state.pad_positions.assign(targets(0))
     solver = ImplicitSolver(model, config)
-    assert solver.scratch.coarse_sizes.numpy().tolist() == [24, 3]
+    assert solver.scratch.coarse_sizes.numpy().tolist() == [48, 48]
     if device != "cpu":
         assert (solver.world_block_threads, solver.cg_block_threads) == (config.world_block_threads,
                                                                          config.cg_block_threads)
@@ -201,9 +201,8 @@ def _rope_steps(config: SolverConfig, steps: int = 14, device: str = "cpu"):
 
 
 def test_world_block_cg_applies_a_rope_coarse_solve_row_by_row_with_the_bits_of_one_thread():
-    """The world-block CG applies a coarse solve wider than one aggregate's (``LANE_COARSE_SIZE``:
-    the rope's 24 unknowns) a row per thread (``coarse_space.coarse_row`` / ``coarse_gain``), the
-    cube's 3 on one thread (``end_iteration``): on the CPU, every state row and report field equal
+    """The world-block CG applies the coarse solve (the rope's 48 unknowns) a row per thread
+    (``coarse_space.coarse_row`` / ``coarse_gain``): on the CPU, every state row and report field equal
     to the phase launches' (which apply it on one thread, ``coarse_coefficients``) over 14 steps
     of a squeezed, lifted rope; with 8 cooperative threads a world (``wp.config.enable_cpu_blocks``,
     the rows then computed by different threads, the other sums in another order) within 1e-5 m
@@ -211,9 +210,6 @@ def test_world_block_cg_applies_a_rope_coarse_solve_row_by_row_with_the_bits_of_
     8-thread rope is 1e-3 m off after the first step.)"""
     import warp as wp
 
-    from defgrasp_env.sim.kernels.world_cg import LANE_COARSE_SIZE
-
-    assert LANE_COARSE_SIZE < 24
     reference = _rope_steps(SolverConfig(world_block_threads=0))
     rows = _rope_steps(SolverConfig(world_block_threads=1))
     for (got, got_report), (want, want_report) in zip(rows, reference):

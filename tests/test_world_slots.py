@@ -113,7 +113,7 @@ def test_a_model_rewritten_in_place_equals_one_assembled_afresh():
     assert np.array_equal(scratch.coarse_sizes.numpy(), fresh_solver.coarse_sizes.numpy())
     assert np.array_equal(scratch.tet_end.numpy(), fresh_solver.tet_end.numpy())
     assert np.array_equal(scratch.edges.triangles.numpy(), fresh_solver.edges.triangles.numpy())
-    assert scratch.coarse_size == fresh_solver.coarse_size == 3 * scene.slots.aggregates
+    assert scratch.coarse_size == fresh_solver.coarse_size == 6 * scene.slots.aggregates
     assert np.array_equal(scene.solver.scratch.edges.triangle_first.numpy(), fresh_solver.edges.triangle_first.numpy())
     for name in ("node_blocks", "node_incidences"):  # the Hessian's pattern
         assert np.array_equal(getattr(scratch.hessian, name).numpy(), getattr(fresh_solver.hessian, name).numpy()), name

@@ -61,7 +61,7 @@ def _geometry(mesh: TetMesh, pad_half_extents: tuple, contact: ContactParams) ->
     out = {name: getattr(m, name).numpy() for name in _GEOMETRY_FIELDS}
     out.update(tets=m.tets.numpy(), world_volume=m.world_volume.numpy(), pad_half_extents=m.pad_half_extents.numpy(),
                gravity=m.gravity, surface=m.surfaces[0], nodes=np.asarray(mesh.nodes, dtype=np.float64),
-               node_aggregate=m.node_aggregate)
+               node_aggregate=m.node_aggregate, node_anchor=m.node_anchor)
     return out
 
 
@@ -103,7 +103,7 @@ def _rows(part: dict, pose: tuple, node_start: int, slots: SlotSizes | None) -> 
             + np.asarray(x, dtype=np.float64)).astype(np.float32)
     rows = {name: part[name] for name in (*_NODE_FIELDS, *_TET_FIELDS)}
     rows.update(rest_positions=rest, tets=(part["tets"] + node_start).astype(np.int32),
-                node_aggregate=part["node_aggregate"])
+                node_aggregate=part["node_aggregate"], node_anchor=part["node_anchor"])
     if slots is None:
         return rows
     spare_nodes, spare_tets = slots.nodes - n, slots.tets - t
@@ -125,6 +125,7 @@ def _rows(part: dict, pose: tuple, node_start: int, slots: SlotSizes | None) -> 
     rows["rest_positions"] = np.concatenate([rest, np.tile(np.float32(SPARE_POSITION), (spare_nodes, 1))])
     rows["tets"] = pad(rows["tets"], spare_tets, spare)
     rows["node_aggregate"] = pad(rows["node_aggregate"], spare_nodes)
+    rows["node_anchor"] = pad(rows["node_anchor"], spare_nodes)
     return rows
 
 
@@ -154,7 +155,7 @@ def assemble_model(meshes: Sequence[TetMesh], materials: Sequence[Material], pos
         device=str(wp.get_device(device)), num_worlds=len(parts), pads_per_world=len(parts[0]["pad_half_extents"]),
         node_start=node_start, tet_start=tet_start, node_end=node_start[:-1] + counts,
         tet_end=tet_start[:-1] + tet_counts, surfaces=[p["surface"] for p in parts],
-        node_aggregate=cat([r["node_aggregate"] for r in rows]),
+        node_aggregate=cat([r["node_aggregate"] for r in rows]), node_anchor=cat([r["node_anchor"] for r in rows]),
         rest_positions=arr("rest_positions", wp.vec3), tets=arr("tets", wp.vec4i),
         tet_world=wp.array(np.repeat(world, tet_rows).astype(np.int32), dtype=wp.int32, device=device),
         node_world=wp.array(np.repeat(world, node_rows).astype(np.int32), dtype=wp.int32, device=device),
@@ -202,6 +203,7 @@ def rewrite_worlds(model: Model, worlds: Sequence[int], meshes: Sequence[TetMesh
         model.tet_end[w] = tstart + len(part["tets"])
         model.surfaces[w] = part["surface"]
         model.node_aggregate[start:start + slots.nodes] = r["node_aggregate"]
+        model.node_anchor[start:start + slots.nodes] = r["node_anchor"]
     if not rows:
         return
     d = model.device

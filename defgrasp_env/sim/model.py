@@ -22,7 +22,7 @@ import numpy as np
 import warp as wp
 
 from ..transforms import quat_normalize, quat_to_matrix
-from .aggregates import bisect_nodes
+from .aggregates import aggregate_anchors, bisect_nodes
 from .kernels.world_rows import scatter_rows
 from .materials import Material, check_range
 
@@ -99,6 +99,8 @@ class Model:
     surfaces: list[np.ndarray]    # W x [S_w,3] int32 host: boundary triangles, world-local node ids
     node_aggregate: np.ndarray    # [N] int32 host: world-local coarse aggregate of each node (``aggregates.py``,
                                   # cut in the object frame: the same for every pose)
+    node_anchor: np.ndarray       # [N] int32 host: world-local node its aggregate's rotations turn about
+                                  # (``aggregates.aggregate_anchors``; a slot's spare nodes: 0)
     rest_positions: wp.array      # [N] vec3, m: node positions at the initial pose
     tets: wp.array                # [T] vec4i: global node indices, positively oriented
     tet_rest_inv: wp.array        # [T] mat33: inverse of the rest edge matrix D_m (object frame), 1/m
@@ -185,7 +187,7 @@ def build_model(
     device = str(wp.get_device(device))
 
     positions, tets, rest_inv, volumes, mus, lams, tet_world = [], [], [], [], [], [], []
-    masses, node_world, free, world_volume, node_stiffness, aggregates = [], [], [], [], [], []
+    masses, node_world, free, world_volume, node_stiffness, aggregates, anchors = [], [], [], [], [], [], []
     node_start, tet_start = [0], [0]
     for w, (mesh, material, (pos, quat)) in enumerate(zip(meshes, materials, poses)):
         nodes = np.asarray(mesh.nodes, dtype=np.float64)
@@ -205,6 +207,7 @@ def build_model(
         fields = material_fields(t, vol, len(x), material, contact)
         positions.append(x)
         aggregates.append(bisect_nodes(nodes))
+        anchors.append(aggregate_anchors(nodes, aggregates[-1]))
         tets.append(t + node_start[-1])
         rest_inv.append(np.linalg.inv(dm))
         volumes.append(vol)
@@ -245,6 +248,7 @@ def build_model(
         tet_end=np.asarray(tet_start[1:], dtype=np.int64),
         surfaces=[np.asarray(mesh.surface, dtype=np.int32) for mesh in meshes],
         node_aggregate=cat(aggregates).astype(np.int32),
+        node_anchor=cat(anchors).astype(np.int32),
         rest_positions=arr(cat(positions).astype(np.float32), wp.vec3),
         tets=arr(cat(tets).astype(np.int32), wp.vec4i),
         tet_rest_inv=arr(cat(rest_inv).astype(np.float32), wp.mat33),

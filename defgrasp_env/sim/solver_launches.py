@@ -242,18 +242,16 @@ def _coarse_before(c: _Context, active) -> list:
     with the residual and CG vectors that follow (kernels/coarse_space.py)."""
     m, s, e, n = c.model, c.scratch, c.scratch.edges, c.model.num_nodes
     return [
-        c.rec(kcs.coarse_assemble_nodes, n, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
-              s.node_aggregate, active, 1.0 / (c.h * c.h), s.residual, s.coarse_matrix, s.coarse_rhs),
-        c.rec(kcs.coarse_assemble_tets, m.num_tets, m.tets, m.tet_rest_inv, m.tet_rest_volume, m.tet_mu,
-              m.tet_lambda, s.cofactor, s.tet_r, s.tet_twist, m.tet_world, active, m.free_axes, s.node_aggregate,
-              s.coarse_matrix),
+        c.rec(kcs.coarse_assemble_nodes, n, c.work.positions, s.node_anchor, m.node_mass, s.contact_hessian,
+              m.free_axes, m.node_world, s.node_aggregate, active, 1.0 / (c.h * c.h), *_hessian_rows(c), s.residual,
+              s.coarse_lever, s.coarse_matrix, s.coarse_rhs),
         *([c.rec(kph.coarse_assemble_edge_points, m.num_worlds * e.points_per_world, e.triangles, active,
                  e.points_per_world, e.point_tri, e.point_bary, e.point_block, m.free_axes,
-                 s.node_aggregate, s.coarse_matrix)] if e.active else []),
+                 s.node_aggregate, c.work.positions, s.node_anchor, s.coarse_matrix)] if e.active else []),
         c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_sizes, s.coarse_matrix, s.coarse_lower_inv,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),
-        c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx,
-              s.coarse_guess),
+        c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_lever,
+              s.coarse_coef, s.dx, s.coarse_guess),
         *_edge_product(c, s.coarse_guess, active),
         c.rec(klin.cg_node_product, n, s.coarse_guess, m.node_mass, s.contact_hessian, m.free_axes, m.node_world,
               active, 1.0 / (c.h * c.h), *_hessian_rows(c), s.ap, s.coarse_scratch, c.compaction.every_row),
@@ -264,10 +262,12 @@ def _coarse_before(c: _Context, active) -> list:
 def _coarse_after(c: _Context, active) -> list:
     """Coarse correction after CG: dx += T (T^T A T)^-1 T^T r with CG's final residual r."""
     m, s, n = c.model, c.scratch, c.model.num_nodes
-    return [c.rec(kcs.coarse_reduce, n, s.residual, m.node_world, s.node_aggregate, active, s.coarse_rhs),
+    return [c.rec(kcs.coarse_reduce, n, s.residual, m.node_world, s.node_aggregate, active, s.coarse_lever,
+                  s.coarse_rhs),
             c.rec(kcs.coarse_solve, m.num_worlds, active, s.coarse_sizes, s.coarse_inverse, s.coarse_rhs,
                   s.coarse_coef),
-            c.rec(kcs.coarse_correct, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef, s.dx)]
+            c.rec(kcs.coarse_correct, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_lever,
+                  s.coarse_coef, s.dx)]
 
 
 def _pads(c: _Context, k: int) -> list:
@@ -386,7 +386,7 @@ def _evaluate_world(c: _Context, config, threads: int, start_energy: bool = Fals
                      s.hessian.node_blocks, s.hessian.block_node, s.hessian.node_incidences, s.hessian.incidence,
                      s.hessian.incidence_blocks, s.hessian.values,
                      m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm, s.node_aggregate,
-                     1.0 / (c.h * c.h), s.coarse_sizes, s.coarse_matrix, s.coarse_rhs, s.coarse_lower_inv,
+                     s.node_anchor, s.coarse_lever, 1.0 / (c.h * c.h), s.coarse_sizes, s.coarse_matrix, s.coarse_rhs, s.coarse_lower_inv,
                      s.coarse_inverse, s.coarse_coef, s.coarse_factored, s.coarse_guess, s.coarse_scratch,
                      s.substep_newton_it, s.patient, s.last_dx, config.newton_tolerance, config.cg_tolerance,
                      config.cg_tolerance_far, s.rz_stop, s.cg_active)]
@@ -402,14 +402,14 @@ def _cg(c: _Context, config, listed: bool = False) -> list:
         *_edge_product(c, s.p, active, listed),
         c.rec(klin.cg_node_product, n, s.p, m.node_mass, s.contact_hessian, m.free_axes, m.node_world, active,
               1.0 / (c.h * c.h), *_hessian_rows(c), s.ap, s.p_ap, nodes),
-        c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate, active,
-              s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs, nodes),
+        c.rec(klin.cg_update_solution, n, s.p, s.ap, s.precond, m.free_axes, m.node_world, s.node_aggregate,
+              s.coarse_lever, active, s.rz, s.p_ap, s.dx, s.residual, s.z, s.rz_new, s.cg_update, s.coarse_rhs, nodes),
         c.rec(klin.cg_end_iteration, m.num_worlds, s.rz_stop,
               config.cg_update_fraction * config.newton_tolerance, config.cg_iterations, s.coarse_sizes,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz, s.rz_new, s.p_ap, s.cg_beta, s.cg_it, s.cg_total,
               active, s.cg_update),
-        c.rec(klin.cg_update_direction, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_coef,
-              s.cg_beta, s.z, s.p, s.ap, nodes)]
+        c.rec(klin.cg_update_direction, n, m.free_axes, m.node_world, s.node_aggregate, s.coarse_lever, active,
+              s.coarse_coef, s.cg_beta, s.z, s.p, s.ap, nodes)]
 
 
 def _cg_world(c: _Context, config, threads: int) -> list:
@@ -420,7 +420,8 @@ def _cg_world(c: _Context, config, threads: int) -> list:
                      threads, config.cg_iterations, wc.nodes.start, e.points_per_world if e.active else 0,
                      *_hessian_rows(c),
                      e.triangles, e.point_tri, e.point_bary, e.point_block,
-                     m.node_mass, s.contact_hessian, m.free_axes, m.node_world, s.node_aggregate, s.precond,
+                     m.node_mass, s.contact_hessian, m.free_axes, m.node_world, s.node_aggregate, s.coarse_lever,
+                     s.precond,
                      1.0 / (c.h * c.h),
                      s.rz_stop, config.cg_update_fraction * config.newton_tolerance, s.coarse_sizes,
                      s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.coarse_terms, s.rz, s.rz_new, s.p_ap,
@@ -435,7 +436,8 @@ def _newton_step_world(c: _Context, config, threads: int, first: bool) -> list:
     m, s = c.model, c.scratch
     return [c.blocks(kwns.newton_step_world_blocks, threads,
                      threads, c.compaction.nodes.start, c.compaction.tets.start, s.newton_active,
-                     s.residual, m.free_axes, s.node_aggregate, s.coarse_sizes, s.coarse_inverse, s.coarse_rhs,
+                     s.residual, m.free_axes, s.node_aggregate, s.coarse_lever, s.coarse_sizes, s.coarse_inverse,
+                     s.coarse_rhs,
                      s.coarse_coef,
                      config.line_search_steps + 1 if config.line_search_steps > 0 else 0, int(first), 1e-6,
                      0.5 ** config.line_search_steps,

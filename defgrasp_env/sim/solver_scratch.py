@@ -11,6 +11,7 @@ import numpy as np
 import warp as wp
 
 from .hessian_blocks import HessianBlocks
+from .kernels.coarse_space import AGGREGATE_UNKNOWNS
 from .model import Model
 from .kernels.world_rows import scatter_rows
 from .pad_edge_points import pad_edge_points, surface_triangles, world_surface_triangles
@@ -75,14 +76,21 @@ class EdgeContactScratch:
 
 
 def world_coarse_sizes(model: Model, node_aggregate: np.ndarray) -> np.ndarray:
-    """[W] int32: 3 x (the largest aggregate index of each world's nodes + 1), the unknowns of its
+    """[W] int32: 6 x (the largest aggregate index of each world's nodes + 1), the unknowns of its
     coarse solve. A batch's coarse arrays are as wide as its most aggregates (a rope: 8, a compact
     object: 1); the rows beyond a world's own are empty (no node, no right-hand side), so its
     solve over its own rows alone gives the same coefficients, bit for bit on the CPU, without the
     dense factor and products of the others (one thread's serial float64 work per Newton and CG
-    iteration: a cuboid beside a rope factored 24 x 24 where 3 x 3 is its own)."""
+    iteration: a cuboid beside a rope factored 48 x 48 where 6 x 6 is its own)."""
     starts = np.asarray(model.node_start[:-1], dtype=np.int64)  # every world has nodes
-    return (3 * (np.maximum.reduceat(np.asarray(node_aggregate), starts) + 1)).astype(np.int32)
+    return (AGGREGATE_UNKNOWNS * (np.maximum.reduceat(np.asarray(node_aggregate), starts) + 1)).astype(np.int32)
+
+
+def global_anchors(model: Model, rows: np.ndarray) -> np.ndarray:
+    """[len(rows)] int32: the global node id of each node row's aggregate anchor (``Model.node_anchor``
+    is world-local)."""
+    world = np.searchsorted(model.node_start, rows, side="right") - 1
+    return (model.node_anchor[rows] + model.node_start[world]).astype(np.int32)
 
 
 @dataclass
@@ -91,7 +99,7 @@ class SolverScratch:
 
     Newton's iterate is the work state's ``positions``; each Newton iteration solves
     ``A dx = r`` (A = M/h^2 + contact Hessian + elastic Hessian) by CG preconditioned by block
-    Jacobi plus a coarse solve on the translations of node aggregates (``kernels/coarse_space.py``),
+    Jacobi plus a coarse solve on the rigid motions of node aggregates (``kernels/coarse_space.py``),
     then line-searches along ``dx``.
     """
 
@@ -152,12 +160,14 @@ class SolverScratch:
     coarse_factored: wp.array   # int: 1 while a world block's coarse Cholesky pivots were positive
     energy0: wp.array           # float64: incremental potential of the accepted iterate
     energy_trial: wp.array      # float64: that of the trial
-    # coarse space: translations of K node aggregates per world (C = 3K unknowns, sim/aggregates.py;
+    # coarse space: rigid motions of K node aggregates per world (C = 6K unknowns, sim/aggregates.py;
     # K: the most aggregates of any world)
     coarse_size: int            # host: C
-    coarse_sizes: wp.array      # [W] int: 3 x the aggregates of each world's object (<= C): its coarse
+    coarse_sizes: wp.array      # [W] int: 6 x the aggregates of each world's object (<= C): its coarse
     #                             solve's unknowns (the rest of its rows, empty aggregates, are left out)
     node_aggregate: wp.array    # [N] int: world-local aggregate of each node
+    node_anchor: wp.array       # [N] int: global node its aggregate's rotations turn about
+    coarse_lever: wp.array      # [N] vec3, m: x_i - x_anchor at the iterate of the last assembly
     coarse_matrix: wp.array     # [W, C, C] float64: T^T A T (assembled, then its Cholesky factor)
     coarse_lower_inv: wp.array  # [W, C, C] float64: inverse of the Cholesky factor
     coarse_inverse: wp.array    # [W, C, C] float64: (T^T A T)^-1 of the current Newton iteration
@@ -190,7 +200,7 @@ class SolverScratch:
             return wp.zeros(w, dtype=dtype, device=d)
 
         aggregate = model.node_aggregate
-        size = 3 * max(int(aggregate.max()) + 1, model.max_aggregates)
+        size = AGGREGATE_UNKNOWNS * max(int(aggregate.max()) + 1, model.max_aggregates)
 
         def coarse(dtype, ndim):
             return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)
@@ -209,6 +219,7 @@ class SolverScratch:
             energy0=per_world(wp.float64), energy_trial=per_world(wp.float64),
             coarse_size=size, coarse_sizes=wp.array(world_coarse_sizes(model, aggregate), dtype=int, device=d),
             node_aggregate=wp.array(aggregate, dtype=int, device=d),
+            node_anchor=wp.array(global_anchors(model, np.arange(n)), dtype=int, device=d), coarse_lever=vec(),
             coarse_matrix=coarse(wp.float64, 3), coarse_lower_inv=coarse(wp.float64, 3),
             coarse_inverse=coarse(wp.float64, 3), coarse_rhs=coarse(float, 2), coarse_coef=coarse(float, 2),
             coarse_terms=coarse(wp.float64, 2),
@@ -230,15 +241,18 @@ class SolverScratch:
             return
         rows = np.concatenate([np.arange(model.node_start[w], model.node_start[w + 1]) for w in worlds])
         aggregates = model.node_aggregate[rows]
-        if int(aggregates.max()) + 1 > self.coarse_size // 3:
+        if int(aggregates.max()) + 1 > self.coarse_size // AGGREGATE_UNKNOWNS:
             raise ValueError(f"the rewritten worlds name {int(aggregates.max()) + 1} coarse aggregates, more than the "
-                             f"{self.coarse_size // 3} this scratch was made for")
+                             f"{self.coarse_size // AGGREGATE_UNKNOWNS} this scratch was made for")
         d = model.device
         self.tet_end.assign(np.asarray(model.tet_end, dtype=np.int32))
         self.coarse_sizes.assign(world_coarse_sizes(model, model.node_aggregate))
         wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(aggregates, dtype=int, device=d),
                                                     wp.array(rows.astype(np.int32), dtype=int, device=d)],
                   outputs=[self.node_aggregate], device=d)
+        wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(global_anchors(model, rows), dtype=int, device=d),
+                                                    wp.array(rows.astype(np.int32), dtype=int, device=d)],
+                  outputs=[self.node_anchor], device=d)
         self.hessian.rewrite_worlds(model, worlds)
         e = self.edges
         if e.triangles.shape[0]:

@@ -1,17 +1,26 @@
-"""Coarse space of the per-world linear solves: piecewise-constant translations of node aggregates.
+"""Coarse space of the per-world linear solves: the rigid motions of node aggregates.
 
 Block-Jacobi CG barely moves the smooth, long-wavelength modes of a Newton system A dx = r: the
-rigid translations of a stiff object (their stiffness m/h^2 is ~1e5 times below the elastic one)
-and the bending of a slender one (a rope: CG needs ~ its length in elements of iterations to carry
-a correction from end to end). Every world's nodes are split into at most K aggregates (``sim/aggregates.py``);
-T [3N x 3K] holds the translations of each aggregate, column (a, k) = e_k on the nodes of aggregate
-a, masked by the free axes. Per Newton iteration the coarse matrix E = T^T A T (3K x 3K, float64)
-is assembled from the node terms (mass/h^2 + contact blocks) and the tets that straddle two or more
-aggregates (a uniform translation does not strain a tet, so tets inside one aggregate add nothing,
-exactly, when all their axes are free), Cholesky-factored and inverted per world.
+rigid motions of a stiff object (their stiffness, the mass term m/h^2 and the contacts, is ~1e5
+times below the elastic one) and the bending of a slender one (a rope: CG needs ~ its length in
+elements of iterations to carry a correction from end to end). Every world's nodes are split into at
+most K aggregates (``sim/aggregates.py``); T [3N x 6K] holds the six rigid motions of each aggregate
+a: node i of a moves by T_i c_a = F_i (t_a + omega_a x l_i), a translation t_a and a small rotation
+omega_a about the aggregate's anchor node (``Model.node_anchor``), with l_i = x_i - x_anchor at the
+Newton iterate (``lever``, written by the assembly) and F_i the diagonal of its free axes. Unknown
+6 a + k: the translation along axis k (k < 3) or the rotation about axis k - 3.
+Per Newton iteration the coarse matrix E = T^T A T (6K x 6K, float64, its lower triangle: all that
+the Cholesky factor reads) is assembled node row by node row: the node terms T_i^T (m/h^2 + contact
+block) T_i, and the elastic Hessian's assembled rows (``hessian_blocks.py``: (K p)_i = sum over
+j != i of K_ij (p_j - p_i)) as T_i^T K_ij T_j into E[a(i), a(j)] and -T_i^T K_ij T_i into
+E[a(i), a(i)]; within one aggregate, with every axis free, the two together are T_i^T K_ij (T_j - T_i),
+whose translation parts vanish exactly (a translation strains nothing) and whose rotation part is
+-[l_i]x K_ij [x_j - x_i]x. The pad edge points add T_j^T (w_j w_k B) T_k
+(``pad_edge_hessian.py``). E is Cholesky-factored and inverted per world.
 It is used (a) before CG: dx0 = T E^-1 T^T r, residual r - A dx0, (b) inside CG: the two-level
 additive preconditioner z = P r + T E^-1 T^T r (P block Jacobi; SPD, so CG stays CG), and (c) after
-CG: dx += T E^-1 T^T r (the best A-norm correction in the coarse space).
+CG: dx += T E^-1 T^T r (the best A-norm correction in the coarse space). T^T r is each aggregate's
+net force and its torque about the anchor.
 A world whose E is not numerically positive definite gets E^-1 = 0 (block Jacobi alone) for that
 Newton iteration.
 """
@@ -19,29 +28,42 @@ Newton iteration.
 import warp as wp
 
 from .block_sync import block_barrier
-from .elastic import pick_vertex, row, spare_tet, stress_differential
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
 wp.set_module_options({"enable_backward": False})
 
-#: Coarse solves of at most this many unknowns (one aggregate: a compact object's) are factored and
-#: applied by one thread of a world's block (``coarse_factor_world``, ``linear_solve.end_iteration``);
-#: larger ones (a slender object's aggregates) by its threads (``coarse_factor_block``,
-#: ``coarse_row``), with more barriers. The same bits either way on the CPU.
-LANE_COARSE_SIZE = 3
+#: Coarse unknowns per aggregate: three translations, three rotations.
+AGGREGATE_UNKNOWNS = 6
 
 
 @wp.func
-def aggregate_part(coef: wp.array2d(dtype=float), w: int, a: int, free: wp.vec3):
-    """(T c)_i for a node of aggregate ``a`` of world ``w`` with free axes ``free``."""
-    return wp.cw_mul(free, wp.vec3(coef[w, 3 * a], coef[w, 3 * a + 1], coef[w, 3 * a + 2]))
+def aggregate_part(coef: wp.array2d(dtype=float), w: int, a: int, lever: wp.vec3, free: wp.vec3):
+    """(T coef)_i = F_i (t_a + omega_a x l_i) for a node of aggregate ``a`` of world ``w`` with lever
+    ``lever`` (m) and free axes ``free``."""
+    b = 6 * a
+    t = wp.vec3(coef[w, b], coef[w, b + 1], coef[w, b + 2])
+    omega = wp.vec3(coef[w, b + 3], coef[w, b + 4], coef[w, b + 5])
+    return wp.cw_mul(free, t + wp.cross(omega, lever))
 
 
 @wp.func
-def add_rhs(rhs: wp.array2d(dtype=float), w: int, a: int, v: wp.vec3):
-    wp.atomic_add(rhs, w, 3 * a, v[0])
-    wp.atomic_add(rhs, w, 3 * a + 1, v[1])
-    wp.atomic_add(rhs, w, 3 * a + 2, v[2])
+def add_rhs(rhs: wp.array2d(dtype=float), w: int, a: int, lever: wp.vec3, v: wp.vec3):
+    """rhs_a += T_i^T v for a node of aggregate ``a`` with lever ``lever`` and ``v`` already masked
+    by its free axes: the force v and its torque l_i x v."""
+    b = 6 * a
+    m = wp.cross(lever, v)
+    wp.atomic_add(rhs, w, b, v[0])
+    wp.atomic_add(rhs, w, b + 1, v[1])
+    wp.atomic_add(rhs, w, b + 2, v[2])
+    wp.atomic_add(rhs, w, b + 3, m[0])
+    wp.atomic_add(rhs, w, b + 4, m[1])
+    wp.atomic_add(rhs, w, b + 5, m[2])
+
+
+@wp.func
+def node_lever(i: int, x: wp.array(dtype=wp.vec3), anchor: wp.array(dtype=int)):
+    """l_i = x_i - x of its aggregate's anchor node (m)."""
+    return x[i] - x[anchor[i]]
 
 
 @wp.func
@@ -91,9 +113,47 @@ def coarse_gain(w: int, size: int, rhs: wp.array2d(dtype=float), terms: wp.array
     return float(g_c)
 
 
+
+@wp.func
+def all_free(f: wp.vec3):
+    return f[0] + f[1] + f[2] == 3.0
+
+
+@wp.func
+def coarse_pair(fu: wp.vec3, lu: wp.vec3, block: wp.mat33d, fv: wp.vec3, lv: wp.vec3):
+    """T_u^T X T_v for nodes u, v (free axes ``fu``/``fv``, levers ``lu``/``lv``) and a 3 x 3 block
+    X: its four 3 x 3 parts (translation-translation, translation-rotation, rotation-translation,
+    rotation-rotation), float64. T_u = [F_u, -F_u [l_u]x], so T_u^T = [F_u; [l_u]x F_u]."""
+    xf = wp.diag(wp.vec3d(fu)) * block * wp.diag(wp.vec3d(fv))
+    su = wp.skew(wp.vec3d(lu))
+    sv = wp.skew(wp.vec3d(lv))
+    return xf, -(xf * sv), su * xf, -(su * xf * sv)
+
+
+@wp.func
+def add_block(matrix: wp.array3d(dtype=wp.float64), w: int, a: int, b: int, tt: wp.mat33d, tr: wp.mat33d,
+              rt: wp.mat33d, rr: wp.mat33d):
+    """E[a, b] += [[tt, tr], [rt, rr]] (6 x 6), its entries in E's lower triangle only (a < b: none;
+    the transposed block of E[b, a] holds them)."""
+    if a < b:
+        return
+    ra = 6 * a
+    cb = 6 * b
+    for r in range(3):
+        for c in range(3):
+            if a > b or c <= r:
+                wp.atomic_add(matrix, w, ra + r, cb + c, tt[r, c])
+                wp.atomic_add(matrix, w, ra + 3 + r, cb + 3 + c, rr[r, c])
+            if a > b:
+                wp.atomic_add(matrix, w, ra + r, cb + 3 + c, tr[r, c])
+            wp.atomic_add(matrix, w, ra + 3 + r, cb + c, rt[r, c])
+
+
 @wp.func
 def coarse_assemble_node(
     i: int,
+    x: wp.array(dtype=wp.vec3),
+    anchor: wp.array(dtype=int),
     mass: wp.array(dtype=float),
     contact_hessian: wp.array(dtype=wp.mat33),
     free: wp.array(dtype=wp.vec3),
@@ -101,7 +161,11 @@ def coarse_assemble_node(
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
     inv_dt2: float,
+    node_blocks: wp.array(dtype=wp.vec2i),
+    block_node: wp.array(dtype=int),
+    hessian_values: wp.array(dtype=wp.mat33),
     r: wp.array(dtype=wp.vec3),
+    lever: wp.array(dtype=wp.vec3),
     matrix: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
 ):
@@ -110,16 +174,42 @@ def coarse_assemble_node(
     if world_active[w] == 0:
         return
     a = node_aggregate[i]
-    fr = wp.diag(free[i])
-    block = fr * (mass[i] * inv_dt2 * wp.identity(n=3, dtype=float) + contact_hessian[i]) * fr
-    for j in range(3):
-        for k in range(3):
-            wp.atomic_add(matrix, w, 3 * a + j, 3 * a + k, wp.float64(block[j, k]))
-    add_rhs(rhs, w, a, r[i])
+    fi = free[i]
+    li = node_lever(i, x, anchor)
+    lever[i] = li
+    d = mass[i] * inv_dt2 * wp.identity(n=3, dtype=float) + contact_hessian[i]
+    tt, tr, rt, rr = coarse_pair(fi, li, wp.mat33d(d), fi, li)
+    bend = wp.mat33d(0.0)  # sum of K_ij [x_j - x_i]x over the all-free neighbours in aggregate a
+    own = wp.mat33d(0.0)   # sum of K_ij over the others: -T_i^T K_ij T_i
+    free_row = all_free(fi)
+    span = node_blocks[i]
+    for k in range(span[0], span[1]):
+        j = block_node[k]
+        kij = wp.mat33d(hessian_values[k])
+        aj = node_aggregate[j]
+        fj = free[j]
+        if aj == a and free_row and all_free(fj):
+            bend += kij * wp.skew(wp.vec3d(x[j] - x[i]))
+        else:
+            own += kij
+            ptt, ptr, prt, prr = coarse_pair(fi, li, kij, fj, node_lever(j, x, anchor))
+            if aj == a:
+                tt += ptt
+                tr += ptr
+                rt += prt
+                rr += prr
+            else:
+                add_block(matrix, w, a, aj, ptt, ptr, prt, prr)
+    ott, otr, ort, orr = coarse_pair(fi, li, own, fi, li)
+    rr = rr - orr - wp.skew(wp.vec3d(li)) * bend
+    add_block(matrix, w, a, a, tt - ott, tr - otr, rt - ort, rr)
+    add_rhs(rhs, w, a, li, r[i])
 
 
 @wp.kernel
 def coarse_assemble_nodes(
+    x: wp.array(dtype=wp.vec3),
+    anchor: wp.array(dtype=int),
     mass: wp.array(dtype=float),
     contact_hessian: wp.array(dtype=wp.mat33),
     free: wp.array(dtype=wp.vec3),
@@ -127,133 +217,20 @@ def coarse_assemble_nodes(
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
     inv_dt2: float,
+    node_blocks: wp.array(dtype=wp.vec2i),
+    block_node: wp.array(dtype=int),
+    hessian_values: wp.array(dtype=wp.mat33),
     r: wp.array(dtype=wp.vec3),
+    lever: wp.array(dtype=wp.vec3),
     matrix: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
 ):
-    """E += T^T (M/h^2 + contact blocks) T and rhs += T^T r (r already masked)."""
-    coarse_assemble_node(wp.tid(), mass, contact_hessian, free, node_world, node_aggregate, world_active, inv_dt2, r,
-                         matrix, rhs)
-
-
-@wp.func
-def vertices_in(a: int, a0: int, a1: int, a2: int, a3: int):
-    """How many of a tet's four vertices (aggregates ``a0`` .. ``a3``) belong to aggregate ``a``."""
-    return wp.where(a == a0, 1, 0) + wp.where(a == a1, 1, 0) + wp.where(a == a2, 1, 0) + wp.where(a == a3, 1, 0)
-
-
-@wp.func
-def most_shared_aggregate(a0: int, a1: int, a2: int, a3: int):
-    """The aggregate that most of a tet's four vertices (aggregates ``a0`` .. ``a3``) belong to;
-    the first vertex's among equals."""
-    best = a0
-    most = vertices_in(a0, a0, a1, a2, a3)
-    n1 = vertices_in(a1, a0, a1, a2, a3)
-    if n1 > most:
-        best = a1
-        most = n1
-    n2 = vertices_in(a2, a0, a1, a2, a3)
-    if n2 > most:
-        best = a2
-        most = n2
-    if vertices_in(a3, a0, a1, a2, a3) > most:
-        best = a3
-    return best
-
-
-@wp.func
-def coarse_assemble_tet(
-    t: int,
-    tets: wp.array(dtype=wp.vec4i),
-    rest_inv: wp.array(dtype=wp.mat33),
-    rest_volume: wp.array(dtype=float),
-    tet_mu: wp.array(dtype=float),
-    tet_lambda: wp.array(dtype=float),
-    tet_cof: wp.array(dtype=wp.mat33),
-    tet_r: wp.array(dtype=wp.mat33),
-    tet_twist: wp.array(dtype=float),
-    tet_world: wp.array(dtype=int),
-    world_active: wp.array(dtype=int),
-    free: wp.array(dtype=wp.vec3),
-    node_aggregate: wp.array(dtype=int),
-    matrix: wp.array3d(dtype=wp.float64),
-):
-    """Row ``t`` of ``coarse_assemble_tets``."""
-    w = tet_world[t]
-    if world_active[w] == 0:
-        return
-    idx = tets[t]
-    if spare_tet(idx):
-        return
-    a0 = node_aggregate[idx[0]]
-    a1 = node_aggregate[idx[1]]
-    a2 = node_aggregate[idx[2]]
-    a3 = node_aggregate[idx[3]]
-    all_free = free[idx[0]] + free[idx[1]] + free[idx[2]] + free[idx[3]]
-    every_axis = all_free[0] + all_free[1] + all_free[2] == 12.0
-    if a0 == a1 and a0 == a2 and a0 == a3 and every_axis:
-        return
-    dm_inv = rest_inv[t]
-    b1 = row(dm_inv, 0)
-    b2 = row(dm_inv, 1)
-    b3 = row(dm_inv, 2)
-    b0 = -(b1 + b2 + b3)
-    cof = tet_cof[t]
-    r = tet_r[t]
-    twist = tet_twist[t]
-    mu = tet_mu[t]
-    lam = tet_lambda[t]
-    v0 = rest_volume[t]
-    # with every axis free, each column of the tet's Hessian sums to zero over its vertices (a uniform
-    # translation strains nothing: b0 + b1 + b2 + b3 = 0), so E[a, c] = -sum over b != c of E[a, b]:
-    # only the vertices outside the aggregate c that holds most of the tet's vertices are
-    # differentiated, each column added to its own aggregate's block and taken from c's (a rope's
-    # straddling tet: 1.3 vertices of 4 on average)
-    c = -1
-    if every_axis:
-        c = most_shared_aggregate(a0, a1, a2, a3)
-    for v in range(4):
-        bv = pick_vertex(b0, b1, b2, b3, v)
-        fv = free[idx[v]]
-        av = node_aggregate[idx[v]]
-        if av == c:
-            continue
-        for j in range(3):
-            if fv[j] != 0.0:
-                e = wp.vec3(0.0)
-                e[j] = 1.0
-                dp = stress_differential(wp.outer(e, bv), cof, r, twist, mu, lam, v0)
-                for u in range(4):
-                    bu = pick_vertex(b0, b1, b2, b3, u)
-                    col = wp.cw_mul(free[idx[u]], dp * bu)
-                    au = node_aggregate[idx[u]]
-                    for k in range(3):
-                        wp.atomic_add(matrix, w, 3 * au + k, 3 * av + j, wp.float64(col[k]))
-                        if c >= 0:
-                            wp.atomic_add(matrix, w, 3 * au + k, 3 * c + j, -wp.float64(col[k]))
-
-
-@wp.kernel
-def coarse_assemble_tets(
-    tets: wp.array(dtype=wp.vec4i),
-    rest_inv: wp.array(dtype=wp.mat33),
-    rest_volume: wp.array(dtype=float),
-    tet_mu: wp.array(dtype=float),
-    tet_lambda: wp.array(dtype=float),
-    tet_cof: wp.array(dtype=wp.mat33),
-    tet_r: wp.array(dtype=wp.mat33),
-    tet_twist: wp.array(dtype=float),
-    tet_world: wp.array(dtype=int),
-    world_active: wp.array(dtype=int),
-    free: wp.array(dtype=wp.vec3),
-    node_aggregate: wp.array(dtype=int),
-    matrix: wp.array3d(dtype=wp.float64),
-):
-    """E += T^T K_t T for the tets t with nodes in two or more aggregates (or a prescribed axis):
-    the tet's 12 unit-vector Hessian products (``stress_differential``), summed into the blocks of
-    the aggregates of their nodes."""
-    coarse_assemble_tet(wp.tid(), tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_cof, tet_r, tet_twist,
-                        tet_world, world_active, free, node_aggregate, matrix)
+    """E += T^T (M/h^2 + contact blocks + elastic Hessian) T (lower triangle; the elastic Hessian's
+    rows assembled at this iterate, ``hessian_blocks.py``), rhs += T^T r (r already masked), and
+    each node's lever l_i = x_i - x_anchor at the iterate ``x`` (what T applies until the next
+    assembly)."""
+    coarse_assemble_node(wp.tid(), x, anchor, mass, contact_hessian, free, node_world, node_aggregate, world_active,
+                         inv_dt2, node_blocks, block_node, hessian_values, r, lever, matrix, rhs)
 
 
 @wp.func
@@ -371,7 +348,7 @@ def coarse_factor_block(
     Per factor column, thread 0 takes the pivot and
     the threads the entries below it (``factored[w]``: 1 while every pivot so far was positive);
     L^-1 a column per thread, E^-1 an entry per thread, ``coef`` a row per thread. A slender
-    object's 24 unknowns on one thread were a serial chain of ~7,800 float64 multiply-adds."""
+    object's 24 unknowns on one thread were a serial chain of ~7,800 float64 multiply-adds (48 now)."""
     size = sizes[w]
     for j in range(lane, size, threads):
         fix_coarse_diagonal(w, j, matrix)
@@ -431,6 +408,7 @@ def coarse_guess_node(
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     coef: wp.array2d(dtype=float),
     dx: wp.array(dtype=wp.vec3),
     guess: wp.array(dtype=wp.vec3),
@@ -439,7 +417,7 @@ def coarse_guess_node(
     w = node_world[i]
     if world_active[w] == 0:
         return
-    d = aggregate_part(coef, w, node_aggregate[i], free[i])
+    d = aggregate_part(coef, w, node_aggregate[i], lever[i], free[i])
     dx[i] = dx[i] + d
     guess[i] = d
 
@@ -450,12 +428,13 @@ def coarse_guess(
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     coef: wp.array2d(dtype=float),
     dx: wp.array(dtype=wp.vec3),
     guess: wp.array(dtype=wp.vec3),
 ):
     """dx += T coef; guess = T coef (the direction whose A-product ``coarse_start_cg`` subtracts)."""
-    coarse_guess_node(wp.tid(), free, node_world, node_aggregate, world_active, coef, dx, guess)
+    coarse_guess_node(wp.tid(), free, node_world, node_aggregate, world_active, lever, coef, dx, guess)
 
 
 @wp.func
@@ -509,13 +488,14 @@ def coarse_reduce_node(
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     rhs: wp.array2d(dtype=float),
 ):
     """Row ``i`` of ``coarse_reduce``."""
     w = node_world[i]
     if world_active[w] == 0:
         return
-    add_rhs(rhs, w, node_aggregate[i], r[i])
+    add_rhs(rhs, w, node_aggregate[i], lever[i], r[i])
 
 
 @wp.kernel
@@ -524,10 +504,11 @@ def coarse_reduce(
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     rhs: wp.array2d(dtype=float),
 ):
     """rhs += T^T r (r masked)."""
-    coarse_reduce_node(wp.tid(), r, node_world, node_aggregate, world_active, rhs)
+    coarse_reduce_node(wp.tid(), r, node_world, node_aggregate, world_active, lever, rhs)
 
 
 @wp.func
@@ -564,6 +545,7 @@ def coarse_correct_node(
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     coef: wp.array2d(dtype=float),
     dx: wp.array(dtype=wp.vec3),
 ):
@@ -571,7 +553,7 @@ def coarse_correct_node(
     w = node_world[i]
     if world_active[w] == 0:
         return
-    dx[i] = dx[i] + aggregate_part(coef, w, node_aggregate[i], free[i])
+    dx[i] = dx[i] + aggregate_part(coef, w, node_aggregate[i], lever[i], free[i])
 
 
 @wp.kernel
@@ -580,8 +562,9 @@ def coarse_correct(
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
     world_active: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     coef: wp.array2d(dtype=float),
     dx: wp.array(dtype=wp.vec3),
 ):
     """dx += T coef."""
-    coarse_correct_node(wp.tid(), free, node_world, node_aggregate, world_active, coef, dx)
+    coarse_correct_node(wp.tid(), free, node_world, node_aggregate, world_active, lever, coef, dx)

@@ -1,5 +1,5 @@
 """Per-world linear solves of the Newton systems: conjugate gradients preconditioned by block
-Jacobi plus a coarse solve on the translations of node aggregates (two-level additive,
+Jacobi plus a coarse solve on the rigid motions of node aggregates (two-level additive,
 ``coarse_space.py``).
 
 Every world runs its own CG (its own alpha, beta and stopping test) inside one set of flat arrays,
@@ -185,6 +185,7 @@ def cg_node_product(
 def update_solution(i: int, p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.vec3),
                     precond: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3),
                     node_world: wp.array(dtype=int), node_aggregate: wp.array(dtype=int),
+                    lever: wp.array(dtype=wp.vec3),
                     cg_active: wp.array(dtype=int), rz: wp.array(dtype=float), p_ap: wp.array(dtype=float),
                     dx: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.vec3), z: wp.array(dtype=wp.vec3),
                     rz_new: wp.array(dtype=float), cg_update: wp.array(dtype=float),
@@ -205,7 +206,7 @@ def update_solution(i: int, p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.ve
     zi = wp.cw_mul(precond[i] * ri, free[i])
     z[i] = zi
     wp.atomic_add(rz_new, w, wp.dot(ri, zi))
-    add_rhs(coarse_rhs, w, node_aggregate[i], ri)
+    add_rhs(coarse_rhs, w, node_aggregate[i], lever[i], ri)
 
 
 @wp.kernel
@@ -216,6 +217,7 @@ def cg_update_solution(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     cg_active: wp.array(dtype=int),
     rz: wp.array(dtype=float),
     p_ap: wp.array(dtype=float),
@@ -232,8 +234,8 @@ def cg_update_solution(
     i = mapped_row(rows, wp.tid())
     if i < 0:
         return
-    update_solution(i, p, ap, precond, free, node_world, node_aggregate, cg_active, rz, p_ap, dx, r, z, rz_new,
-                    cg_update, coarse_rhs)
+    update_solution(i, p, ap, precond, free, node_world, node_aggregate, lever, cg_active, rz, p_ap, dx, r, z,
+                    rz_new, cg_update, coarse_rhs)
 
 
 @wp.func
@@ -307,14 +309,15 @@ def cg_end_iteration(
 
 @wp.func
 def update_direction(i: int, free: wp.array(dtype=wp.vec3), node_world: wp.array(dtype=int),
-                     node_aggregate: wp.array(dtype=int), cg_active: wp.array(dtype=int),
+                     node_aggregate: wp.array(dtype=int), lever: wp.array(dtype=wp.vec3),
+                     cg_active: wp.array(dtype=int),
                      coarse_coef: wp.array2d(dtype=float), beta: wp.array(dtype=float),
                      z: wp.array(dtype=wp.vec3), p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.vec3)):
     """z_i += (T coef)_i, p_i = z_i + beta p_i, ap_i = 0 (node ``i``, if its world still iterates)."""
     w = node_world[i]
     if cg_active[w] == 0:
         return
-    zi = z[i] + aggregate_part(coarse_coef, w, node_aggregate[i], free[i])
+    zi = z[i] + aggregate_part(coarse_coef, w, node_aggregate[i], lever[i], free[i])
     z[i] = zi
     p[i] = zi + beta[w] * p[i]
     ap[i] = wp.vec3(0.0)
@@ -325,6 +328,7 @@ def cg_update_direction(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     cg_active: wp.array(dtype=int),
     coarse_coef: wp.array2d(dtype=float),
     beta: wp.array(dtype=float),
@@ -338,4 +342,4 @@ def cg_update_direction(
     i = mapped_row(rows, wp.tid())
     if i < 0:
         return
-    update_direction(i, free, node_world, node_aggregate, cg_active, coarse_coef, beta, z, p, ap)
+    update_direction(i, free, node_world, node_aggregate, lever, cg_active, coarse_coef, beta, z, p, ap)

@@ -5,6 +5,7 @@ matrix T^T H T."""
 
 import warp as wp
 
+from .coarse_space import add_block, coarse_pair, node_lever
 from .world_rows import RowMap, mapped_row
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
@@ -70,6 +71,8 @@ def coarse_assemble_edge_point(
     point_block: wp.array(dtype=wp.mat33),
     free: wp.array(dtype=wp.vec3),
     node_aggregate: wp.array(dtype=int),
+    x: wp.array(dtype=wp.vec3),
+    anchor: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
 ):
     """Row ``slot`` of ``coarse_assemble_edge_points``."""
@@ -83,13 +86,13 @@ def coarse_assemble_edge_point(
     ids = triangles[t]
     bary = point_bary[slot]
     for j in range(3):
-        aj = node_aggregate[ids[j]]
+        nj = ids[j]
+        lj = node_lever(nj, x, anchor)
         for k in range(3):
-            part = (bary[j] * bary[k]) * (wp.diag(free[ids[j]]) * block * wp.diag(free[ids[k]]))
-            ak = node_aggregate[ids[k]]
-            for r in range(3):
-                for c in range(3):
-                    wp.atomic_add(matrix, w, 3 * aj + r, 3 * ak + c, wp.float64(part[r, c]))
+            nk = ids[k]
+            part = wp.mat33d((bary[j] * bary[k]) * block)
+            tt, tr, rt, rr = coarse_pair(free[nj], lj, part, free[nk], node_lever(nk, x, anchor))
+            add_block(matrix, w, node_aggregate[nj], node_aggregate[nk], tt, tr, rt, rr)
 
 
 @wp.kernel
@@ -102,9 +105,12 @@ def coarse_assemble_edge_points(
     point_block: wp.array(dtype=wp.mat33),
     free: wp.array(dtype=wp.vec3),
     node_aggregate: wp.array(dtype=int),
+    x: wp.array(dtype=wp.vec3),
+    anchor: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
 ):
     """E += T^T H T for the edge points' Hessians (``edge_point_product``): block
-    w_j w_k F_j B F_k between the aggregates of nodes j and k (F: diagonal of free axes)."""
+    T_j^T (w_j w_k B) T_k between the aggregates of nodes j and k (``coarse_space.coarse_pair``: the
+    rigid motions of their aggregates, levers at the iterate ``x``; E's lower triangle)."""
     coarse_assemble_edge_point(wp.tid(), triangles, world_active, points_per_world, point_tri, point_bary,
-                               point_block, free, node_aggregate, matrix)
+                               point_block, free, node_aggregate, x, anchor, matrix)

@@ -14,8 +14,8 @@ the world's alpha and beta are read after it). A world computes its rows in the 
 way, so with one thread per world (the CPU, which runs a launch's threads one after another) the
 results are bit-identical to the phase-by-phase CG's; on a GPU the float atomics' order differs, as
 it does between any two GPU runs. The coarse part of the preconditioner (z's T E^-1 T^T r) is a
-dense product of the world's coarse inverse with T^T r: up to 24 x 24 (the rope's 8 aggregates),
-computed a row per thread where it is larger than one aggregate's 3 x 3 (``LANE_COARSE_SIZE``).
+dense product of the world's coarse inverse with T^T r (48 x 48 for 8 aggregates), computed a row per
+thread (``coarse_space.coarse_row``, then ``coarse_gain`` on thread 0).
 
 The barrier (``block_sync.py``) is reached by every thread of a block: the iteration loop's bound
 and its exit read the world's flag after a barrier, the same value for all of the block's threads,
@@ -31,8 +31,8 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .block_sync import block_barrier
-from .coarse_space import LANE_COARSE_SIZE, coarse_gain, coarse_row
-from .linear_solve import end_iteration, finish_iteration, node_product, update_direction, update_solution
+from .coarse_space import coarse_gain, coarse_row
+from .linear_solve import finish_iteration, node_product, update_direction, update_solution
 from .pad_edge_hessian import edge_point_slot_product
 
 
@@ -58,6 +58,7 @@ def cg_world_blocks(
     free: wp.array(dtype=wp.vec3),
     node_world: wp.array(dtype=int),
     node_aggregate: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     precond: wp.array(dtype=wp.mat33),
     inv_dt2: float,
     # per world
@@ -105,25 +106,19 @@ def cg_world_blocks(
                          hessian_values, ap, p_ap)
         block_barrier()
         for i in range(n0 + lane, n1, threads):
-            update_solution(i, p, ap, precond, free, node_world, node_aggregate, cg_active, rz, p_ap, dx, r, z,
-                            rz_new, cg_update, coarse_rhs)
+            update_solution(i, p, ap, precond, free, node_world, node_aggregate, lever, cg_active, rz, p_ap, dx, r,
+                            z, rz_new, cg_update, coarse_rhs)
         block_barrier()
         size = coarse_sizes[w]
-        if size > LANE_COARSE_SIZE:  # the same for every thread of the block: the barrier is reached by all
-            for i in range(lane, size, threads):
-                coarse_row(w, i, size, coarse_inverse, coarse_rhs, coarse_coef, coarse_terms)
-            block_barrier()
-            if lane == 0:
-                finish_iteration(w, coarse_gain(w, size, coarse_rhs, coarse_terms), rz_stop, update_tol,
-                                 max_iterations, rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total,
-                                 cg_active, cg_update)
-        elif lane == 0:
-            end_iteration(w, rz_stop, update_tol, max_iterations, coarse_sizes, coarse_inverse, coarse_rhs,
-                          coarse_coef, rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total, cg_active,
-                          cg_update)
+        for i in range(lane, size, threads):
+            coarse_row(w, i, size, coarse_inverse, coarse_rhs, coarse_coef, coarse_terms)
+        block_barrier()
+        if lane == 0:
+            finish_iteration(w, coarse_gain(w, size, coarse_rhs, coarse_terms), rz_stop, update_tol, max_iterations,
+                             rz, rz_new, p_ap, beta, cg_iterations, cg_iterations_total, cg_active, cg_update)
         block_barrier()
         if cg_active[w] == 0:
             break
         for i in range(n0 + lane, n1, threads):
-            update_direction(i, free, node_world, node_aggregate, cg_active, coarse_coef, beta, z, p, ap)
+            update_direction(i, free, node_world, node_aggregate, lever, cg_active, coarse_coef, beta, z, p, ap)
         block_barrier()

@@ -10,10 +10,9 @@ coarse space's assembly, factor and initial guess with its Hessian product,
 ``coarse_space.coarse_start_cg``, ``linear_solve.start_cg_worlds``); one
 world on a GPU pays a launch's latency for each. ``evaluate_world_blocks`` calls the same row
 functions in the same order per world: bit-identical on the CPU (one thread per world). The coarse
-factor of a slender object (more unknowns than ``LANE_COARSE_SIZE``) is spread over the block's
-threads entry by entry (``coarse_space.coarse_factor_block``); a compact object's 3 x 3 stays on
-thread 0. A world
-not iterating Newton only has its CG flag cleared (the phase kernels also cleared its CG vectors,
+factor (48 x 48 for 8 aggregates) is spread over the block's threads entry by entry
+(``coarse_space.coarse_factor_block``: the bits of the phase kernel's one thread). A world not
+iterating Newton only has its CG flag cleared (the phase kernels also cleared its CG vectors,
 its CG stopping value and its line-search start energy, which nothing reads before its next solve
 sets them again).
 """
@@ -25,8 +24,7 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .block_sync import block_barrier
-from .coarse_space import (LANE_COARSE_SIZE, coarse_assemble_node, coarse_assemble_tet, coarse_factor_block,
-                           coarse_factor_world, coarse_guess_node, coarse_start_cg_node)
+from .coarse_space import coarse_assemble_node, coarse_factor_block, coarse_guess_node, coarse_start_cg_node
 from .contact import evaluate_node
 from .elastic import evaluate_tet
 from .hessian_blocks import assemble_hessian_row
@@ -116,6 +114,8 @@ def evaluate_world_blocks(
     rz: wp.array(dtype=float),
     residual_norm: wp.array(dtype=float),
     node_aggregate: wp.array(dtype=int),
+    node_anchor: wp.array(dtype=int),
+    coarse_lever: wp.array(dtype=wp.vec3),
     inv_dt2: float,
     coarse_sizes: wp.array(dtype=int),
     coarse_matrix: wp.array3d(dtype=wp.float64),
@@ -175,24 +175,18 @@ def evaluate_world_blocks(
                              rest_volume, tet_mu, tet_lambda, tet_cof, tet_r, tet_twist, hessian_values)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
-        coarse_assemble_node(i, mass, contact_hessian, free, node_world, node_aggregate, active, inv_dt2, residual,
-                             coarse_matrix, coarse_rhs)
-    for t in range(t0 + lane, t1, threads):
-        coarse_assemble_tet(t, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_cof, tet_r, tet_twist, tet_world,
-                            active, free, node_aggregate, coarse_matrix)
+        coarse_assemble_node(i, x, node_anchor, mass, contact_hessian, free, node_world, node_aggregate, active,
+                             inv_dt2, node_blocks, block_node, hessian_values, residual, coarse_lever, coarse_matrix,
+                             coarse_rhs)
     for e in range(e0 + lane, e1, threads):
         coarse_assemble_edge_point(e, triangles, active, points_per_world, point_tri, point_bary, point_block, free,
-                                   node_aggregate, coarse_matrix)
+                                   node_aggregate, x, node_anchor, coarse_matrix)
     block_barrier()
-    if coarse_sizes[w] > LANE_COARSE_SIZE:  # the same for every thread of the block: all reach its barriers
-        coarse_factor_block(w, lane, threads, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
-                            coarse_coef, coarse_factored, rz)
-    elif lane == 0:
-        coarse_factor_world(w, active, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
-                            coarse_coef, rz)
+    coarse_factor_block(w, lane, threads, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
+                        coarse_coef, coarse_factored, rz)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
-        coarse_guess_node(i, free, node_world, node_aggregate, active, coarse_coef, dx, coarse_guess)
+        coarse_guess_node(i, free, node_world, node_aggregate, active, coarse_lever, coarse_coef, dx, coarse_guess)
     block_barrier()
     for e in range(e0 + lane, e1, threads):
         edge_point_slot_product(e, coarse_guess, triangles, active, points_per_world, point_tri, point_bary,

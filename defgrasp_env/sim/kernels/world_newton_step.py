@@ -39,6 +39,7 @@ def newton_step_world_blocks(
     residual: wp.array(dtype=wp.vec3),
     free: wp.array(dtype=wp.vec3),
     node_aggregate: wp.array(dtype=int),
+    lever: wp.array(dtype=wp.vec3),
     coarse_sizes: wp.array(dtype=int),
     coarse_inverse: wp.array3d(dtype=wp.float64),
     coarse_rhs: wp.array2d(dtype=float),
@@ -126,13 +127,13 @@ def newton_step_world_blocks(
     e0 = w * points_per_world
     e1 = e0 + points_per_world
     for i in range(n0 + lane, n1, threads):
-        coarse_reduce_node(i, residual, node_world, node_aggregate, newton_active, coarse_rhs)
+        coarse_reduce_node(i, residual, node_world, node_aggregate, newton_active, lever, coarse_rhs)
     block_barrier()
     if lane == 0:
         coarse_solve_world(w, newton_active, coarse_sizes, coarse_inverse, coarse_rhs, coarse_coef)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
-        coarse_correct_node(i, free, node_world, node_aggregate, newton_active, coarse_coef, dx)
+        coarse_correct_node(i, free, node_world, node_aggregate, newton_active, lever, coarse_coef, dx)
     if max_trials > 0:
         if start_energy_of_nodes != 0:
             for i in range(n0 + lane, n1, threads):
