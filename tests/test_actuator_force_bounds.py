@@ -101,8 +101,10 @@ def test_patient_re_solves_settle_the_limits_decision_not_convergence(monkeypatc
     ``limit_loads.SolveLoads.patient_re_solve``). Independent truth: the actuator bounds (as
     ``test_torus_sweep_pinch``), and the same runs with the rule before 2026-12-07 (every solve
     over the limit re-solved to the Newton tolerance, emulated) keep them too, with more Newton
-    iterations over all solves (retries and patient re-solves counted): measured torus 2,315 ->
-    1,664, cuboid 10,794 -> 5,518 (asserted: at most 0.85x)."""
+    iterations over all solves (retries and patient re-solves counted; asserted: more): measured
+    torus 2,315 -> 1,664, cuboid 10,794 -> 5,518 with the translations of one aggregate as the
+    coarse space; with the rigid motions of 8 (2026-12-07), which converge a stiff object's solves
+    in far fewer iterations, torus 1,844 -> 1,123, cuboid 1,657 -> 1,508."""
     from defgrasp_env.envs import limit_loads
     from defgrasp_env.sim.solver import ImplicitSolver
 
@@ -126,7 +128,7 @@ def test_patient_re_solves_settle_the_limits_decision_not_convergence(monkeypatc
     monkeypatch.setattr(limit_loads, "PATIENT_UPDATE_FRACTION", 0.0)  # to the Newton tolerance
     monkeypatch.setattr(limit_loads.SolveLoads, "certainly_over", lambda self: np.zeros(len(self.load), bool))
     converged = run()
-    assert settled <= 0.85 * converged, (settled, converged)
+    assert settled < converged, (settled, converged)
 
 
 def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical():
@@ -137,9 +139,10 @@ def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical
     with world 0 patient. World 1's result equals, bit for bit, the solve without patience; world 0
     meets the Newton tolerance and reads a pad force far below world 1's unconverged one. With node
     contact alone (``edge_contact=False``): with the pads' edges held out (the default) no substep
-    of this sweep's first steps read kN unconverged, and the case needs one. Asked to stop at an
-    update between the plain solve's and the tolerance (``patient_update``), world 0 stops under
-    it with fewer iterations than to the tolerance; a NaN update is refused."""
+    of this sweep's first steps read kN unconverged, and the case needs one. Asked to stop at half
+    the plain solve's update (``patient_update``; above the tolerance), world 0 stops under it with
+    fewer iterations than to the tolerance (measured 2026-12-07: the plain solve's 4 iterations end
+    at 2.0e-3 m, the next at 2.4e-4 m, the tolerance is met at the 7th); a NaN update is refused."""
     venv = gym.make_vec("DeformablePickup-v0", num_envs=2, object="torus", youngs_modulus=1e7,
                         max_linear_speed=2.0, max_angular_speed=2 * math.pi, init_yaw_noise=0.0,
                         init_position_noise=0.0, edge_contact=False)
@@ -166,7 +169,7 @@ def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical
             if not plain.converged[0] and tip_plain[0].max() > 1000.0:
                 patient = scene.solver.step(scene.state, patient_state, control, h, np.array([True, False]))
                 partial_state = State.from_model(scene.model)
-                middle = math.sqrt(1e-5 * float(plain.last_update[0]))  # between the tolerance and the plain update
+                middle = 0.5 * float(plain.last_update[0])  # half the plain update: above the tolerance
                 partial = scene.solver.step(scene.state, partial_state, control, h, np.array([True, False]),
                                             patient_update=np.array([middle, 1.0]))
                 x_partial = partial_state.positions.numpy().copy()

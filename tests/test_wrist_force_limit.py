@@ -152,9 +152,10 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
     (``Gripper.held_at_limit``, turn or not) in one solve instead of a full-motion try (with a
     patient re-solve where the try may be under the limit converged) and a stopped re-solve.
     Independent truth: the same episode with holding switched off (``HOLD_COSINE`` above 1: every
-    substep tries its motion) gives bit-identical observations and wrist forces with >= 1.4x the
+    substep tries its motion) gives bit-identical observations and wrist forces with >= 1.3x the
     solves (measured 1.5-1.8x; 1.8-1.9x while every try over the limit was re-solved patiently,
-    before 2026-12-07), turning or not: a world at its limit whose try reads over is
+    before 2026-12-07; 1.35x for the stiff sphere, 1.67-1.86x for the others, with the solver's
+    rigid-motion coarse space, whose patient re-solves converge sooner), turning or not: a world at its limit whose try reads over is
     stopped whole (slide, turn and jaw), as the held one is, and one the object still pushes over
     the limit backs off (along the object's push, not turning), as the held one does. While
     pressing, the turning wrist keeps its orientation, and the wrist force stays within the limit's
@@ -196,7 +197,7 @@ def test_sustained_push_is_held_without_retries_and_released_at_once(monkeypatch
         assert len(pressing) >= 10 and np.abs(quats[1] - quats[0]).max() > 1e-3
         assert max(np.abs(quats[t] - quats[t - 1]).max() for t in pressing[1:]) == 0.0
     assert max(r[2] for r in held_rows) > DEFAULT_WRIST_FORCE_LIMIT  # it pressed at the limit
-    assert tried_solves >= 1.4 * held_solves, (held_solves, tried_solves)
+    assert tried_solves >= 1.3 * held_solves, (held_solves, tried_solves)
     heights = [AGENT_POS.get(r[0], "wrist_position")[1] for r in held_rows[31:]]
     np.testing.assert_allclose(np.diff(heights), 0.3 * 0.05, rtol=1e-3)  # lifting at full speed at once
     worst, bound = max(r[2] for r in held_rows), DEFAULT_WRIST_FORCE_LIMIT * (1 + FORCE_TOLERANCE)
