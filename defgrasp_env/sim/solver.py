@@ -2,7 +2,7 @@
 
 Each substep solves  M/h^2 (x - x_start - h v) = f_elastic(x) + f_contact(x) + M g + f_ext  for x by
 Newton's method (projected elastic Hessian, exact contact normal Hessian, lagged friction), each
-Newton system by CG preconditioned by block Jacobi plus a coarse solve on the translations of node
+Newton system by CG preconditioned by block Jacobi plus a coarse solve on the rigid motions of node
 aggregates (kernels/linear_solve.py, kernels/coarse_space.py, sim/aggregates.py), a backtracking
 line search on the incremental potential (kernels/energy.py, kernels/line_search.py), all per world.
 The scratch arrays are a ``SolverScratch``; the launches of each phase of a substep are recorded by
