@@ -352,32 +352,24 @@ def test_edge_point_hessian_product_and_coarse_block_against_the_force_and_the_p
     if friction:  # the blocks, from the documented laws: s n n^T (penalty) + mu f_n f1(s)/s (I - n n^T)
         _expect_point_blocks(model, edges, x, x - shift * np.array([0.6, 0.0, 0.8]), pads)
     # (b) coarse block: 3 aggregates by node id, anchors their first nodes, axis z fixed on every 5th node
-    aggregate = np.arange(n) % 3
-    anchor = np.arange(n) % 3
+    aggregate = anchor = np.arange(n) % 3
     free = np.ones((n, 3), np.float32)
     free[::5, 2] = 0.0
-    size = 6 * 3
-    matrix = wp.zeros((model.num_worlds, size, size), dtype=wp.float64, device="cpu")
-    world = model.node_world.numpy()
+    matrix = wp.zeros((model.num_worlds, 18, 18), dtype=wp.float64, device="cpu")
+    ints = [wp.array(a.astype(np.int32), dtype=int, device="cpu") for a in (aggregate, anchor)]
     wp.launch(kph.coarse_assemble_edge_points, slots,
               [edges.triangles, active, edges.points_per_world, edges.point_tri, edges.point_bary, edges.point_block,
-               wp.array(free, dtype=wp.vec3, device="cpu"),
-               wp.array(aggregate.astype(np.int32), dtype=int, device="cpu"),
-               wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu"),
-               wp.array(anchor.astype(np.int32), dtype=int, device="cpu"), matrix], device="cpu")
-    got = matrix.numpy()[0]
-    lever = x.astype(np.float32).astype(np.float64)
-    lever = lever - lever[anchor]
-    columns = np.zeros((size, n, 3))
-    for a in range(3):
-        mine = (aggregate == a) & (world == 0)
-        for k in range(3):
-            axis = np.eye(3)[k]
-            columns[6 * a + k, mine] = free[mine] * axis
-            columns[6 * a + 3 + k, mine] = free[mine] * np.cross(axis, lever[mine])
+               wp.array(free, dtype=wp.vec3, device="cpu"), ints[0], wp.array(x.astype(np.float32), dtype=wp.vec3,
+                                                                                device="cpu"), ints[1], matrix],
+              device="cpu")
+    got, lever = matrix.numpy()[0], x.astype(np.float32).astype(np.float64)
+    lever, columns = lever - lever[anchor], np.zeros((18, n, 3))
+    for a, k in np.ndindex(3, 3):
+        mine = (aggregate == a) & (model.node_world.numpy() == 0)
+        columns[6 * a + k, mine] = free[mine] * np.eye(3)[k]
+        columns[6 * a + 3 + k, mine] = free[mine] * np.cross(np.eye(3)[k], lever[mine])
     expected = np.einsum("inj,knj->ik", columns, np.stack([product(c) for c in columns]) * free[None])
-    assert np.abs(expected).max() > 0 and np.abs(np.tril(expected, -1)).max() > 0
-    assert np.all(np.triu(got, 1) == 0.0)
+    assert np.abs(np.tril(expected, -1)).max() > 0 and np.all(np.triu(got, 1) == 0.0)
     # scaled by the diagonal (rotation entries are ~lever^2 times the translations'): each entry to 1e-5
     scale = 1.0 / np.sqrt(np.where(np.diag(expected) > 0, np.diag(expected), 1.0))
     np.testing.assert_allclose(scale[:, None] * got * scale, scale[:, None] * np.tril(expected) * scale, rtol=1e-4,
