@@ -101,7 +101,7 @@ def test_patient_re_solves_settle_the_limits_decision_not_convergence(monkeypatc
     ``limit_loads.SolveLoads.patient_re_solve``). Independent truth: the actuator bounds (as
     ``test_torus_sweep_pinch``), and the same runs with the rule before 2026-12-07 (every solve
     over the limit re-solved to the Newton tolerance, emulated) keep them too, with more Newton
-    iterations over all solves (retries and patient re-solves counted; asserted: more): measured
+    iterations over all solves (retries and patient re-solves counted; asserted: at least 1/0.95 x): measured
     torus 2,315 -> 1,664, cuboid 10,794 -> 5,518 with the translations of one aggregate as the
     coarse space; with the rigid motions of 8 (2026-12-07), which converge a stiff object's solves
     in far fewer iterations, torus 1,844 -> 1,123, cuboid 1,657 -> 1,508."""
@@ -128,7 +128,7 @@ def test_patient_re_solves_settle_the_limits_decision_not_convergence(monkeypatc
     monkeypatch.setattr(limit_loads, "PATIENT_UPDATE_FRACTION", 0.0)  # to the Newton tolerance
     monkeypatch.setattr(limit_loads.SolveLoads, "certainly_over", lambda self: np.zeros(len(self.load), bool))
     converged = run()
-    assert settled < converged, (settled, converged)
+    assert settled <= 0.95 * converged, (settled, converged)
 
 
 def test_patient_iterations_converge_one_world_and_leave_the_other_bit_identical():

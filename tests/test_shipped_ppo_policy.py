@@ -3,12 +3,14 @@ run from scratch on goals drawn per episode; ``ppo_cuboid_scratch_hold_e1e6``: t
 on with successes that do not end the episode and staggered worlds; benchmarks/RESULTS.md
 2026-11-27) drive ``gym.make`` as plain policy objects (``PPOPolicy.from_run``) at the task's goal:
 each picks the cuboid on seeds whose episodes its recorded CPU evaluation counted as successes, at
-the same steps (the CPU is bit-deterministic, and a world of the vector env equals the single env
-on its seed). A change of the simulation that alters these episodes fails here: re-evaluate the
+the same steps (the CPU is bit-deterministic on one kind of CPU; a world of the vector env that
+recorded the evaluation repeats the single env's episode on these seeds, though not on every seed:
+``test_demo``). A change of the simulation that alters these episodes fails here: re-evaluate the
 policy (``benchmarks/eval_ppo.py``) and update the recorded evaluation. Last re-evaluated for the
 solver's rigid-motion coarse space (2026-12-07, ``..._cpu_rigid_coarse.json``; the earlier JSONs
-are the record of the earlier solver): scratch 50 -> 47 / 64, hold 64 -> 62 / 64; seed 1000000005
-of the scratch policy no longer picks, 1000000007 does."""
+are the record of the earlier solver): scratch 50 -> 47 / 64, hold 60 -> 62 / 64 (the solver
+before, re-evaluated on the same AMD EPYC: ``..._cpu_2026-12-07.json``); seed 1000000005 of the
+scratch policy no longer picks, 1000000007 does."""
 
 import json
 import pathlib

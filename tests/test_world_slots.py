@@ -105,11 +105,12 @@ def test_a_model_rewritten_in_place_equals_one_assembled_afresh():
                            model.contact, "cpu", scene.slots)
     for name, value in _arrays(fresh).items():
         assert np.array_equal(getattr(model, name).numpy(), value), name
-    for name in ("node_start", "tet_start", "node_end", "tet_end", "node_aggregate"):
+    for name in ("node_start", "tet_start", "node_end", "tet_end", "node_aggregate", "node_anchor"):
         assert np.array_equal(getattr(model, name), getattr(fresh, name)), name
     assert all(np.array_equal(a, b) for a, b in zip(model.surfaces, fresh.surfaces))
     fresh_solver = PickupScene(config, list(setups), slotted=True).solver.scratch
     assert np.array_equal(scratch.node_aggregate.numpy(), fresh_solver.node_aggregate.numpy())
+    assert np.array_equal(scratch.node_anchor.numpy(), fresh_solver.node_anchor.numpy())
     assert np.array_equal(scratch.coarse_sizes.numpy(), fresh_solver.coarse_sizes.numpy())
     assert np.array_equal(scratch.tet_end.numpy(), fresh_solver.tet_end.numpy())
     assert np.array_equal(scratch.edges.triangles.numpy(), fresh_solver.edges.triangles.numpy())

@@ -77,11 +77,11 @@ class EdgeContactScratch:
 
 def world_coarse_sizes(model: Model, node_aggregate: np.ndarray) -> np.ndarray:
     """[W] int32: 6 x (the largest aggregate index of each world's nodes + 1), the unknowns of its
-    coarse solve. A batch's coarse arrays are as wide as its most aggregates (a rope: 8, a compact
-    object: 1); the rows beyond a world's own are empty (no node, no right-hand side), so its
-    solve over its own rows alone gives the same coefficients, bit for bit on the CPU, without the
-    dense factor and products of the others (one thread's serial float64 work per Newton and CG
-    iteration: a cuboid beside a rope factored 48 x 48 where 6 x 6 is its own)."""
+    coarse solve. A batch's coarse arrays are as wide as its most aggregates (8 for every object of
+    more than a few nodes; a single tet's 4 nodes name pieces 0-6); the rows beyond a world's own
+    are empty (no node, no right-hand side), so its solve over its own rows alone gives the same
+    coefficients, bit for bit on the CPU, without the dense factor and products of the rows it
+    does not use."""
     starts = np.asarray(model.node_start[:-1], dtype=np.int64)  # every world has nodes
     return (AGGREGATE_UNKNOWNS * (np.maximum.reduceat(np.asarray(node_aggregate), starts) + 1)).astype(np.int32)
 

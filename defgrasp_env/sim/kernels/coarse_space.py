@@ -14,8 +14,9 @@ the Cholesky factor reads) is assembled node row by node row: the node terms T_i
 block) T_i, and the elastic Hessian's assembled rows (``hessian_blocks.py``: (K p)_i = sum over
 j != i of K_ij (p_j - p_i)) as T_i^T K_ij T_j into E[a(i), a(j)] and -T_i^T K_ij T_i into
 E[a(i), a(i)]; within one aggregate, with every axis free, the two together are T_i^T K_ij (T_j - T_i),
-whose translation parts vanish exactly (a translation strains nothing) and whose rotation part is
--[l_i]x K_ij [x_j - x_i]x. The pad edge points add T_j^T (w_j w_k B) T_k
+whose lower parts are exactly 0 in the translation rows and -[l_i]x K_ij [x_j - x_i]x in the
+rotation-rotation block (its translation-rotation part, -K_ij [x_j - x_i]x, lies in the upper
+triangle, which is not stored; summed over the object it is 0, as K annihilates translations). The pad edge points add T_j^T (w_j w_k B) T_k
 (``pad_edge_hessian.py``). E is Cholesky-factored and inverted per world.
 It is used (a) before CG: dx0 = T E^-1 T^T r, residual r - A dx0, (b) inside CG: the two-level
 additive preconditioner z = P r + T E^-1 T^T r (P block Jacobi; SPD, so CG stays CG), and (c) after
@@ -347,8 +348,9 @@ def coarse_factor_block(
     computed by the same function in the same order of operations as there, so the same bits.
     Per factor column, thread 0 takes the pivot and
     the threads the entries below it (``factored[w]``: 1 while every pivot so far was positive);
-    L^-1 a column per thread, E^-1 an entry per thread, ``coef`` a row per thread. A slender
-    object's 24 unknowns on one thread were a serial chain of ~7,800 float64 multiply-adds (48 now)."""
+    L^-1 a column per thread, E^-1 an entry per thread, ``coef`` a row per thread (a rope's 24
+    unknowns of the translation coarse space on one thread were a serial chain of ~7,800 float64
+    multiply-adds; 48 now)."""
     size = sizes[w]
     for j in range(lane, size, threads):
         fix_coarse_diagonal(w, j, matrix)

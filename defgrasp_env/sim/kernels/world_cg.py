@@ -9,8 +9,9 @@ iterations in one launch: block ``w`` (``threads`` threads: a CUDA thread block,
 ``block_dim = threads``) strides over world ``w``'s pad edge slots and nodes, calling the same
 row functions as the phase kernels (``pad_edge_hessian.edge_point_slot_product``,
 ``linear_solve.node_product`` with the assembled elastic Hessian's rows, ``update_solution``,
-``end_iteration``, ``update_direction``), with ``block_barrier`` between the phases (their sums and
-the world's alpha and beta are read after it). A world computes its rows in the same order either
+``finish_iteration`` after ``coarse_space.coarse_row`` / ``coarse_gain``, ``update_direction``),
+with ``block_barrier`` between the phases (their sums and the world's alpha and beta are read after
+it). A world computes its rows in the same order either
 way, so with one thread per world (the CPU, which runs a launch's threads one after another) the
 results are bit-identical to the phase-by-phase CG's; on a GPU the float atomics' order differs, as
 it does between any two GPU runs. The coarse part of the preconditioner (z's T E^-1 T^T r) is a
@@ -85,7 +86,7 @@ def cg_world_blocks(
     z: wp.array(dtype=wp.vec3),
 ):
     """CG iterations of world ``tid // threads`` (thread ``tid % threads`` of its block) until its
-    stopping test (``linear_solve.end_iteration``) or ``max_iterations``; a world not iterating CG
+    stopping test (``linear_solve.finish_iteration``) or ``max_iterations``; a world not iterating CG
     returns at once."""
     tid = wp.tid()
     w = tid // threads
