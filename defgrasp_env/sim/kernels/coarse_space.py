@@ -16,8 +16,8 @@ j != i of K_ij (p_j - p_i)) as T_i^T K_ij T_j into E[a(i), a(j)] and -T_i^T K_ij
 E[a(i), a(i)]; within one aggregate, with every axis free, the two together are T_i^T K_ij (T_j - T_i),
 whose lower parts are exactly 0 in the translation rows and -[l_i]x K_ij [x_j - x_i]x in the
 rotation-rotation block (its translation-rotation part, -K_ij [x_j - x_i]x, lies in the upper
-triangle, which is not stored; summed over the object it is 0, as K annihilates translations). The pad edge points add T_j^T (w_j w_k B) T_k
-(``pad_edge_hessian.py``). E is Cholesky-factored and inverted per world.
+triangle, which is not stored; summed over the object it is 0, as K annihilates translations).
+The pad edge points add T_j^T (w_j w_k B) T_k (``pad_edge_hessian.py``). E is Cholesky-factored and inverted per world.
 It is used (a) before CG: dx0 = T E^-1 T^T r, residual r - A dx0, (b) inside CG: the two-level
 additive preconditioner z = P r + T E^-1 T^T r (P block Jacobi; SPD, so CG stays CG), and (c) after
 CG: dx += T E^-1 T^T r (the best A-norm correction in the coarse space). T^T r is each aggregate's
