@@ -7,7 +7,7 @@ bisection of its rest nodes at the median along the principal axis of each piece
 object (a rope) into 8 slices along its length, where block-Jacobi CG is slowest (a correction takes
 ~ its length in elements of iterations to cross it), a compact one into octant-like blocks, whose
 rigid motions carry a stiff object's near-rigid deformation. Measured on the expert's episodes
-(100 steps, E = 1e4 and 1e7, this project's 2-core Xeon, 2026-12-07; CG iterations summed): with the
+(100 steps, E = 1e4 and 1e7, this project's 2-core AMD EPYC, 2026-12-07; CG iterations summed): with the
 rigid motions of 8 pieces against the translations of one (compact) or of 8 slices (the rope)
 before: stiff cuboid 7,594 -> 3,968, stiff torus 13,525 -> 6,976, soft torus 26,409 -> 19,531,
 rope 31,457 -> 26,331 (E = 1e4) and 13,968 -> 12,140 (1e7); 4 pieces of a compact object saved

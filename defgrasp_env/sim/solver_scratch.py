@@ -233,9 +233,10 @@ class SolverScratch:
         return scratch
 
     def rewrite_worlds(self, model: Model, worlds) -> None:
-        """The rows of ``worlds`` that this scratch copies from ``model`` (coarse aggregates, surface
-        triangles, the objects' last tets, the Hessian's pattern), written again after ``model``'s rows of them changed in
-        place (a slotted model's object change, ``envs.world_models.rewrite_worlds``)."""
+        """The rows of ``worlds`` that this scratch copies from ``model`` (coarse aggregates and their
+        anchors, surface triangles, the objects' last tets, the Hessian's pattern), written again after
+        ``model``'s rows of them changed in place (a slotted model's object change,
+        ``envs.world_models.rewrite_worlds``)."""
         worlds = [int(w) for w in worlds]
         if not worlds:
             return
@@ -247,12 +248,10 @@ class SolverScratch:
         d = model.device
         self.tet_end.assign(np.asarray(model.tet_end, dtype=np.int32))
         self.coarse_sizes.assign(world_coarse_sizes(model, model.node_aggregate))
-        wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(aggregates, dtype=int, device=d),
-                                                    wp.array(rows.astype(np.int32), dtype=int, device=d)],
-                  outputs=[self.node_aggregate], device=d)
-        wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(global_anchors(model, rows), dtype=int, device=d),
-                                                    wp.array(rows.astype(np.int32), dtype=int, device=d)],
-                  outputs=[self.node_anchor], device=d)
+        index = wp.array(rows.astype(np.int32), dtype=int, device=d)
+        for values, target in ((aggregates, self.node_aggregate), (global_anchors(model, rows), self.node_anchor)):
+            wp.launch(scatter_rows, dim=len(rows), inputs=[wp.array(values, dtype=int, device=d), index],
+                      outputs=[target], device=d)
         self.hessian.rewrite_worlds(model, worlds)
         e = self.edges
         if e.triangles.shape[0]:

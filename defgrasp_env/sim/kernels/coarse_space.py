@@ -17,7 +17,8 @@ E[a(i), a(i)]; within one aggregate, with every axis free, the two together are 
 whose lower parts are exactly 0 in the translation rows and -[l_i]x K_ij [x_j - x_i]x in the
 rotation-rotation block (its translation-rotation part, -K_ij [x_j - x_i]x, lies in the upper
 triangle, which is not stored; summed over the object it is 0, as K annihilates translations).
-The pad edge points add T_j^T (w_j w_k B) T_k (``pad_edge_hessian.py``). E is Cholesky-factored and inverted per world.
+The pad edge points add T_j^T (w_j w_k B) T_k (``pad_edge_hessian.py``). E is Cholesky-factored and
+inverted per world.
 It is used (a) before CG: dx0 = T E^-1 T^T r, residual r - A dx0, (b) inside CG: the two-level
 additive preconditioner z = P r + T E^-1 T^T r (P block Jacobi; SPD, so CG stays CG), and (c) after
 CG: dx += T E^-1 T^T r (the best A-norm correction in the coarse space). T^T r is each aggregate's
@@ -114,9 +115,9 @@ def coarse_gain(w: int, size: int, rhs: wp.array2d(dtype=float), terms: wp.array
     return float(g_c)
 
 
-
 @wp.func
 def all_free(f: wp.vec3):
+    """Whether a node's three axes are free (``f``: its free-axes mask)."""
     return f[0] + f[1] + f[2] == 3.0
 
 
@@ -182,6 +183,7 @@ def coarse_assemble_node(
     tt, tr, rt, rr = coarse_pair(fi, li, wp.mat33d(d), fi, li)
     bend = wp.mat33d(0.0)  # sum of K_ij [x_j - x_i]x over the all-free neighbours in aggregate a
     own = wp.mat33d(0.0)   # sum of K_ij over the others: -T_i^T K_ij T_i
+    others = int(0)
     free_row = all_free(fi)
     span = node_blocks[i]
     for k in range(span[0], span[1]):
@@ -193,6 +195,7 @@ def coarse_assemble_node(
             bend += kij * wp.skew(wp.vec3d(x[j] - x[i]))
         else:
             own += kij
+            others = 1
             ptt, ptr, prt, prr = coarse_pair(fi, li, kij, fj, node_lever(j, x, anchor))
             if aj == a:
                 tt += ptt
@@ -201,9 +204,13 @@ def coarse_assemble_node(
                 rr += prr
             else:
                 add_block(matrix, w, a, aj, ptt, ptr, prt, prr)
-    ott, otr, ort, orr = coarse_pair(fi, li, own, fi, li)
-    rr = rr - orr - wp.skew(wp.vec3d(li)) * bend
-    add_block(matrix, w, a, a, tt - ott, tr - otr, rt - ort, rr)
+    if others != 0:  # most nodes have none: a rope's interior, any node of a free object's piece
+        ott, otr, ort, orr = coarse_pair(fi, li, own, fi, li)
+        tt -= ott
+        tr -= otr
+        rt -= ort
+        rr -= orr
+    add_block(matrix, w, a, a, tt, tr, rt, rr - wp.skew(wp.vec3d(li)) * bend)
     add_rhs(rhs, w, a, li, r[i])
 
 
