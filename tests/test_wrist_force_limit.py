@@ -69,6 +69,28 @@ def test_stiff_contact_is_stopped_at_the_limit(stiffness):
     np.testing.assert_array_equal(calls[-1], scale)
 
 
+def test_a_worlds_search_does_not_depend_on_the_batch():
+    """A world's bracketing is its own: world 0 (a spring whose first trial reads well under the
+    limit) tries the same fractions and accepts the same scale alone as beside world 1, a stiffer,
+    nearer spring whose first trial reads over the limit (the retries go on for it). Before, the
+    retries' early end on "every world's trial accepted" ended world 0's search at its first trial
+    alone but refined it on in the batch: another episode per batch size."""
+    def run(gap, stiffness):
+        calls = []
+        solve = spring_contact(np.array(gap), np.array(stiffness), np.full(len(gap), 0.01), calls)
+        force, load, scale = limited_substep(solve, np.zeros(len(gap)))
+        return np.array(calls), load, scale
+
+    def distinct(fractions):  # a world whose fraction is unchanged is not re-solved (the scene's solve)
+        return fractions[np.r_[True, fractions[1:] != fractions[:-1]]]
+
+    calls_alone, load_alone, scale_alone = run([0.004], [1e5])
+    calls_batch, load_batch, scale_batch = run([0.004, 0.0005], [1e5, 1e6])
+    assert len(calls_batch) > len(calls_alone)  # world 1 searched on after world 0's first trial
+    assert scale_batch[0] == scale_alone[0] and load_batch[0] == load_alone[0]
+    np.testing.assert_array_equal(distinct(calls_batch[:, 0]), calls_alone[:, 0])
+
+
 def test_a_stopped_wrist_still_over_the_limit_backs_off_to_it():
     """Worlds stopped at the limit whose stop still reads over it (the object pushes back): world 0
     a spring that relaxes as the wrist backs off (force = preload + k x scale x travel, also for

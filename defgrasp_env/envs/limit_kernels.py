@@ -304,17 +304,20 @@ def limit_update(loads: wp.array(dtype=solve_load_row), tolerance: wp.float64, s
 @wp.kernel
 def retry_gate(retries: int, gate: wp.array(dtype=wp.int32), retry: wp.array(dtype=wp.int32),
                final: wp.array(dtype=wp.int32)):
-    """After a retry's update: accepted as is where every world's trial is its scale (no final
-    solve; nor after a non-finite solve: the host raises); else retry again while fewer than
-    ``retries`` ran and a world searches."""
+    """After a retry's update: retry again while fewer than ``retries`` ran and a world searches
+    (``_bracket``: a world's search ends by its own test only, never because every world's trial
+    was accepted); then accepted as is where every world's trial is its scale (no final solve; nor
+    after a non-finite solve: the host raises)."""
     gate[GATE_RETRIES] = gate[GATE_RETRIES] + 1
-    if gate[GATE_UNEQUAL] == 0 or gate[GATE_NONFINITE] != 0:
+    if gate[GATE_NONFINITE] != 0:
         final[0] = 0
         retry[0] = 0
     elif gate[GATE_RETRIES] < retries and gate[GATE_SEARCHING] > 0:
         retry[0] = 1
     else:
         retry[0] = 0
+        if gate[GATE_UNEQUAL] == 0:
+            final[0] = 0
     gate[GATE_UNEQUAL] = 0
     gate[GATE_SEARCHING] = 0
 

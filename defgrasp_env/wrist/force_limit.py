@@ -157,6 +157,7 @@ def _bracket(solve, result, load, scale: np.ndarray, bracket: tuple, searching: 
     lo, f_lo, hi, f_hi = (np.array(a, dtype=np.float64) for a in bracket)
     searching = searching.copy()
     side = np.zeros_like(scale)  # Illinois: halve the stale end's excess after two moves of one side
+    trial = None
     for _ in range(retries):
         if not searching.any():
             break
@@ -172,6 +173,9 @@ def _bracket(solve, result, load, scale: np.ndarray, bracket: tuple, searching: 
         side = np.where(low, -1.0, np.where(high, 1.0, side))
         scale[:] = np.where(low, trial, scale)
         searching &= ~done
-        if np.array_equal(trial, scale):
-            return result, load   # the last solve is the accepted one in every world
+    # only once no world searches (or the retries ran out): ending the retries as soon as every
+    # world's trial was accepted also ended a searching world's refinement (accepted under 1 -
+    # tolerance) where no other world read over, so a world's course depended on the batch
+    if trial is not None and np.array_equal(trial, scale):
+        return result, load   # the last solve is the accepted one in every world
     return solve(scale.copy())
