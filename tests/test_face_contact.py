@@ -165,3 +165,24 @@ def test_the_contact_force_is_minus_the_gradient_of_the_energy_at_a_faces_edge()
                 fd = -(energy(xp) - energy(xm)) / (2 * step)
                 assert abs(fd - residual[i, j]) < 0.01 * np.abs(residual[i]).max() + 0.05, (lag_force, i, j, fd,
                                                                                            residual[i, j])
+
+
+def test_a_point_past_the_opposite_face_keeps_the_full_depth_behind_its_face():
+    """A pad's corner swept across a node (a stiff cylinder in the contact fuzz, 2026-12-07): the node
+    ended 0.6 mm past the face opposite the one it entered through, 0.03 mm inside the side of the
+    box, so its depth measured to that side was 0.03 mm and the solve let it through. Past the
+    opposite face within the face's extent the depth is the full depth behind the face (the box's
+    thickness plus how far past, pushing it back out where it came in), with the face's normal; beside
+    the extent there is no contact, as in front of the face."""
+    past = np.array([[-HALF[0] - 0.0006, HALF[1] - 0.00003, 0.0],   # the fuzz's node: near the +y side
+                     [-HALF[0] - 0.002, 0.0, HALF[2] - 0.0001],     # near the +z side
+                     [-HALF[0] - 0.0001, 0.0, 0.0]])                # just past, mid-face
+    depth, normal = contacts(past, (1.0, 0.0, 0.0))
+    np.testing.assert_allclose(depth, HALF[0] - past[:, 0], atol=2e-8)
+    assert (normal == [1.0, 0.0, 0.0]).all()
+    inside = past.copy()  # the same points 0.5 mm inside the opposite face: the side rule holds
+    inside[:, 0] = -HALF[0] + 0.0005
+    depth, normal = contacts(inside, (1.0, 0.0, 0.0))
+    np.testing.assert_allclose(depth[:2], [0.00003, 0.0001], atol=2e-8)
+    beside = past + [0.0, 0.001, 0.0]  # the first is then beside the extent
+    assert contacts(beside[:1], (1.0, 0.0, 0.0))[0][0] <= 0.0

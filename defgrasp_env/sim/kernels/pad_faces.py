@@ -4,7 +4,8 @@ substep, and the node's depth behind that face.
 Each node meets each box through one face per substep, chosen at the substep start by continuous
 collision detection of the node's motion relative to the box (``contact_face``); the penalty then
 pushes the node out through that face, or through a side face of that face's extent where the node
-is nearer to it, never through the opposite face (``face_contact``), so a box that moves further
+is nearer to it (while it is not past the opposite face), never through the opposite face
+(``face_contact``), so a box that moves further
 than its half thickness in a substep cannot push nodes out of its far side (the nearest face of a
 deep node is the wrong one), and the depth is continuous where a node slides past the face's edge
 (it jumped from 0 to the full depth there until 2026-12-07, which stalled Newton in violent
@@ -93,13 +94,18 @@ def face_contact(local: wp.vec3, half: wp.vec3, n: wp.vec3):
     box axis): its depth behind that face (however deep, never through the opposite one), or its
     distance to a side face of that face's lateral extent where smaller (then that side's normal),
     so that the depth falls to 0 at the lateral edge of the face instead of jumping from 0 to the
-    full depth there; depth <= 0: no contact (in front of the face or beside its extent). The
+    full depth there; depth <= 0: no contact (in front of the face or beside its extent). A point
+    past the opposite face (gone through the box within the face's extent) keeps the full depth
+    behind the face: measured to a side it was ~0 near the box's corners, and a pad's corner swept
+    across a node let it through (a stiff cylinder in the contact fuzz, 2026-12-07). The
     normal is minus the depth's gradient: the contact force is ``penalty_force(depth)`` along it,
     its Hessian ``penalty_stiffness(depth)`` times its outer product (``evaluate_node``)."""
     depth = float(-1.0)
+    beyond = False  # past the opposite face: gone through the box
     for j in range(3):
         if n[j] != 0.0:
             depth = half[j] - n[j] * local[j]
+            beyond = depth > 2.0 * half[j]
     normal = n
     if depth > 0.0:
         for j in range(3):
@@ -107,7 +113,7 @@ def face_contact(local: wp.vec3, half: wp.vec3, n: wp.vec3):
                 side = half[j] - wp.abs(local[j])
                 if side <= 0.0:
                     depth = -1.0
-                elif side < depth:
+                elif side < depth and not beyond:
                     depth = side
                     normal = axis_normal(j, wp.sign(local[j]))
     return depth, normal
