@@ -44,6 +44,7 @@ import numpy as np  # noqa: E402
 
 from defgrasp_env.layout import AGENT_POS, ENV_STATE  # noqa: E402
 from defgrasp_env.rl.ppo_policy import run_env_options  # noqa: E402
+from machine import numeric_host  # noqa: E402
 from train_ppo import load_normalisation, make_vec_env, parse_object  # noqa: E402
 
 OUTCOMES = ("success", "at the goal, not held", "grasped, never at the goal", "never grasped")
@@ -88,7 +89,8 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     grasped), ``pressed_steps`` (steps whose force term charged: a wrist force above
     ``envs.task.FORCE_FREE``), ``newton_iterations_median`` and ``_max`` (``info["newton_iterations"]``
     per step: what a batched step waits for is its slowest world's), ``return``) and
-    their summary (``success_rate``, outcome counts).
+    their summary (``success_rate``, outcome counts), and ``host`` (``machine.numeric_host``: where
+    the same code repeats these episodes bit for bit).
 
     ``workers`` > 1 splits the worlds into that many consecutive blocks, each evaluated in its own
     process (seeds and, for a fixed-world-objects run, objects as in one process: a block starts
@@ -117,7 +119,8 @@ def evaluate(run: pathlib.Path, num_worlds: int, seed: int = 10**9, device: str 
     objects = [r["object"] for r in records]
     by_object = {name: {o: sum(r["outcome"] == o for r in records if r["object"] == name) for o in OUTCOMES}
                  for name in dict.fromkeys(objects)}
-    return {"run": str(run), "worlds": num_worlds, "seed": seed, "device": device, "deterministic": deterministic,
+    return {"run": str(run), "host": numeric_host(), "worlds": num_worlds, "seed": seed, "device": device,
+            "deterministic": deterministic,
             "workers": workers, "env": env_options, "fixed_world_objects": fixed,
             "success_rate": counts["success"] / num_worlds, "outcomes": counts, "outcomes_by_object": by_object,
             "success_step_median": float(np.median(success_steps)) if success_steps else None,

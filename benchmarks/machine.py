@@ -32,6 +32,29 @@ def host(unknown: str | None = None, *, cores: str = "CPUs") -> str:
     return f"{cpu_model(unknown)}, {os.cpu_count()} logical {cores}, {platform.system()} {platform.release()}"
 
 
+def numeric_host() -> dict:
+    """What a CPU episode's float results depend on besides the code and the seed: the CPU (model name
+    and a digest of its feature flags: Warp compiles CPU kernels for the host's features, torch and
+    its BLAS pick kernels by them) and the versions of warp, torch and numpy. Two hosts with equal
+    values give the same bits; others may differ in the last bits of a policy's actions or a
+    solve, and a chaotic contact episode then takes other steps (benchmarks/RESULTS.md, 2026-12-08:
+    two AMD EPYCs with different feature flags)."""
+    import hashlib
+
+    import numpy
+    import torch
+    import warp
+
+    flags = ""
+    try:
+        flags = next((line.split(":", 1)[1] for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines()
+                      if line.startswith("flags")), "")
+    except OSError:
+        pass
+    return {"cpu": cpu_model("unknown"), "cpu_flags": hashlib.sha1(" ".join(sorted(flags.split())).encode()).hexdigest()[:12],
+            "warp": warp.config.version, "torch": torch.__version__, "numpy": numpy.__version__}
+
+
 def git_state() -> str:
     """Short commit of the checkout, plus any uncommitted or untracked files in the code folders."""
     try:

@@ -31,13 +31,14 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-def recording_cpu() -> bool:
-    """Whether this host's CPU is of the kind the shipped policies' CPU evaluations were recorded on
-    (an AMD EPYC): Warp compiles its CPU kernels with ``-march=native``, so their float results,
-    and a chaotic contact episode's steps, are bit-identical on one kind of CPU, not across kinds
-    (on a 2-core Intel Xeon, 2026-12-06, the same code took 1-106 more steps or missed 2 of 6)."""
-    try:
-        text = pathlib.Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return False
-    return "AMD EPYC" in text
+def recorded_here(evaluation: dict) -> bool:
+    """Whether this host repeats a recorded CPU evaluation (``benchmarks/eval_ppo.py``'s JSON) bit for
+    bit: its ``host`` (``benchmarks/machine.numeric_host``: CPU model and feature flags, warp, torch
+    and numpy versions) is this one's. Elsewhere a chaotic contact episode takes other steps (two AMD
+    EPYCs with different feature flags, 2026-12-08: 6 of the 6 recorded steps differed)."""
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from machine import numeric_host
+
+    return evaluation.get("host") == numeric_host()

@@ -5,7 +5,7 @@ cylinder and the torus (50, 50 and 48 / 50 in its GPU evaluation), and PPO fine-
 clone (``ppo_five_clone_ppo_e1e6``) picks the rope and the cuboid, the objects the clone fails on
 most (6 and 40 / 50 for the clone, 129 and 140 / 150 for it on the GPU), each on a seed its CPU
 evaluation counted as a success. Not compared step for step (the recorded episodes are
-bit-identical on one kind of CPU only, tests/conftest.recording_cpu): success within the env's 15 s
+bit-identical on one host only, tests/conftest.recorded_here): success within the env's 15 s
 and no pierced step. The cuboid's seed changed on 2026-12-07 with the force limit's patient rule
 (a re-solve settles the limit's decision, not convergence): seed 1000000000 grasps the cuboid
 elsewhere and no longer lifts it (300 steps, 0.60 m from the goal), while over seeds 1000000010-50
