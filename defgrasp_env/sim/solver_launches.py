@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import warp as wp
 
+from .kernels import coarse_factor as kcf
 from .kernels import coarse_space as kcs
 from .kernels import contact as kc
 from .kernels import pad_edge_contact as kpe
@@ -248,7 +249,7 @@ def _coarse_before(c: _Context, active) -> list:
         *([c.rec(kph.coarse_assemble_edge_points, m.num_worlds * e.points_per_world, e.triangles, active,
                  e.points_per_world, e.point_tri, e.point_bary, e.point_block, m.free_axes,
                  s.node_aggregate, c.work.positions, s.node_anchor, s.coarse_matrix)] if e.active else []),
-        c.rec(kcs.coarse_factor, m.num_worlds, active, s.coarse_sizes, s.coarse_matrix, s.coarse_lower_inv,
+        c.rec(kcf.coarse_factor, m.num_worlds, active, s.coarse_sizes, s.coarse_matrix, s.coarse_lower_inv,
               s.coarse_inverse, s.coarse_rhs, s.coarse_coef, s.rz),
         c.rec(kcs.coarse_guess, n, m.free_axes, m.node_world, s.node_aggregate, active, s.coarse_lever,
               s.coarse_coef, s.dx, s.coarse_guess),

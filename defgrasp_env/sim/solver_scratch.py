@@ -11,6 +11,7 @@ import numpy as np
 import warp as wp
 
 from .hessian_blocks import HessianBlocks
+from .kernels.coarse_factor import MAX_COARSE
 from .kernels.coarse_space import AGGREGATE_UNKNOWNS
 from .model import Model
 from .kernels.world_rows import scatter_rows
@@ -201,6 +202,9 @@ class SolverScratch:
 
         aggregate = model.node_aggregate
         size = AGGREGATE_UNKNOWNS * max(int(aggregate.max()) + 1, model.max_aggregates)
+        if size > MAX_COARSE:
+            raise ValueError(f"a world has at most {MAX_COARSE // AGGREGATE_UNKNOWNS} node aggregates (the coarse "
+                             f"inverse's shared memory, coarse_factor.MAX_COARSE), got {size // AGGREGATE_UNKNOWNS}")
 
         def coarse(dtype, ndim):
             return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)

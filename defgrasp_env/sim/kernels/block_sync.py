@@ -1,6 +1,6 @@
 """A barrier for the threads of one thread block, for kernels that give each world a block
 (``world_start.py``, ``world_evaluate.py``, ``world_cg.py``, ``world_newton_step.py``,
-``world_finish.py``, ``substep.mean_stress``, ``coarse_space.coarse_factor_block``): all
+``world_finish.py``, ``substep.mean_stress``, ``coarse_factor.coarse_factor_block``): all
 the block's global-memory writes before it are seen by all its threads after it. Warp's
 ``WP_TILE_SYNC``: ``__syncthreads()`` on CUDA; on the CPU nothing with one thread per block (a
 launch's threads run one after another there), and the fibers' sync where

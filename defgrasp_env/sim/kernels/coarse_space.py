@@ -17,8 +17,8 @@ E[a(i), a(i)]; within one aggregate, with every axis free, the two together are 
 whose lower parts are exactly 0 in the translation rows and -[l_i]x K_ij [x_j - x_i]x in the
 rotation-rotation block (its translation-rotation part, -K_ij [x_j - x_i]x, lies in the upper
 triangle, which is not stored; summed over the object it is 0, as K annihilates translations).
-The pad edge points add T_j^T (w_j w_k B) T_k (``pad_edge_hessian.py``). E is Cholesky-factored and
-inverted per world.
+The pad edge points add T_j^T (w_j w_k B) T_k (``pad_edge_hessian.py``). E is inverted per world
+(``coarse_factor.py``).
 It is used (a) before CG: dx0 = T E^-1 T^T r, residual r - A dx0, (b) inside CG: the two-level
 additive preconditioner z = P r + T E^-1 T^T r (P block Jacobi; SPD, so CG stays CG), and (c) after
 CG: dx += T E^-1 T^T r (the best A-norm correction in the coarse space). T^T r is each aggregate's
@@ -29,7 +29,7 @@ Newton iteration.
 
 import warp as wp
 
-from .block_sync import block_barrier
+from .block_memory import shared_add
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
 wp.set_module_options({"enable_backward": False})
@@ -133,10 +133,20 @@ def coarse_pair(fu: wp.vec3, lu: wp.vec3, block: wp.mat33d, fv: wp.vec3, lv: wp.
 
 
 @wp.func
+def add_entry(matrix: wp.array3d(dtype=wp.float64), w: int, row: int, col: int, block_size: int, v: wp.float64):
+    """E[row, col] += v: world ``w``'s ``matrix``, or the block memory where ``block_size`` > 0 (E there
+    row-major with row stride ``block_size``: a world block of several threads, ``world_evaluate``)."""
+    if block_size > 0:
+        shared_add(row * block_size + col, v)
+    else:
+        wp.atomic_add(matrix, w, row, col, v)
+
+
+@wp.func
 def add_block(matrix: wp.array3d(dtype=wp.float64), w: int, a: int, b: int, tt: wp.mat33d, tr: wp.mat33d,
-              rt: wp.mat33d, rr: wp.mat33d):
+              rt: wp.mat33d, rr: wp.mat33d, block_size: int):
     """E[a, b] += [[tt, tr], [rt, rr]] (6 x 6), its entries in E's lower triangle only (a < b: none;
-    the transposed block of E[b, a] holds them)."""
+    the transposed block of E[b, a] holds them), by ``add_entry``."""
     if a < b:
         return
     ra = 6 * a
@@ -144,11 +154,11 @@ def add_block(matrix: wp.array3d(dtype=wp.float64), w: int, a: int, b: int, tt: 
     for r in range(3):
         for c in range(3):
             if a > b or c <= r:
-                wp.atomic_add(matrix, w, ra + r, cb + c, tt[r, c])
-                wp.atomic_add(matrix, w, ra + 3 + r, cb + 3 + c, rr[r, c])
+                add_entry(matrix, w, ra + r, cb + c, block_size, tt[r, c])
+                add_entry(matrix, w, ra + 3 + r, cb + 3 + c, block_size, rr[r, c])
             if a > b:
-                wp.atomic_add(matrix, w, ra + r, cb + 3 + c, tr[r, c])
-            wp.atomic_add(matrix, w, ra + 3 + r, cb + c, rt[r, c])
+                add_entry(matrix, w, ra + r, cb + 3 + c, block_size, tr[r, c])
+            add_entry(matrix, w, ra + 3 + r, cb + c, block_size, rt[r, c])
 
 
 @wp.func
@@ -170,8 +180,10 @@ def coarse_assemble_node(
     lever: wp.array(dtype=wp.vec3),
     matrix: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
+    block_size: int,
 ):
-    """Row ``i`` of ``coarse_assemble_nodes``."""
+    """Row ``i`` of ``coarse_assemble_nodes``; E into the block memory where ``block_size`` > 0
+    (``add_entry``)."""
     w = node_world[i]
     if world_active[w] == 0:
         return
@@ -203,14 +215,14 @@ def coarse_assemble_node(
                 rt += prt
                 rr += prr
             else:
-                add_block(matrix, w, a, aj, ptt, ptr, prt, prr)
+                add_block(matrix, w, a, aj, ptt, ptr, prt, prr, block_size)
     if others != 0:  # most nodes have none: a rope's interior, any node of a free object's piece
         ott, otr, ort, orr = coarse_pair(fi, li, own, fi, li)
         tt -= ott
         tr -= otr
         rt -= ort
         rr -= orr
-    add_block(matrix, w, a, a, tt, tr, rt, rr - wp.skew(wp.vec3d(li)) * bend)
+    add_block(matrix, w, a, a, tt, tr, rt, rr - wp.skew(wp.vec3d(li)) * bend, block_size)
     add_rhs(rhs, w, a, li, r[i])
 
 
@@ -238,176 +250,7 @@ def coarse_assemble_nodes(
     each node's lever l_i = x_i - x_anchor at the iterate ``x`` (what T applies until the next
     assembly)."""
     coarse_assemble_node(wp.tid(), x, anchor, mass, contact_hessian, free, node_world, node_aggregate, world_active,
-                         inv_dt2, node_blocks, block_node, hessian_values, r, lever, matrix, rhs)
-
-
-@wp.func
-def cholesky_pivot(w: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
-    """Column ``j``'s pivot of world ``w``'s in-place Cholesky factor (the columns before it done):
-    1 and L_jj in ``matrix[w, j, j]``, or 0 (not numerically positive definite; left as it is)."""
-    s = matrix[w, j, j]
-    for k in range(j):
-        s -= matrix[w, j, k] * matrix[w, j, k]
-    if not (s > wp.float64(1.0e-12) * matrix[w, j, j]):
-        return 0
-    matrix[w, j, j] = wp.sqrt(s)
-    return 1
-
-
-@wp.func
-def cholesky_entry(w: int, i: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
-    """L_ij (i > j) of world ``w``'s in-place Cholesky factor, after column ``j``'s pivot."""
-    s = matrix[w, i, j]
-    for k in range(j):
-        s -= matrix[w, i, k] * matrix[w, j, k]
-    matrix[w, i, j] = s / matrix[w, j, j]
-
-
-@wp.func
-def lower_inverse_column(w: int, j: int, size: int, ok: int, matrix: wp.array3d(dtype=wp.float64),
-                         lower_inv: wp.array3d(dtype=wp.float64)):
-    """Column ``j`` of L^-1 (forward substitution down the column; reads only this column of
-    ``lower_inv``), all zero where the factor failed (``ok`` = 0)."""
-    for i in range(size):
-        lower_inv[w, i, j] = wp.float64(0.0)
-    if ok == 1:
-        lower_inv[w, j, j] = wp.float64(1.0) / matrix[w, j, j]
-        for i in range(j + 1, size):
-            s = wp.float64(0.0)
-            for k in range(j, i):
-                s += matrix[w, i, k] * lower_inv[w, k, j]
-            lower_inv[w, i, j] = -s / matrix[w, i, i]
-
-
-@wp.func
-def inverse_entry(w: int, i: int, j: int, size: int, lower_inv: wp.array3d(dtype=wp.float64),
-                  inverse: wp.array3d(dtype=wp.float64)):
-    """E^-1_ij = E^-1_ji = (L^-T L^-1)_ij for j <= i."""
-    s = wp.float64(0.0)
-    for k in range(i, size):
-        s += lower_inv[w, k, i] * lower_inv[w, k, j]
-    inverse[w, i, j] = s
-    inverse[w, j, i] = s
-
-
-@wp.func
-def fix_coarse_diagonal(w: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
-    """An unknown with no stiffness (an empty aggregate, an axis prescribed on all of its nodes)
-    gets a diagonal of 1."""
-    if matrix[w, j, j] <= wp.float64(0.0):
-        matrix[w, j, j] = wp.float64(1.0)
-
-
-@wp.func
-def coarse_factor_world(
-    w: int,
-    world_active: wp.array(dtype=int),
-    sizes: wp.array(dtype=int),
-    matrix: wp.array3d(dtype=wp.float64),
-    lower_inv: wp.array3d(dtype=wp.float64),
-    inverse: wp.array3d(dtype=wp.float64),
-    rhs: wp.array2d(dtype=float),
-    coef: wp.array2d(dtype=float),
-    rz: wp.array(dtype=float),
-):
-    """Row ``w`` of ``coarse_factor``: one thread's loops over the entry functions above
-    (``coarse_factor_block`` runs the same entries on a block's threads)."""
-    if world_active[w] == 0:
-        return
-    size = sizes[w]
-    for j in range(size):
-        fix_coarse_diagonal(w, j, matrix)
-    ok = int(1)
-    for j in range(size):  # Cholesky, in place in the lower triangle
-        if ok == 1:
-            ok = cholesky_pivot(w, j, matrix)
-            if ok == 1:
-                for i in range(j + 1, size):
-                    cholesky_entry(w, i, j, matrix)
-    for j in range(size):  # L^-1 (lower)
-        lower_inverse_column(w, j, size, ok, matrix, lower_inv)
-    for i in range(size):  # E^-1 = L^-T L^-1 (symmetric by construction)
-        for j in range(i + 1):
-            inverse_entry(w, i, j, size, lower_inv, inverse)
-    for i in range(size):
-        for j in range(size):
-            matrix[w, i, j] = wp.float64(0.0)
-    coarse_coefficients(w, size, inverse, rhs, coef)
-    rz[w] = 0.0
-
-
-@wp.func
-def coarse_factor_block(
-    w: int,
-    lane: int,
-    threads: int,
-    sizes: wp.array(dtype=int),
-    matrix: wp.array3d(dtype=wp.float64),
-    lower_inv: wp.array3d(dtype=wp.float64),
-    inverse: wp.array3d(dtype=wp.float64),
-    rhs: wp.array2d(dtype=float),
-    coef: wp.array2d(dtype=float),
-    factored: wp.array(dtype=int),
-    rz: wp.array(dtype=float),
-):
-    """``coarse_factor_world`` of an iterating world ``w`` by the ``threads`` threads of its block
-    (thread ``lane``; every thread must call it): each entry of the factor, of L^-1 and of E^-1
-    computed by the same function in the same order of operations as there, so the same bits.
-    Per factor column, thread 0 takes the pivot and
-    the threads the entries below it (``factored[w]``: 1 while every pivot so far was positive);
-    L^-1 a column per thread, E^-1 an entry per thread, ``coef`` a row per thread (a rope's 24
-    unknowns of the translation coarse space on one thread were a serial chain of ~7,800 float64
-    multiply-adds; 48 now)."""
-    size = sizes[w]
-    for j in range(lane, size, threads):
-        fix_coarse_diagonal(w, j, matrix)
-    if lane == 0:
-        factored[w] = 1
-    block_barrier()
-    for j in range(size):  # Cholesky, in place in the lower triangle: a column per pass
-        if lane == 0 and factored[w] == 1:
-            factored[w] = cholesky_pivot(w, j, matrix)
-        block_barrier()
-        if factored[w] == 1:
-            for i in range(j + 1 + lane, size, threads):
-                cholesky_entry(w, i, j, matrix)
-        block_barrier()
-    ok = factored[w]
-    for j in range(lane, size, threads):
-        lower_inverse_column(w, j, size, ok, matrix, lower_inv)
-    block_barrier()
-    for e in range(lane, size * size, threads):
-        i = e // size
-        j = e - i * size
-        if j <= i:
-            inverse_entry(w, i, j, size, lower_inv, inverse)
-    block_barrier()
-    for e in range(lane, size * size, threads):
-        matrix[w, e // size, e - (e // size) * size] = wp.float64(0.0)
-    for i in range(lane, size, threads):
-        coarse_coefficient(w, i, size, inverse, rhs, coef)
-    block_barrier()
-    for i in range(lane, size, threads):
-        rhs[w, i] = 0.0
-    if lane == 0:
-        rz[w] = 0.0
-
-
-@wp.kernel
-def coarse_factor(
-    world_active: wp.array(dtype=int),
-    sizes: wp.array(dtype=int),
-    matrix: wp.array3d(dtype=wp.float64),
-    lower_inv: wp.array3d(dtype=wp.float64),
-    inverse: wp.array3d(dtype=wp.float64),
-    rhs: wp.array2d(dtype=float),
-    coef: wp.array2d(dtype=float),
-    rz: wp.array(dtype=float),
-):
-    """Per world: E^-1 by Cholesky (E = L L^T, E^-1 = L^-T L^-1; unknowns with a zero diagonal, i.e.
-    empty aggregates or axes prescribed on all of an aggregate's nodes, get 1), coef = E^-1 rhs;
-    clears E, rhs and rz (recomputed by ``coarse_start_cg``)."""
-    coarse_factor_world(wp.tid(), world_active, sizes, matrix, lower_inv, inverse, rhs, coef, rz)
+                         inv_dt2, node_blocks, block_node, hessian_values, r, lever, matrix, rhs, 0)
 
 
 @wp.func

@@ -74,8 +74,10 @@ def coarse_assemble_edge_point(
     x: wp.array(dtype=wp.vec3),
     anchor: wp.array(dtype=int),
     matrix: wp.array3d(dtype=wp.float64),
+    block_size: int,
 ):
-    """Row ``slot`` of ``coarse_assemble_edge_points``."""
+    """Row ``slot`` of ``coarse_assemble_edge_points``; E into the block memory where ``block_size`` > 0
+    (``coarse_space.add_entry``)."""
     w = slot // points_per_world
     t = point_tri[slot]
     if t < 0 or world_active[w] == 0:
@@ -92,7 +94,7 @@ def coarse_assemble_edge_point(
             nk = ids[k]
             part = wp.mat33d((bary[j] * bary[k]) * block)
             tt, tr, rt, rr = coarse_pair(free[nj], lj, part, free[nk], node_lever(nk, x, anchor))
-            add_block(matrix, w, node_aggregate[nj], node_aggregate[nk], tt, tr, rt, rr)
+            add_block(matrix, w, node_aggregate[nj], node_aggregate[nk], tt, tr, rt, rr, block_size)
 
 
 @wp.kernel
@@ -113,4 +115,4 @@ def coarse_assemble_edge_points(
     T_j^T (w_j w_k B) T_k between the aggregates of nodes j and k (``coarse_space.coarse_pair``: the
     rigid motions of their aggregates, levers at the iterate ``x``; E's lower triangle)."""
     coarse_assemble_edge_point(wp.tid(), triangles, world_active, points_per_world, point_tri, point_bary,
-                               point_block, free, node_aggregate, x, anchor, matrix)
+                               point_block, free, node_aggregate, x, anchor, matrix, 0)

@@ -9,9 +9,11 @@ Phase by phase this is eleven to fifteen launches over the rows of every world
 coarse space's assembly, factor and initial guess with its Hessian product,
 ``coarse_space.coarse_start_cg``, ``linear_solve.start_cg_worlds``); one
 world on a GPU pays a launch's latency for each. ``evaluate_world_blocks`` calls the same row
-functions in the same order per world: bit-identical on the CPU (one thread per world). The coarse
-factor (48 x 48 for 8 aggregates) is spread over the block's threads entry by entry
-(``coarse_space.coarse_factor_block``: the bits of the phase kernel's one thread). A world not
+functions in the same order per world: bit-identical on the CPU (one thread per world). With one thread a
+world (the CPU) the coarse matrix (48 x 48 for 8 aggregates) is assembled in global memory and
+inverted as the phase kernel does (the same bits); with several (a GPU) it is assembled in the
+block's shared memory (``block_memory.py``) and inverted there by Gauss-Jordan
+(``coarse_factor.coarse_factor_block``). A world not
 iterating Newton only has its CG flag cleared (the phase kernels also cleared its CG vectors,
 its CG stopping value and its line-search start energy, which nothing reads before its next solve
 sets them again).
@@ -23,8 +25,10 @@ import warp as wp
 # CUDA compile time (world_evaluate: 205 s with it, on a 2-core Xeon)
 wp.set_module_options({"enable_backward": False})
 
+from .block_memory import shared_set
 from .block_sync import block_barrier
-from .coarse_space import coarse_assemble_node, coarse_factor_block, coarse_guess_node, coarse_start_cg_node
+from .coarse_factor import coarse_factor_block
+from .coarse_space import coarse_assemble_node, coarse_guess_node, coarse_start_cg_node
 from .contact import evaluate_node
 from .elastic import evaluate_tet
 from .hessian_blocks import assemble_hessian_row
@@ -173,14 +177,20 @@ def evaluate_world_blocks(
         begin_node_solve(i, residual, diag_block, free, node_world, active, precond, z, p, dx, ap, rz, residual_norm)
         assemble_hessian_row(i, node_world, active, node_blocks, node_incidences, incidence, incidence_blocks, rest_inv,
                              rest_volume, tet_mu, tet_lambda, tet_cof, tet_r, tet_twist, hessian_values)
+    size = coarse_sizes[w]
+    in_block = int(0)  # E in global memory (one thread: the phase kernels' bits), else in the block memory
+    if threads > 1:
+        in_block = size
+        for e in range(lane, size * size, threads):
+            shared_set(e, wp.float64(0.0))
     block_barrier()
     for i in range(n0 + lane, n1, threads):
         coarse_assemble_node(i, x, node_anchor, mass, contact_hessian, free, node_world, node_aggregate, active,
                              inv_dt2, node_blocks, block_node, hessian_values, residual, coarse_lever, coarse_matrix,
-                             coarse_rhs)
+                             coarse_rhs, in_block)
     for e in range(e0 + lane, e1, threads):
         coarse_assemble_edge_point(e, triangles, active, points_per_world, point_tri, point_bary, point_block, free,
-                                   node_aggregate, x, node_anchor, coarse_matrix)
+                                   node_aggregate, x, node_anchor, coarse_matrix, in_block)
     block_barrier()
     coarse_factor_block(w, lane, threads, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
                         coarse_coef, coarse_factored, rz)
