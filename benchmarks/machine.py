@@ -51,8 +51,9 @@ def numeric_host() -> dict:
                       if line.startswith("flags")), "")
     except OSError:
         pass
-    return {"cpu": cpu_model("unknown"), "cpu_flags": hashlib.sha1(" ".join(sorted(flags.split())).encode()).hexdigest()[:12],
-            "warp": warp.config.version, "torch": torch.__version__, "numpy": numpy.__version__}
+    digest = hashlib.sha1(" ".join(sorted(flags.split())).encode()).hexdigest()[:12]
+    return {"cpu": cpu_model("unknown"), "cpu_flags": digest, "warp": warp.config.version, "torch": torch.__version__,
+            "numpy": numpy.__version__}
 
 
 def git_state() -> str:

@@ -8,10 +8,11 @@ seeded uniform random delta actions) is stepped twice from the same seed: first 
 (the shipped path; wall ms per step, each step bracketed by ``wp.synchronize_device``), then with the
 solver's graphs and the scene's period graphs off, under ``wp.timing_begin(wp.TIMING_KERNEL)``, so
 that each kernel launch is timed on the GPU with CUDA events (``--world-block-threads 0``: the
-solver's phase launches instead of its world blocks, so that each phase is a kernel of its own). Printed: per kernel, launches per step,
-median us per launch and ms per step, largest first, and the totals (kernel time and launches per
-step). With graphs on the same launches run as graph nodes, so the launch count is what a step's
-graphs replay, and their sum of kernel times is a lower bound of the graph-on step.
+solver's phase launches instead of its world blocks, so that each phase is a kernel of its own).
+Printed: per kernel, launches per step, median us per launch and ms per step, largest first, and
+the totals (kernel time and launches per step). With graphs on the same launches run as graph
+nodes, so the launch count is what a step's graphs replay, and their sum of kernel times is a lower
+bound of the graph-on step.
 """
 
 from __future__ import annotations

@@ -2,9 +2,9 @@
 the world-block evaluation's path) against one thread's loops (``coarse_factor_world``, the phase
 kernel's path). With one thread a block runs the same entry functions in the same order, so the two
 must agree bit for bit (the CPU's world blocks); with several (a GPU's) it inverts E, assembled in
-the block's shared memory (loaded there by this file's kernel), by Gauss-Jordan there, which must agree with the Cholesky path to rounding (1e-12 of the inverse's
-largest entry: float64 on matrices of condition ~1e2), fail where a pivot fails, and give
-E^-1 E = I.
+the block's shared memory (loaded there by this file's kernel), by Gauss-Jordan there, which must
+agree with the Cholesky path to rounding (1e-12 of the inverse's largest entry: float64 on
+matrices of condition ~1e2), fail where a pivot fails, and give E^-1 E = I.
 
 The threads run as Warp's CPU fibers (``wp.config.enable_cpu_blocks``): a block's threads run one
 after another between barriers, so a missing barrier before a phase that reads another thread's
