@@ -33,12 +33,13 @@ def host(unknown: str | None = None, *, cores: str = "CPUs") -> str:
 
 
 def numeric_host() -> dict:
-    """What a CPU episode's float results depend on besides the code and the seed: the CPU (model name
-    and a digest of its feature flags: Warp compiles CPU kernels for the host's features, torch and
-    its BLAS pick kernels by them) and the versions of warp, torch and numpy. Two hosts with equal
-    values give the same bits; others may differ in the last bits of a policy's actions or a
-    solve, and a chaotic contact episode then takes other steps (benchmarks/RESULTS.md, 2026-12-08:
-    two AMD EPYCs with different feature flags)."""
+    """What a CPU episode's float results were found to depend on besides the code and the seed: the
+    CPU (model name and a digest of its feature flags: Warp compiles CPU kernels for the host's
+    features, torch and its BLAS pick kernels by them) and the versions of warp, torch and numpy.
+    Hosts that differ here may differ in the last bits of a policy's actions or a solve, and a
+    chaotic contact episode then takes other steps (benchmarks/RESULTS.md, 2026-12-08: two AMD EPYCs
+    with different feature flags); equal values are what the tests take as the same host (not
+    covered: Python, the C library, torch's thread count)."""
     import hashlib
 
     import numpy

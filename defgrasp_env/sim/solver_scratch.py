@@ -158,7 +158,7 @@ class SolverScratch:
     solve_worlds: wp.array      # int: world computed by the current solve (1 in all unless advance(worlds=...))
     patient: wp.array           # int: world to iterate until patient_update (ImplicitSolver.advance)
     searching: wp.array         # int: world still line-searching
-    coarse_factored: wp.array   # int: 1 while a world block's coarse Cholesky pivots were positive
+    coarse_factored: wp.array   # int: 1 where a world block's coarse pivots were all positive
     energy0: wp.array           # float64: incremental potential of the accepted iterate
     energy_trial: wp.array      # float64: that of the trial
     # coarse space: rigid motions of K node aggregates per world (C = 6K unknowns, sim/aggregates.py;
@@ -204,7 +204,8 @@ class SolverScratch:
         size = AGGREGATE_UNKNOWNS * max(int(aggregate.max()) + 1, model.max_aggregates)
         if size > MAX_COARSE:
             raise ValueError(f"a world has at most {MAX_COARSE // AGGREGATE_UNKNOWNS} node aggregates (the coarse "
-                             f"inverse's shared memory, coarse_factor.MAX_COARSE), got {size // AGGREGATE_UNKNOWNS}")
+                             f"matrix in a GPU world block's shared memory, block_memory.MAX_COARSE; on every "
+                             f"device, so that a model runs on any), got {size // AGGREGATE_UNKNOWNS}")
 
         def coarse(dtype, ndim):
             return wp.zeros((w,) + (size,) * (ndim - 1), dtype=dtype, device=d)

@@ -9,7 +9,10 @@ every call in a kernel. CPU: one static array for the process (Warp's CPU JIT ha
 storage); only blocks of several threads use it, which the CPU runs only under
 ``wp.config.enable_cpu_blocks`` (tests, one launch at a time, a block's threads as fibers that switch
 at barriers only, so a plain add is atomic there); the solver's CPU world blocks have one thread and
-use global memory.
+use global memory. The phase kernels' coarse assembly (``coarse_space.coarse_assemble_nodes``,
+``pad_edge_hessian.coarse_assemble_edge_points``) calls the same functions with the shared path off
+at run time, so a CUDA launch of those kernels (``world_block_threads = 0``, not the default)
+reserves the array without using it.
 """
 
 import warp as wp

@@ -97,7 +97,10 @@ def face_contact(local: wp.vec3, half: wp.vec3, n: wp.vec3):
     full depth there; depth <= 0: no contact (in front of the face or beside its extent). A point
     past the opposite face (gone through the box within the face's extent) keeps the full depth
     behind the face: measured to a side it was ~0 near the box's corners, and a pad's corner swept
-    across a node let it through (a stiff cylinder in the contact fuzz, 2026-12-07). The
+    across a node let it through (a stiff cylinder in the contact fuzz, 2026-12-07). So the depth
+    jumps at the opposite face's plane near the sides (from the side distance inside to at least the
+    box's thickness past it, the normal from the side's to the face's): a wall that only a node
+    already through the box meets, unlike the lateral edge, where the depth is continuous. The
     normal is minus the depth's gradient: the contact force is ``penalty_force(depth)`` along it,
     its Hessian ``penalty_stiffness(depth)`` times its outer product (``evaluate_node``)."""
     depth = float(-1.0)
