@@ -100,7 +100,7 @@ def _factor(m, rhs, sizes, threads):
     return {name: a.numpy() for name, a in block.items()}, factored.numpy()
 
 
-@pytest.mark.parametrize("threads", [1, 5, 8, 32])
+@pytest.mark.parametrize("threads", [1, 5, 8, 32, 128, 256])
 def test_a_block_inverts_the_coarse_matrix_as_one_thread_does(threads, monkeypatch):
     monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
     m, rhs, sizes = _problems(np.random.default_rng(3))

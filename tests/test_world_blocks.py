@@ -112,10 +112,12 @@ def test_world_block_threads_is_checked_and_its_default_depends_on_the_device():
     assert off.world_block_threads == 0 and off._listed_cg
 
 
-def test_world_blocks_with_several_threads_a_world_agree_on_the_cpu(monkeypatch):
-    """The barriers at work without a GPU: with ``wp.config.enable_cpu_blocks`` a CPU block runs 8
-    cooperative threads per world (Warp's fibers; ``block_sync`` is their sync), which sum in another
-    order than one thread. Against the phase launches over 14 steps of the FEM batch: positions
+@pytest.mark.parametrize("threads", [8, 128])
+def test_world_blocks_with_several_threads_a_world_agree_on_the_cpu(threads, monkeypatch):
+    """The barriers at work without a GPU: with ``wp.config.enable_cpu_blocks`` a CPU block runs 8 or
+    128 (a GPU's block at W > 2048: more threads than coarse unknowns) cooperative threads per world
+    (Warp's fibers; ``block_sync`` is their sync), which sum in another order than one thread, and
+    assemble and invert the coarse matrix in the block memory. Against the phase launches over 14 steps of the FEM batch: positions
     within 1e-5 m (as CUDA against the phase launches; ~1e-6 measured) and the CG iterations within
     10 %. (Checked by hand: without the barrier before ``end_iteration`` in ``world_cg`` the positions
     are 0.12 m off at the first step and worlds diverge.)"""
@@ -123,9 +125,9 @@ def test_world_blocks_with_several_threads_a_world_agree_on_the_cpu(monkeypatch)
 
     monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
     model, _, _ = build((0, 1, 2))
-    assert ImplicitSolver(model, SolverConfig(world_block_threads=8)).world_block_threads == 8
+    assert ImplicitSolver(model, SolverConfig(world_block_threads=threads)).world_block_threads == threads
     reference = _solver_steps(SolverConfig(world_block_threads=0), None)
-    worlds = _solver_steps(SolverConfig(world_block_threads=8), None)
+    worlds = _solver_steps(SolverConfig(world_block_threads=threads), None)
     for (got, got_report), (want, want_report) in zip(worlds, reference):
         assert not got_report.diverged.any()
         np.testing.assert_allclose(got["positions"], want["positions"], atol=1e-5)
