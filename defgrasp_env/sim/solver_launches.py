@@ -388,7 +388,7 @@ def _evaluate_world(c: _Context, config, threads: int, start_energy: bool = Fals
                      s.hessian.incidence_blocks, s.hessian.values,
                      m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm, s.node_aggregate,
                      s.node_anchor, s.coarse_lever, 1.0 / (c.h * c.h), s.coarse_sizes, s.coarse_matrix, s.coarse_rhs,
-                     s.coarse_lower_inv, s.coarse_inverse, s.coarse_coef, s.coarse_factored, s.coarse_guess,
+                     s.coarse_lower_inv, s.coarse_inverse, s.coarse_coef, s.coarse_guess,
                      s.coarse_scratch,
                      s.substep_newton_it, s.patient, s.last_dx, config.newton_tolerance, config.cg_tolerance,
                      config.cg_tolerance_far, s.rz_stop, s.cg_active)]

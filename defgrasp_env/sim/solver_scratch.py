@@ -11,7 +11,7 @@ import numpy as np
 import warp as wp
 
 from .hessian_blocks import HessianBlocks
-from .kernels.coarse_factor import MAX_COARSE
+from .kernels.block_memory import MAX_COARSE
 from .kernels.coarse_space import AGGREGATE_UNKNOWNS
 from .model import Model
 from .kernels.world_rows import scatter_rows
@@ -158,7 +158,6 @@ class SolverScratch:
     solve_worlds: wp.array      # int: world computed by the current solve (1 in all unless advance(worlds=...))
     patient: wp.array           # int: world to iterate until patient_update (ImplicitSolver.advance)
     searching: wp.array         # int: world still line-searching
-    coarse_factored: wp.array   # int: 1 where a world block's coarse pivots were all positive
     energy0: wp.array           # float64: incremental potential of the accepted iterate
     energy_trial: wp.array      # float64: that of the trial
     # coarse space: rigid motions of K node aggregates per world (C = 6K unknowns, sim/aggregates.py;

@@ -90,7 +90,7 @@ def coarse_invert_serial(w: int, size: int, matrix: wp.array3d(dtype=wp.float64)
                          lower_inv: wp.array3d(dtype=wp.float64), inverse: wp.array3d(dtype=wp.float64)):
     """E^-1 of world ``w`` (``size`` unknowns, E's lower triangle in ``matrix``) into ``inverse`` by one
     thread's loops over the entry functions above (Cholesky in place, L^-1, L^-T L^-1); all zero
-    where a pivot failed; clears ``matrix``. Returns 1, or 0 where a pivot failed."""
+    where a pivot failed; clears ``matrix``."""
     for j in range(size):
         fix_coarse_diagonal(w, j, matrix)
     ok = int(1)
@@ -108,7 +108,6 @@ def coarse_invert_serial(w: int, size: int, matrix: wp.array3d(dtype=wp.float64)
     for i in range(size):
         for j in range(size):
             matrix[w, i, j] = wp.float64(0.0)
-    return ok
 
 
 @wp.func
@@ -139,12 +138,10 @@ def coarse_invert_in_block(
     threads: int,
     size: int,
     inverse: wp.array3d(dtype=wp.float64),
-    factored: wp.array(dtype=int),
 ):
     """E^-1 of world ``w`` (``size`` unknowns; E's lower triangle in the block memory, row-major with
     row stride ``size``) into ``inverse`` by Gauss-Jordan in the block memory (thread ``lane`` of
-    ``threads``; every thread must call it), symmetrized; all zero and ``factored[w]`` = 0 where a
-    pivot is not positive (relative to E's diagonal, as ``cholesky_pivot``)."""
+    ``threads``; every thread must call it), symmetrized; all zero where a pivot is not positive (relative to E's diagonal, as ``cholesky_pivot``)."""
     col = MAX_COARSE * MAX_COARSE  # the pivot column's slots, then the diagonal's
     diag = col + MAX_COARSE
     for e in range(lane, size * size, threads):  # the upper triangle from the lower one; the diagonal fixed
@@ -190,8 +187,6 @@ def coarse_invert_in_block(
         if ok == 1:
             v = wp.float64(0.5) * (shared_get(e) + shared_get(j * size + i))
         inverse[w, i, j] = v
-    if lane == 0:
-        factored[w] = ok
     block_barrier()
 
 
@@ -206,19 +201,18 @@ def coarse_factor_block(
     inverse: wp.array3d(dtype=wp.float64),
     rhs: wp.array2d(dtype=float),
     coef: wp.array2d(dtype=float),
-    factored: wp.array(dtype=int),
     rz: wp.array(dtype=float),
 ):
     """``coarse_factor_world`` of an iterating world ``w`` by the ``threads`` threads of its block
     (thread ``lane``; every thread must call it): E^-1 by ``coarse_invert_serial`` of E in
     ``matrix`` where the block has one thread (the CPU: the phase kernel's bits), else by
-    ``coarse_invert_in_block`` of E in the block memory (``factored[w]``: 1 where it held); then
+    ``coarse_invert_in_block`` of E in the block memory; then
     ``coef`` a row per thread, rhs and rz cleared."""
     size = sizes[w]
     if threads > 1:
-        coarse_invert_in_block(w, lane, threads, size, inverse, factored)
+        coarse_invert_in_block(w, lane, threads, size, inverse)
     else:
-        factored[w] = coarse_invert_serial(w, size, matrix, lower_inv, inverse)
+        coarse_invert_serial(w, size, matrix, lower_inv, inverse)
     for i in range(lane, size, threads):
         coarse_coefficient(w, i, size, inverse, rhs, coef)
     block_barrier()

@@ -127,7 +127,6 @@ def evaluate_world_blocks(
     coarse_lower_inv: wp.array3d(dtype=wp.float64),
     coarse_inverse: wp.array3d(dtype=wp.float64),
     coarse_coef: wp.array2d(dtype=float),
-    coarse_factored: wp.array(dtype=int),
     coarse_guess: wp.array(dtype=wp.vec3),
     coarse_p_ap: wp.array(dtype=float),
     # CG's start (linear_solve.start_cg_world)
@@ -178,22 +177,22 @@ def evaluate_world_blocks(
         assemble_hessian_row(i, node_world, active, node_blocks, node_incidences, incidence, incidence_blocks, rest_inv,
                              rest_volume, tet_mu, tet_lambda, tet_cof, tet_r, tet_twist, hessian_values)
     size = coarse_sizes[w]
-    in_block = int(0)  # E in global memory (one thread: the phase kernels' bits), else in the block memory
+    block_size = int(0)  # E in global memory (one thread: the phase kernels' bits), else in the block memory
     if threads > 1:
-        in_block = size
+        block_size = size
         for e in range(lane, size * size, threads):
             shared_set(e, wp.float64(0.0))
     block_barrier()
     for i in range(n0 + lane, n1, threads):
         coarse_assemble_node(i, x, node_anchor, mass, contact_hessian, free, node_world, node_aggregate, active,
                              inv_dt2, node_blocks, block_node, hessian_values, residual, coarse_lever, coarse_matrix,
-                             coarse_rhs, in_block)
+                             coarse_rhs, block_size)
     for e in range(e0 + lane, e1, threads):
         coarse_assemble_edge_point(e, triangles, active, points_per_world, point_tri, point_bary, point_block, free,
-                                   node_aggregate, x, node_anchor, coarse_matrix, in_block)
+                                   node_aggregate, x, node_anchor, coarse_matrix, block_size)
     block_barrier()
     coarse_factor_block(w, lane, threads, coarse_sizes, coarse_matrix, coarse_lower_inv, coarse_inverse, coarse_rhs,
-                        coarse_coef, coarse_factored, rz)
+                        coarse_coef, rz)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
         coarse_guess_node(i, free, node_world, node_aggregate, active, coarse_lever, coarse_coef, dx, coarse_guess)
