@@ -17,3 +17,16 @@ import warp as wp
 WP_TILE_SYNC();
 """)
 def block_barrier(): ...
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+return 0;
+#else
+return 1;
+#endif
+""")
+def compiled_for_cpu() -> int:
+    """1 in a kernel compiled for the CPU, 0 for CUDA: a constant of the target, so a branch on it
+    leaves no code (and no registers) in the other target's kernel."""
+    ...

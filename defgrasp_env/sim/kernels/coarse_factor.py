@@ -5,8 +5,9 @@ Two algorithms, both giving E^-1 = 0 (block Jacobi alone for that Newton iterati
 numerically positive definite (a pivot <= 1e-12 of its diagonal), and a diagonal of 1 to an unknown
 with no stiffness (an empty aggregate, an axis prescribed on all of its nodes):
 - one thread (``coarse_factor_world``, the phase kernel ``coarse_factor``, and a world block of one
-  thread, the CPU's): left-looking Cholesky E = L L^T in place in E's lower triangle, L^-1 column by
-  column, E^-1 = L^-T L^-1, each entry by its own function in a fixed order of operations;
+  thread, the CPU's): left-looking Cholesky E = L L^T in place in E's lower triangle, L^-1 row by
+  row, E^-1 = L^-T L^-1, each entry a sum in a fixed order of operations (``cholesky_entry``,
+  ``lower_inverse_entry``, ``inverse_entry``), ``SERIAL_LANES`` entries computed together;
 - a block of several threads (``coarse_factor_block`` with ``threads`` > 1, a GPU's world blocks):
   Gauss-Jordan inversion in the block's shared memory (``block_memory.py``, where the world-block
   evaluation assembled E), pivots on the diagonal
@@ -27,6 +28,10 @@ from .coarse_space import coarse_coefficient, coarse_coefficients
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
 wp.set_module_options({"enable_backward": False})
+
+#: entries of the one-thread factor computed together (independent dependency chains)
+SERIAL_LANES = 4
+serial_lanes = wp.types.vector(length=SERIAL_LANES, dtype=wp.float64)
 
 @wp.func
 def cholesky_pivot(w: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
@@ -51,19 +56,63 @@ def cholesky_entry(w: int, i: int, j: int, matrix: wp.array3d(dtype=wp.float64))
 
 
 @wp.func
-def lower_inverse_column(w: int, j: int, size: int, ok: int, matrix: wp.array3d(dtype=wp.float64),
-                         lower_inv: wp.array3d(dtype=wp.float64)):
-    """Column ``j`` of L^-1 (forward substitution down the column; reads only this column of
-    ``lower_inv``), all zero where the factor failed (``ok`` = 0)."""
+def cholesky_column(w: int, j: int, size: int, matrix: wp.array3d(dtype=wp.float64)):
+    """Column ``j`` of world ``w``'s in-place Cholesky factor below its pivot: ``cholesky_entry`` of
+    rows j + 1 .. size - 1, ``SERIAL_LANES`` rows at a time."""
+    d = matrix[w, j, j]
+    i = j + 1
+    while i + SERIAL_LANES <= size:
+        s = serial_lanes()
+        for q in range(SERIAL_LANES):
+            s[q] = matrix[w, i + q, j]
+        for k in range(j):
+            b = matrix[w, j, k]
+            for q in range(SERIAL_LANES):
+                s[q] = s[q] - matrix[w, i + q, k] * b
+        for q in range(SERIAL_LANES):
+            matrix[w, i + q, j] = s[q] / d
+        i += SERIAL_LANES
+    while i < size:
+        cholesky_entry(w, i, j, matrix)
+        i += 1
+
+
+@wp.func
+def lower_inverse_entry(w: int, i: int, j: int, matrix: wp.array3d(dtype=wp.float64),
+                        lower_inv: wp.array3d(dtype=wp.float64)):
+    """(L^-1)_ij (i > j) by forward substitution, the rows above i of L^-1 done."""
+    s = wp.float64(0.0)
+    for k in range(j, i):
+        s += matrix[w, i, k] * lower_inv[w, k, j]
+    lower_inv[w, i, j] = -s / matrix[w, i, i]
+
+
+@wp.func
+def lower_inverse(w: int, size: int, matrix: wp.array3d(dtype=wp.float64), lower_inv: wp.array3d(dtype=wp.float64)):
+    """L^-1 of world ``w``'s Cholesky factor (in ``matrix``'s lower triangle) into ``lower_inv``
+    (zero above its diagonal), row by row, each row's entries ``SERIAL_LANES`` at a time: entry
+    (i, j)'s sum runs over k from j to i - 1 as ``lower_inverse_entry``'s; a group's sums all start
+    at its first column, the terms before an entry's own column adding m x 0 (L^-1 is zero above its
+    diagonal) to a sum still at +0, so each entry keeps its bits."""
     for i in range(size):
-        lower_inv[w, i, j] = wp.float64(0.0)
-    if ok == 1:
-        lower_inv[w, j, j] = wp.float64(1.0) / matrix[w, j, j]
-        for i in range(j + 1, size):
-            s = wp.float64(0.0)
+        for j in range(i + 1, size):
+            lower_inv[w, i, j] = wp.float64(0.0)
+    for i in range(size):
+        d = matrix[w, i, i]
+        lower_inv[w, i, i] = wp.float64(1.0) / d
+        j = int(0)
+        while j + SERIAL_LANES <= i:
+            s = serial_lanes()
             for k in range(j, i):
-                s += matrix[w, i, k] * lower_inv[w, k, j]
-            lower_inv[w, i, j] = -s / matrix[w, i, i]
+                a = matrix[w, i, k]
+                for q in range(SERIAL_LANES):
+                    s[q] = s[q] + a * lower_inv[w, k, j + q]
+            for q in range(SERIAL_LANES):
+                lower_inv[w, i, j + q] = -s[q] / d
+            j += SERIAL_LANES
+        while j < i:
+            lower_inverse_entry(w, i, j, matrix, lower_inv)
+            j += 1
 
 
 @wp.func
@@ -75,6 +124,26 @@ def inverse_entry(w: int, i: int, j: int, size: int, lower_inv: wp.array3d(dtype
         s += lower_inv[w, k, i] * lower_inv[w, k, j]
     inverse[w, i, j] = s
     inverse[w, j, i] = s
+
+
+@wp.func
+def inverse_row(w: int, i: int, size: int, lower_inv: wp.array3d(dtype=wp.float64),
+                inverse: wp.array3d(dtype=wp.float64)):
+    """``inverse_entry`` of row ``i``'s entries j <= i, ``SERIAL_LANES`` at a time."""
+    j = int(0)
+    while j + SERIAL_LANES <= i + 1:
+        s = serial_lanes()
+        for k in range(i, size):
+            a = lower_inv[w, k, i]
+            for q in range(SERIAL_LANES):
+                s[q] = s[q] + a * lower_inv[w, k, j + q]
+        for q in range(SERIAL_LANES):
+            inverse[w, i, j + q] = s[q]
+            inverse[w, j + q, i] = s[q]
+        j += SERIAL_LANES
+    while j <= i:
+        inverse_entry(w, i, j, size, lower_inv, inverse)
+        j += 1
 
 
 @wp.func
@@ -90,7 +159,10 @@ def coarse_invert_serial(w: int, size: int, matrix: wp.array3d(dtype=wp.float64)
                          lower_inv: wp.array3d(dtype=wp.float64), inverse: wp.array3d(dtype=wp.float64)):
     """E^-1 of world ``w`` (``size`` unknowns, E's lower triangle in ``matrix``) into ``inverse`` by one
     thread's loops over the entry functions above (Cholesky in place, L^-1, L^-T L^-1); all zero
-    where a pivot failed; clears ``matrix``."""
+    where a pivot failed; clears ``matrix``. Each entry is a sum in a fixed order, a dependent
+    chain of float64 multiply-adds (up to 48 long); computing ``SERIAL_LANES`` entries together
+    keeps each entry's order, hence its bits, while a CPU core overlaps their chains (a 48 x 48
+    inverse 98 -> 41 us on a 2-core AMD EPYC: benchmarks/RESULTS.md, 2026-12-08, ninth session)."""
     for j in range(size):
         fix_coarse_diagonal(w, j, matrix)
     ok = int(1)
@@ -98,13 +170,15 @@ def coarse_invert_serial(w: int, size: int, matrix: wp.array3d(dtype=wp.float64)
         if ok == 1:
             ok = cholesky_pivot(w, j, matrix)
             if ok == 1:
-                for i in range(j + 1, size):
-                    cholesky_entry(w, i, j, matrix)
-    for j in range(size):  # L^-1 (lower)
-        lower_inverse_column(w, j, size, ok, matrix, lower_inv)
-    for i in range(size):  # E^-1 = L^-T L^-1 (symmetric by construction)
-        for j in range(i + 1):
-            inverse_entry(w, i, j, size, lower_inv, inverse)
+                cholesky_column(w, j, size, matrix)
+    if ok == 1:
+        lower_inverse(w, size, matrix, lower_inv)
+        for i in range(size):  # E^-1 = L^-T L^-1 (symmetric by construction)
+            inverse_row(w, i, size, lower_inv, inverse)
+    else:
+        for i in range(size):
+            for j in range(size):
+                inverse[w, i, j] = wp.float64(0.0)
     for i in range(size):
         for j in range(size):
             matrix[w, i, j] = wp.float64(0.0)

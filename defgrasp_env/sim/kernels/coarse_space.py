@@ -103,6 +103,33 @@ def coarse_row(w: int, i: int, size: int, inverse: wp.array3d(dtype=wp.float64),
     terms[w, i] = s * wp.float64(rhs[w, i])
 
 
+#: rows of the coarse product one thread computes together (``coarse_rows_serial``)
+SERIAL_ROWS = 4
+serial_rows = wp.types.vector(length=SERIAL_ROWS, dtype=wp.float64)
+
+
+@wp.func
+def coarse_rows_serial(w: int, size: int, inverse: wp.array3d(dtype=wp.float64), rhs: wp.array2d(dtype=float),
+                       coef: wp.array2d(dtype=float), terms: wp.array2d(dtype=wp.float64)):
+    """``coarse_row`` of every row by one thread (a world block of one thread: the CPU),
+    ``SERIAL_ROWS`` rows at a time: each row's sum in ``coarse_coefficient``'s order (the same
+    bits), the rows' dependent chains of float64 multiply-adds overlapped by the core."""
+    i = int(0)
+    while i + SERIAL_ROWS <= size:
+        s = serial_rows()
+        for j in range(size):
+            g = wp.float64(rhs[w, j])
+            for q in range(SERIAL_ROWS):
+                s[q] = s[q] + inverse[w, i + q, j] * g
+        for q in range(SERIAL_ROWS):
+            coef[w, i + q] = float(s[q])
+            terms[w, i + q] = s[q] * wp.float64(rhs[w, i + q])
+        i += SERIAL_ROWS
+    while i < size:
+        coarse_row(w, i, size, inverse, rhs, coef, terms)
+        i += 1
+
+
 @wp.func
 def coarse_gain(w: int, size: int, rhs: wp.array2d(dtype=float), terms: wp.array2d(dtype=wp.float64)):
     """g . E^-1 g from the rows' ``coarse_row`` terms (summed in row order, as

@@ -16,7 +16,9 @@ way, so with one thread per world (the CPU, which runs a launch's threads one af
 results are bit-identical to the phase-by-phase CG's; on a GPU the float atomics' order differs, as
 it does between any two GPU runs. The coarse part of the preconditioner (z's T E^-1 T^T r) is a
 dense product of the world's coarse inverse with T^T r (48 x 48 for 8 aggregates), computed a row per
-thread (``coarse_space.coarse_row``, then ``coarse_gain`` on thread 0).
+thread (``coarse_space.coarse_row``, then ``coarse_gain`` on thread 0), or, by a block of one
+thread (the CPU; ``block_sync.compiled_for_cpu``), ``SERIAL_ROWS`` rows at a time
+(``coarse_rows_serial``: the same bits).
 
 The barrier (``block_sync.py``) is reached by every thread of a block: the iteration loop's bound
 and its exit read the world's flag after a barrier, the same value for all of the block's threads,
@@ -31,8 +33,8 @@ import warp as wp
 # CUDA compile time (world_evaluate: 205 s with it, on a 2-core Xeon)
 wp.set_module_options({"enable_backward": False})
 
-from .block_sync import block_barrier
-from .coarse_space import coarse_gain, coarse_row
+from .block_sync import block_barrier, compiled_for_cpu
+from .coarse_space import coarse_gain, coarse_row, coarse_rows_serial
 from .linear_solve import finish_iteration, node_product, update_direction, update_solution
 from .pad_edge_hessian import edge_point_slot_product
 
@@ -111,8 +113,11 @@ def cg_world_blocks(
                             z, rz_new, cg_update, coarse_rhs)
         block_barrier()
         size = coarse_sizes[w]
-        for i in range(lane, size, threads):
-            coarse_row(w, i, size, coarse_inverse, coarse_rhs, coarse_coef, coarse_terms)
+        if compiled_for_cpu() == 1 and threads == 1:
+            coarse_rows_serial(w, size, coarse_inverse, coarse_rhs, coarse_coef, coarse_terms)
+        else:
+            for i in range(lane, size, threads):
+                coarse_row(w, i, size, coarse_inverse, coarse_rhs, coarse_coef, coarse_terms)
         block_barrier()
         if lane == 0:
             finish_iteration(w, coarse_gain(w, size, coarse_rhs, coarse_terms), rz_stop, update_tol, max_iterations,
