@@ -1,9 +1,10 @@
 """The one-thread coarse factor (``coarse_factor.coarse_invert_serial``: the CPU's world blocks and
-the phase kernel) computes ``SERIAL_LANES`` entries together so that a CPU core overlaps their
-dependent sums. Each entry must keep its own order of operations, so the result must be, bit for
-bit, that of computing one entry at a time with the entry functions (``cholesky_entry``,
-``lower_inverse_entry``, ``inverse_entry``: the factor before the grouping, rebuilt here from them)
-and must invert E (an independent check: E^-1 E = I in float64)."""
+the phase kernel) computes ``SERIAL_LANES`` entries together on the CPU (``grouped``) so that a core
+overlaps their dependent sums, and one at a time in CUDA kernels. Each entry must keep its own
+order of operations, so both must give, bit for bit, what computing one entry at a time with the
+entry functions gives (``cholesky_entry``, ``lower_inverse_entry``, ``inverse_entry`` in the
+factor's order before the grouping, rebuilt here), and must invert E (an independent check:
+E^-1 E = I in float64)."""
 
 from __future__ import annotations
 
@@ -24,7 +25,14 @@ WIDTH = 48  # the arrays' width: 8 aggregates x 6 rigid motions
 def _grouped(sizes: wp.array(dtype=int), matrix: wp.array3d(dtype=wp.float64),
              lower_inv: wp.array3d(dtype=wp.float64), inverse: wp.array3d(dtype=wp.float64)):
     w = wp.tid()
-    coarse_invert_serial(w, sizes[w], matrix, lower_inv, inverse)
+    coarse_invert_serial(w, sizes[w], matrix, lower_inv, inverse, 1)
+
+
+@wp.kernel
+def _entrywise(sizes: wp.array(dtype=int), matrix: wp.array3d(dtype=wp.float64),
+               lower_inv: wp.array3d(dtype=wp.float64), inverse: wp.array3d(dtype=wp.float64)):
+    w = wp.tid()
+    coarse_invert_serial(w, sizes[w], matrix, lower_inv, inverse, 0)
 
 
 @wp.kernel
@@ -81,10 +89,11 @@ def _run(kernel, m, sizes):
     return arrays[2].numpy()
 
 
-def test_grouped_entries_keep_the_bits_of_one_entry_at_a_time():
+@pytest.mark.parametrize("kernel", [_grouped, _entrywise], ids=["grouped", "entrywise"])
+def test_the_factor_keeps_the_bits_of_one_entry_at_a_time(kernel):
     assert SERIAL_LANES > 1  # else there is nothing to check
     m, sizes = _problems()
-    grouped = _run(_grouped, m, sizes)
+    grouped = _run(kernel, m, sizes)
     reference = _run(_one_entry_at_a_time, m, sizes)
     for w, n in enumerate(sizes):
         # float64 bits compared as integers (NaN-safe; a signed zero counts)

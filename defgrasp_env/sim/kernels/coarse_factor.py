@@ -23,7 +23,7 @@ with no stiffness (an empty aggregate, an axis prescribed on all of its nodes):
 import warp as wp
 
 from .block_memory import MAX_COARSE, shared_get, shared_set
-from .block_sync import block_barrier
+from .block_sync import block_barrier, compiled_for_cpu
 from .coarse_space import coarse_coefficient, coarse_coefficients
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
@@ -56,12 +56,12 @@ def cholesky_entry(w: int, i: int, j: int, matrix: wp.array3d(dtype=wp.float64))
 
 
 @wp.func
-def cholesky_column(w: int, j: int, size: int, matrix: wp.array3d(dtype=wp.float64)):
+def cholesky_column(w: int, j: int, size: int, matrix: wp.array3d(dtype=wp.float64), grouped: int):
     """Column ``j`` of world ``w``'s in-place Cholesky factor below its pivot: ``cholesky_entry`` of
-    rows j + 1 .. size - 1, ``SERIAL_LANES`` rows at a time."""
+    rows j + 1 .. size - 1, ``SERIAL_LANES`` rows at a time where ``grouped`` is 1."""
     d = matrix[w, j, j]
     i = j + 1
-    while i + SERIAL_LANES <= size:
+    while grouped == 1 and i + SERIAL_LANES <= size:
         s = serial_lanes()
         for q in range(SERIAL_LANES):
             s[q] = matrix[w, i + q, j]
@@ -88,9 +88,11 @@ def lower_inverse_entry(w: int, i: int, j: int, matrix: wp.array3d(dtype=wp.floa
 
 
 @wp.func
-def lower_inverse(w: int, size: int, matrix: wp.array3d(dtype=wp.float64), lower_inv: wp.array3d(dtype=wp.float64)):
+def lower_inverse(w: int, size: int, matrix: wp.array3d(dtype=wp.float64), lower_inv: wp.array3d(dtype=wp.float64),
+                  grouped: int):
     """L^-1 of world ``w``'s Cholesky factor (in ``matrix``'s lower triangle) into ``lower_inv``
-    (zero above its diagonal), row by row, each row's entries ``SERIAL_LANES`` at a time: entry
+    (zero above its diagonal), row by row, each row's entries ``SERIAL_LANES`` at a time where
+    ``grouped`` is 1 (else one at a time, ``lower_inverse_entry``): entry
     (i, j)'s sum runs over k from j to i - 1 as ``lower_inverse_entry``'s; a group's sums all start
     at its first column, the terms before an entry's own column adding m x 0 (L^-1 is zero above its
     diagonal) to a sum still at +0, so each entry keeps its bits."""
@@ -101,7 +103,7 @@ def lower_inverse(w: int, size: int, matrix: wp.array3d(dtype=wp.float64), lower
         d = matrix[w, i, i]
         lower_inv[w, i, i] = wp.float64(1.0) / d
         j = int(0)
-        while j + SERIAL_LANES <= i:
+        while grouped == 1 and j + SERIAL_LANES <= i:
             s = serial_lanes()
             for k in range(j, i):
                 a = matrix[w, i, k]
@@ -128,10 +130,11 @@ def inverse_entry(w: int, i: int, j: int, size: int, lower_inv: wp.array3d(dtype
 
 @wp.func
 def inverse_row(w: int, i: int, size: int, lower_inv: wp.array3d(dtype=wp.float64),
-                inverse: wp.array3d(dtype=wp.float64)):
-    """``inverse_entry`` of row ``i``'s entries j <= i, ``SERIAL_LANES`` at a time."""
+                inverse: wp.array3d(dtype=wp.float64), grouped: int):
+    """``inverse_entry`` of row ``i``'s entries j <= i, ``SERIAL_LANES`` at a time where ``grouped``
+    is 1."""
     j = int(0)
-    while j + SERIAL_LANES <= i + 1:
+    while grouped == 1 and j + SERIAL_LANES <= i + 1:
         s = serial_lanes()
         for k in range(i, size):
             a = lower_inv[w, k, i]
@@ -156,13 +159,16 @@ def fix_coarse_diagonal(w: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
 
 @wp.func
 def coarse_invert_serial(w: int, size: int, matrix: wp.array3d(dtype=wp.float64),
-                         lower_inv: wp.array3d(dtype=wp.float64), inverse: wp.array3d(dtype=wp.float64)):
+                         lower_inv: wp.array3d(dtype=wp.float64), inverse: wp.array3d(dtype=wp.float64),
+                         grouped: int):
     """E^-1 of world ``w`` (``size`` unknowns, E's lower triangle in ``matrix``) into ``inverse`` by one
     thread's loops over the entry functions above (Cholesky in place, L^-1, L^-T L^-1); all zero
     where a pivot failed; clears ``matrix``. Each entry is a sum in a fixed order, a dependent
-    chain of float64 multiply-adds (up to 48 long); computing ``SERIAL_LANES`` entries together
-    keeps each entry's order, hence its bits, while a CPU core overlaps their chains (a 48 x 48
-    inverse 98 -> 41 us on a 2-core AMD EPYC: benchmarks/RESULTS.md, 2026-12-08, ninth session)."""
+    chain of float64 multiply-adds (up to 48 long). ``grouped`` 1 computes ``SERIAL_LANES`` entries
+    together: each entry keeps its order, hence its bits, while a CPU core overlaps their chains (a
+    48 x 48 inverse 98 -> 41 us on a 2-core AMD EPYC: benchmarks/RESULTS.md, 2026-12-08, ninth
+    session); the solver passes ``compiled_for_cpu()``, so CUDA kernels (where this path runs only
+    in the phase kernel ``coarse_factor``) keep one entry at a time and their registers."""
     for j in range(size):
         fix_coarse_diagonal(w, j, matrix)
     ok = int(1)
@@ -170,11 +176,11 @@ def coarse_invert_serial(w: int, size: int, matrix: wp.array3d(dtype=wp.float64)
         if ok == 1:
             ok = cholesky_pivot(w, j, matrix)
             if ok == 1:
-                cholesky_column(w, j, size, matrix)
+                cholesky_column(w, j, size, matrix, grouped)
     if ok == 1:
-        lower_inverse(w, size, matrix, lower_inv)
+        lower_inverse(w, size, matrix, lower_inv, grouped)
         for i in range(size):  # E^-1 = L^-T L^-1 (symmetric by construction)
-            inverse_row(w, i, size, lower_inv, inverse)
+            inverse_row(w, i, size, lower_inv, inverse, grouped)
     else:
         for i in range(size):
             for j in range(size):
@@ -200,7 +206,7 @@ def coarse_factor_world(
     if world_active[w] == 0:
         return
     size = sizes[w]
-    coarse_invert_serial(w, size, matrix, lower_inv, inverse)
+    coarse_invert_serial(w, size, matrix, lower_inv, inverse, compiled_for_cpu())
     coarse_coefficients(w, size, inverse, rhs, coef)
     rz[w] = 0.0
 
@@ -286,7 +292,7 @@ def coarse_factor_block(
     if threads > 1:
         coarse_invert_in_block(w, lane, threads, size, inverse)
     else:
-        coarse_invert_serial(w, size, matrix, lower_inv, inverse)
+        coarse_invert_serial(w, size, matrix, lower_inv, inverse, compiled_for_cpu())
     for i in range(lane, size, threads):
         coarse_coefficient(w, i, size, inverse, rhs, coef)
     block_barrier()
