@@ -59,6 +59,27 @@ def test_world_blocks_give_the_bits_of_the_phase_launches_on_the_cpu():
     assert len(set(phases["reset/object"])) > 1, phases["reset/object"]
 
 
+def test_cpu_world_blocks_keep_the_last_trials_rotations_for_the_next_evaluation():
+    """On the CPU the line search's last trial keeps the tets' polar rotations it found
+    (``scratch.trial_rotation``), and the next Newton evaluation at those positions uses them instead
+    of computing them again (``rotations_at_x``; the phase launches above compute them, with the same
+    bits). Independent check: after a step of a cube falling free (no clamp moves a node) the
+    outputs pass evaluates the final positions from the same warm start, as the last trial did, and
+    must find the same rotations bit for bit; the flag is set where the world line-searched."""
+    env = gym.make("DeformablePickup-v0", object="cuboid", youngs_modulus=1e5, device="cpu")
+    env.reset(seed=3)
+    scene = env.unwrapped.scene
+    scene.state.positions.assign(scene.state.positions.numpy() + np.array([0.0, 0.05, 0.0], np.float32))
+    env.step(np.zeros(env.action_space.shape, np.float32))
+    s = scene.solver.scratch
+    assert scene.solver.world_block_threads == 1
+    assert s.rotations_at_x.numpy()[0] == 1
+    kept, found = s.trial_rotation.numpy(), s.tet_rotation.numpy()
+    assert kept.any()
+    np.testing.assert_array_equal(kept.view(np.int32), found.view(np.int32))
+    env.close()
+
+
 @pytest.mark.parametrize("config,edges", [(SolverConfig(), True),
                                           (SolverConfig(substeps=3, line_search_steps=0, check_every=0), True),
                                           (SolverConfig(newton_iterations=2, cg_iterations=5, patient_iterations=0), True),

@@ -122,6 +122,7 @@ class SolverScratch:
     tet_rotation: wp.array      # [T] quat: polar rotation of each tet at the last evaluated positions (warm start)
     tet_r: wp.array             # [T] mat33: the rotation at the last Newton iterate as a matrix
     tet_twist: wp.array         # [T] float: twist factor of the fixed-corotated Hessian there
+    trial_rotation: wp.array    # [T] quat: the rotations the line search's last trial found (world blocks, CPU)
     tet_start: wp.array         # [W+1] int: first tet row of each world (a world's tets are contiguous)
     tet_end: wp.array           # [W] int: one past the last tet of each world's object (``Model.tet_end``)
     # contact, lagged at the substep start
@@ -154,6 +155,7 @@ class SolverScratch:
     cg_total: wp.array          # int: CG iterations of the step (SolveStats)
     diverged: wp.array          # int: world blew up
     unconverged: wp.array       # int: a substep stopped at the iteration limit
+    rotations_at_x: wp.array    # int: trial_rotation holds the rotations at the iterate (world blocks, CPU)
     clamped: wp.array           # int: a substep's solve left a node deeper than the penetration bound
     solve_worlds: wp.array      # int: world computed by the current solve (1 in all unless advance(worlds=...))
     patient: wp.array           # int: world to iterate until patient_update (ImplicitSolver.advance)
@@ -216,7 +218,7 @@ class SolverScratch:
             step_start=vec(), x_start=vec(), v_new=vec(), x_trial=vec(),
             residual=vec(), z=vec(), p=vec(), ap=vec(), dx=vec(),
             diag_block=mat(), precond=mat(), contact_hessian=mat(), cofactor=mat(t),
-            tet_rotation=quat(t), tet_r=mat(t), tet_twist=wp.zeros(t, dtype=float, device=d),
+            tet_rotation=quat(t), tet_r=mat(t), tet_twist=wp.zeros(t, dtype=float, device=d), trial_rotation=quat(t),
             lag_normal_force=wp.zeros(slots, dtype=float, device=d), lag_normal=vec(slots),
             pad_pos0=vec(pads), pad_rot0=quat(pads), pad_pos1=vec(pads), pad_rot1=quat(pads),
             **{k: per_world(float) for k in floats}, **{k: per_world(int) for k in ints},

@@ -160,6 +160,10 @@ def evaluate_tet(
     world_active: wp.array(dtype=int),
     # in: warm start; out: the rotation at x
     tet_rotation: wp.array(dtype=wp.quat),
+    # 1: the rotation at x is known (``known_rotation``: the line search's last trial computed it from
+    # the same warm start at the same positions, ``energy.tet_energy_row``), so it is not computed again
+    rotation_known: int,
+    known_rotation: wp.array(dtype=wp.quat),
     # outputs
     residual: wp.array(dtype=wp.vec3),
     diag_block: wp.array(dtype=wp.mat33),
@@ -183,7 +187,11 @@ def evaluate_tet(
     cof = cofactor(f)
     mu = tet_mu[t]
     lam = tet_lambda[t]
-    q = polar_rotation(f, tet_rotation[t])
+    q = wp.quat()
+    if rotation_known != 0:
+        q = known_rotation[t]
+    else:
+        q = polar_rotation(f, tet_rotation[t])
     r = wp.quat_to_matrix(q)
     p = first_piola(f, cof, r, mu, lam)
     v0 = rest_volume[t]
@@ -247,7 +255,7 @@ def evaluate_tets(
     term, with the rotation just found) to ``energy[world]`` (the line search's start energy, from
     the F and R this pass computes anyway)."""
     evaluate_tet(wp.tid(), x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, world_active, tet_rotation,
-                 residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, outputs, add_energy,
+                 0, tet_rotation, residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, outputs, add_energy,
                  energy)
 
 

@@ -27,8 +27,9 @@ def friction_potential(mu: float, normal_force: float, slip: wp.vec3, n: wp.vec3
 
 
 @wp.func
-def strain_energy_density(f: wp.mat33, rotation_guess: wp.quat, mu: float, lam: float):
-    d = f - wp.quat_to_matrix(polar_rotation(f, rotation_guess))
+def strain_energy_density(f: wp.mat33, rotation: wp.quat, mu: float, lam: float):
+    """psi(F) (J/m^3) of the fixed-corotated model, ``rotation`` the polar rotation of F."""
+    d = f - wp.quat_to_matrix(rotation)
     j = wp.determinant(f)
     return mu * wp.ddot(d, d) + 0.5 * lam * (j - 1.0) * (j - 1.0)
 
@@ -138,9 +139,13 @@ def tet_energy_row(
     world_active: wp.array(dtype=int),
     tet_rotation: wp.array(dtype=wp.quat),
     energy: wp.array(dtype=wp.float64),
+    keep: int,
+    kept_rotation: wp.array(dtype=wp.quat),
 ):
     """energy += V0 psi(F) per world; ``tet_rotation`` (the rotations at the last evaluated
-    positions) warm-starts the polar rotation of F."""
+    positions) warm-starts the polar rotation of F, which ``keep`` = 1 stores in ``kept_rotation``
+    (what the next evaluation at these positions would compute: ``elastic.evaluate_tet``'s
+    ``rotation_known``)."""
     w = tet_world[t]
     if world_active[w] == 0:
         return
@@ -148,7 +153,10 @@ def tet_energy_row(
     if spare_tet(idx):
         return
     f = deformation_gradient(x[idx[0]], x[idx[1]], x[idx[2]], x[idx[3]], rest_inv[t])
-    e = rest_volume[t] * strain_energy_density(f, tet_rotation[t], tet_mu[t], tet_lambda[t])
+    q = polar_rotation(f, tet_rotation[t])
+    if keep != 0:
+        kept_rotation[t] = q
+    e = rest_volume[t] * strain_energy_density(f, q, tet_mu[t], tet_lambda[t])
     wp.atomic_add(energy, w, wp.float64(e))
 
 
@@ -168,4 +176,4 @@ def tet_energy(
     """energy += V0 psi(F) per world; ``tet_rotation`` (the rotations at the last evaluated
     positions) warm-starts the polar rotation of F."""
     tet_energy_row(wp.tid(), x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, world_active, tet_rotation,
-                   energy)
+                   energy, 0, tet_rotation)

@@ -26,7 +26,7 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .block_memory import shared_set
-from .block_sync import block_barrier
+from .block_sync import block_barrier, compiled_for_cpu
 from .coarse_factor import coarse_factor_block
 from .coarse_space import coarse_assemble_node, coarse_guess_node, coarse_start_cg_node
 from .contact import evaluate_node
@@ -97,6 +97,8 @@ def evaluate_world_blocks(
     tet_lambda: wp.array(dtype=float),
     tet_world: wp.array(dtype=int),
     tet_rotation: wp.array(dtype=wp.quat),
+    trial_rotation: wp.array(dtype=wp.quat),
+    rotations_at_x: wp.array(dtype=int),
     tet_cof: wp.array(dtype=wp.mat33),
     von_mises: wp.array(dtype=float),
     tet_r: wp.array(dtype=wp.mat33),
@@ -168,9 +170,13 @@ def evaluate_world_blocks(
                             pads_per_world, points, point_pad, points_per_world, point_tri, point_bary, point_normal,
                             point_stiffness, point_allowed, point_friction, knee, pad_mu, slip_eps, triangle_first, 0,
                             residual, diag_block, point_block, contact_force, pad_normal_force, pad_force, penetration)
+    known = int(0)  # the CPU: the line search's last trial found the rotations at x (world_newton_step)
+    if compiled_for_cpu() == 1 and add_energy == 0:
+        known = rotations_at_x[w]
     for t in range(t0 + lane, t1, threads):
-        evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, active, tet_rotation, residual,
-                     diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, 0, add_energy, energy)
+        evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, active, tet_rotation, known,
+                     trial_rotation, residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, 0,
+                     add_energy, energy)
     block_barrier()
     for i in range(n0 + lane, n1, threads):
         begin_node_solve(i, residual, diag_block, free, node_world, active, precond, z, p, dx, ap, rz, residual_norm)

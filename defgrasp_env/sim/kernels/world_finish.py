@@ -179,8 +179,9 @@ def finish_world_blocks(
         if outputs == ALL_OUTPUTS:
             block_barrier()
             for t in range(t0 + lane, t1, threads):
-                evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, solve, tet_rotation,
-                             residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, 1, 0, energy)
+                evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, solve, tet_rotation, 0,
+                             tet_rotation, residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, 1,
+                             0, energy)
             block_barrier()
             for i in range(n0 + lane, n1, threads):
                 begin_node_solve(i, residual, diag_block, free, node_world, solve, precond, z, p, dx, ap, rz,

@@ -21,7 +21,7 @@ import warp as wp
 # CUDA compile time (world_evaluate: 205 s with it, on a 2-core Xeon)
 wp.set_module_options({"enable_backward": False})
 
-from .block_sync import block_barrier
+from .block_sync import block_barrier, compiled_for_cpu
 from .coarse_space import coarse_correct_node, coarse_reduce_node, coarse_solve_world
 from .energy import node_energy_row, tet_energy_row
 from .line_search import begin_search_world, end_trial, trial_position
@@ -97,6 +97,8 @@ def newton_step_world_blocks(
     tet_lambda: wp.array(dtype=float),
     tet_world: wp.array(dtype=int),
     tet_rotation: wp.array(dtype=wp.quat),
+    trial_rotation: wp.array(dtype=wp.quat),
+    rotations_at_x: wp.array(dtype=int),
     # the update (substep.apply_node_step, end_newton_world)
     max_step: float,
     dx_norm: wp.array(dtype=float),
@@ -134,6 +136,7 @@ def newton_step_world_blocks(
     block_barrier()
     for i in range(n0 + lane, n1, threads):
         coarse_correct_node(i, free, node_world, node_aggregate, newton_active, lever, coarse_coef, dx)
+    keep = compiled_for_cpu()  # the CPU: the last trial's rotations, for the next evaluation at its positions
     if max_trials > 0:
         if start_energy_of_nodes != 0:
             for i in range(n0 + lane, n1, threads):
@@ -164,7 +167,7 @@ def newton_step_world_blocks(
                                        point_friction, knee, pad_mu, slip_eps, trial_energy)
             for t in range(t0 + lane, t1, threads):
                 tet_energy_row(t, x_trial, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, searching,
-                               tet_rotation, trial_energy)
+                               tet_rotation, trial_energy, keep, trial_rotation)
             block_barrier()
             if lane == 0:
                 end_trial(w, start_energy, rel_tol, min_step, trial_energy, step_length, searching)
@@ -176,5 +179,12 @@ def newton_step_world_blocks(
         apply_node_step(i, dx, node_world, newton_active, step_length, max_step, x, dx_norm, diverged)
     block_barrier()
     if lane == 0:
+        # x is now the last trial's positions, bit for bit (apply_node_step adds the trial's step), where
+        # the world line-searched to an accepted trial and did not diverge (a diverged world's nodes
+        # stay where they were)
+        known = int(0)
+        if keep == 1 and max_trials > 0 and searching[w] == 0 and diverged[w] == 0:
+            known = 1
+        rotations_at_x[w] = known
         end_newton_world(w, dx_norm, newton_tolerance, newton_iterations, diverged, substep_iterations, iterations,
                          newton_active, rz, residual_norm, cg_iterations, last_update, unconverged)
