@@ -138,22 +138,46 @@ def start_cg_worlds(
 
 
 @wp.func
+def node_product_row(i: int, p: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float),
+                     contact_hessian: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3), inv_dt2: float,
+                     node_blocks: wp.array(dtype=wp.vec2i), block_node: wp.array(dtype=int),
+                     hessian_values: wp.array(dtype=wp.mat33), ap: wp.array(dtype=wp.vec3)):
+    """ap_i += (K p)_i + (m/dt^2 I + contact Hessian) p_i, masked, K the assembled elastic Hessian
+    (``hessian_blocks.hessian_row_product``; ap holds the pad edge points' part); returns p_i . ap_i."""
+    pi = p[i]
+    elastic = hessian_row_product(i, p, node_blocks, block_node, hessian_values)
+    api = wp.cw_mul(ap[i] + elastic + mass[i] * inv_dt2 * pi + contact_hessian[i] * pi, free[i])
+    ap[i] = api
+    return wp.dot(pi, api)
+
+
+@wp.func
 def node_product(i: int, p: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float),
                  contact_hessian: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3),
                  node_world: wp.array(dtype=int), cg_active: wp.array(dtype=int), inv_dt2: float,
                  node_blocks: wp.array(dtype=wp.vec2i), block_node: wp.array(dtype=int),
                  hessian_values: wp.array(dtype=wp.mat33), ap: wp.array(dtype=wp.vec3), p_ap: wp.array(dtype=float)):
-    """ap_i += (K p)_i + (m/dt^2 I + contact Hessian) p_i, masked, K the assembled elastic Hessian
-    (``hessian_blocks.hessian_row_product``; ap holds the pad edge points' part); p_ap[w] += p_i . ap_i
-    (node ``i``)."""
+    """``node_product_row`` of node ``i`` if its world iterates CG, and p_ap[w] += p_i . ap_i."""
     w = node_world[i]
     if cg_active[w] == 0:
         return
-    pi = p[i]
-    elastic = hessian_row_product(i, p, node_blocks, block_node, hessian_values)
-    api = wp.cw_mul(ap[i] + elastic + mass[i] * inv_dt2 * pi + contact_hessian[i] * pi, free[i])
-    ap[i] = api
-    wp.atomic_add(p_ap, w, wp.dot(pi, api))
+    wp.atomic_add(p_ap, w, node_product_row(i, p, mass, contact_hessian, free, inv_dt2, node_blocks, block_node,
+                                            hessian_values, ap))
+
+
+@wp.func
+def node_products_serial(w: int, n0: int, n1: int, p: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float),
+                         contact_hessian: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3), inv_dt2: float,
+                         node_blocks: wp.array(dtype=wp.vec2i), block_node: wp.array(dtype=int),
+                         hessian_values: wp.array(dtype=wp.mat33), ap: wp.array(dtype=wp.vec3),
+                         p_ap: wp.array(dtype=float)):
+    """``node_product`` of world ``w``'s nodes n0 .. n1 - 1 (iterating CG) by one thread: p . Ap summed
+    in node order as there, in a register instead of through memory (the same bits; on a CPU core
+    the sum's store-to-load chain no longer paces the rows)."""
+    s = p_ap[w]
+    for i in range(n0, n1):
+        s += node_product_row(i, p, mass, contact_hessian, free, inv_dt2, node_blocks, block_node, hessian_values, ap)
+    p_ap[w] = s
 
 
 @wp.kernel
@@ -182,6 +206,33 @@ def cg_node_product(
 
 
 @wp.func
+def cg_alpha(w: int, rz: wp.array(dtype=float), p_ap: wp.array(dtype=float)):
+    """World ``w``'s CG step length r.z / p.Ap (0 where p.Ap is not positive)."""
+    alpha = 0.0
+    if p_ap[w] > 0.0:
+        alpha = rz[w] / p_ap[w]
+    return alpha
+
+
+@wp.func
+def update_solution_row(i: int, w: int, alpha: float, p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.vec3),
+                        precond: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3),
+                        node_aggregate: wp.array(dtype=int), lever: wp.array(dtype=wp.vec3),
+                        dx: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.vec3), z: wp.array(dtype=wp.vec3),
+                        coarse_rhs: wp.array2d(dtype=float)):
+    """dx_i += alpha p_i, r_i -= alpha ap_i, z_i = P r_i, T^T r gains node ``i``'s part; returns
+    (the largest component of |alpha p_i|, r_i . z_i)."""
+    step = alpha * p[i]
+    dx[i] = dx[i] + step
+    ri = r[i] - alpha * ap[i]
+    r[i] = ri
+    zi = wp.cw_mul(precond[i] * ri, free[i])
+    z[i] = zi
+    add_rhs(coarse_rhs, w, node_aggregate[i], lever[i], ri)
+    return wp.max(wp.abs(step)), wp.dot(ri, zi)
+
+
+@wp.func
 def update_solution(i: int, p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.vec3),
                     precond: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3),
                     node_world: wp.array(dtype=int), node_aggregate: wp.array(dtype=int),
@@ -190,23 +241,36 @@ def update_solution(i: int, p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.ve
                     dx: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.vec3), z: wp.array(dtype=wp.vec3),
                     rz_new: wp.array(dtype=float), cg_update: wp.array(dtype=float),
                     coarse_rhs: wp.array2d(dtype=float)):
-    """dx_i += alpha p_i, r_i -= alpha ap_i, z_i = P r_i; the world's r.z, largest |alpha p| and
-    T^T r gain node ``i``'s part."""
+    """``update_solution_row`` of node ``i`` if its world iterates CG; the world's r.z and largest
+    |alpha p| gain its part."""
     w = node_world[i]
     if cg_active[w] == 0:
         return
-    alpha = 0.0
-    if p_ap[w] > 0.0:
-        alpha = rz[w] / p_ap[w]
-    step = alpha * p[i]
-    dx[i] = dx[i] + step
-    wp.atomic_max(cg_update, w, wp.max(wp.abs(step)))
-    ri = r[i] - alpha * ap[i]
-    r[i] = ri
-    zi = wp.cw_mul(precond[i] * ri, free[i])
-    z[i] = zi
-    wp.atomic_add(rz_new, w, wp.dot(ri, zi))
-    add_rhs(coarse_rhs, w, node_aggregate[i], lever[i], ri)
+    moved, rz_i = update_solution_row(i, w, cg_alpha(w, rz, p_ap), p, ap, precond, free, node_aggregate, lever, dx, r,
+                                      z, coarse_rhs)
+    wp.atomic_max(cg_update, w, moved)
+    wp.atomic_add(rz_new, w, rz_i)
+
+
+@wp.func
+def update_solutions_serial(w: int, n0: int, n1: int, p: wp.array(dtype=wp.vec3), ap: wp.array(dtype=wp.vec3),
+                            precond: wp.array(dtype=wp.mat33), free: wp.array(dtype=wp.vec3),
+                            node_aggregate: wp.array(dtype=int), lever: wp.array(dtype=wp.vec3),
+                            rz: wp.array(dtype=float), p_ap: wp.array(dtype=float), dx: wp.array(dtype=wp.vec3),
+                            r: wp.array(dtype=wp.vec3), z: wp.array(dtype=wp.vec3), rz_new: wp.array(dtype=float),
+                            cg_update: wp.array(dtype=float), coarse_rhs: wp.array2d(dtype=float)):
+    """``update_solution`` of world ``w``'s nodes n0 .. n1 - 1 (iterating CG) by one thread: alpha
+    once, r.z summed in node order and the largest move kept in registers (the same bits)."""
+    alpha = cg_alpha(w, rz, p_ap)
+    rz_sum = rz_new[w]
+    largest = cg_update[w]
+    for i in range(n0, n1):
+        moved, rz_i = update_solution_row(i, w, alpha, p, ap, precond, free, node_aggregate, lever, dx, r, z,
+                                          coarse_rhs)
+        largest = wp.max(largest, moved)
+        rz_sum += rz_i
+    rz_new[w] = rz_sum
+    cg_update[w] = largest
 
 
 @wp.kernel

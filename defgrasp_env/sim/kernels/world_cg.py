@@ -18,7 +18,9 @@ it does between any two GPU runs. The coarse part of the preconditioner (z's T E
 dense product of the world's coarse inverse with T^T r (48 x 48 for 8 aggregates), computed a row per
 thread (``coarse_space.coarse_row``, then ``coarse_gain`` on thread 0), or, by a block of one
 thread (the CPU; ``block_sync.compiled_for_cpu``), ``SERIAL_ROWS`` rows at a time
-(``coarse_rows_serial``: the same bits).
+(``coarse_rows_serial``: the same bits); such a block also keeps the world's sums of its
+rows (p . Ap, r . z, the largest move) in registers (``linear_solve.node_products_serial``,
+``update_solutions_serial``).
 
 The barrier (``block_sync.py``) is reached by every thread of a block: the iteration loop's bound
 and its exit read the world's flag after a barrier, the same value for all of the block's threads,
@@ -35,7 +37,8 @@ wp.set_module_options({"enable_backward": False})
 
 from .block_sync import block_barrier, compiled_for_cpu
 from .coarse_space import coarse_gain, coarse_row, coarse_rows_serial
-from .linear_solve import finish_iteration, node_product, update_direction, update_solution
+from .linear_solve import (finish_iteration, node_product, node_products_serial, update_direction,
+                           update_solution, update_solutions_serial)
 from .pad_edge_hessian import edge_point_slot_product
 
 
@@ -104,13 +107,19 @@ def cg_world_blocks(
             edge_point_slot_product(e, p, triangles, cg_active, points_per_world, point_tri, point_bary, point_block,
                                     ap)
         block_barrier()
-        for i in range(n0 + lane, n1, threads):
-            node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, node_blocks, block_node,
-                         hessian_values, ap, p_ap)
-        block_barrier()
-        for i in range(n0 + lane, n1, threads):
-            update_solution(i, p, ap, precond, free, node_world, node_aggregate, lever, cg_active, rz, p_ap, dx, r,
-                            z, rz_new, cg_update, coarse_rhs)
+        if compiled_for_cpu() == 1 and threads == 1:  # the world's sums in registers (the same bits)
+            node_products_serial(w, n0, n1, p, mass, contact_hessian, free, inv_dt2, node_blocks, block_node,
+                                 hessian_values, ap, p_ap)
+            update_solutions_serial(w, n0, n1, p, ap, precond, free, node_aggregate, lever, rz, p_ap, dx, r, z,
+                                    rz_new, cg_update, coarse_rhs)
+        else:
+            for i in range(n0 + lane, n1, threads):
+                node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, node_blocks,
+                             block_node, hessian_values, ap, p_ap)
+            block_barrier()
+            for i in range(n0 + lane, n1, threads):
+                update_solution(i, p, ap, precond, free, node_world, node_aggregate, lever, cg_active, rz, p_ap, dx,
+                                r, z, rz_new, cg_update, coarse_rhs)
         block_barrier()
         size = coarse_sizes[w]
         if compiled_for_cpu() == 1 and threads == 1:
