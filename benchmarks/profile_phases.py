@@ -73,7 +73,7 @@ def phase_stamp(sums: wp.array(dtype=wp.float64), k: int, runs: int, lane: int, 
     return now
 '''
 _CALL = re.compile(r"(?<![.\w])([a-z_][a-z0-9_]*)\(")
-_NOT_ROW_FUNCTIONS = {"range", "block_barrier", "int", "float"}
+_NOT_ROW_FUNCTIONS = {"range", "block_barrier", "int", "float", "compiled_for_cpu"}
 
 
 def _instrument_kernel(source: str, kernel: str, base: int) -> tuple[str, list[str]]:

@@ -13,7 +13,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks
 from bench_action_replay import DEFAULT, replay  # noqa: E402
 
 
-def test_the_shipped_sequence_is_the_operators_stiff_torus(tmp_path):
+def test_the_shipped_sequence_is_the_operators_stiff_torus():
     data = np.load(DEFAULT)
     assert data["actions"].shape == (160, 8)
     assert (str(data["object"]), float(data["youngs_modulus"]), str(data["action_mode"])) == ("torus", 1e7, "absolute")

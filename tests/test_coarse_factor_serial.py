@@ -83,8 +83,8 @@ def _problems():
 
 
 def _run(kernel, m, sizes):
-    arrays = [wp.array(m, dtype=wp.float64), wp.zeros(m.shape, dtype=wp.float64),
-              wp.array(np.full(m.shape, np.nan), dtype=wp.float64)]
+    nan = np.full(m.shape, np.nan)  # L^-1 and E^-1 start as NaN: an entry the factor does not write shows
+    arrays = [wp.array(m, dtype=wp.float64), wp.array(nan, dtype=wp.float64), wp.array(nan, dtype=wp.float64)]
     wp.launch(kernel, dim=len(m), inputs=[wp.array(sizes, dtype=int), *arrays], device="cpu")
     return arrays[2].numpy()
 

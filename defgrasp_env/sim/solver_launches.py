@@ -333,7 +333,8 @@ def _start_world(c: _Context, threads: int, k: int) -> list:
                      e.triangles, e.triangle_world, e.triangle_first, e.points, e.point_first, e.point_pad,
                      e.point_share, e.points_per_world if e.active else 0, e.best_dist, e.best_tri, e.point_tri,
                      e.point_bary, e.point_normal, e.point_stiffness, e.point_allowed, e.point_friction, e.push,
-                     e.push_normal, m.tets, m.tet_rest_inv, s.tet_rotation, s.newton_active, s.substep_newton_it)]
+                     e.push_normal, m.tets, m.tet_rest_inv, s.tet_rotation, s.newton_active, s.substep_newton_it,
+                     s.rotations_at_x)]
 
 
 def _evaluate(c: _Context, config, start_energy: bool = False) -> list:
@@ -383,9 +384,9 @@ def _evaluate_world(c: _Context, config, threads: int, start_energy: bool = Fals
                      s.residual, s.diag_block, s.contact_hessian, work.contact_force, work.elastic_force,
                      work.pad_normal_force, work.pad_force, s.penetration,
                      *_world_edge_terms(c), e.triangle_first, e.point_block,
-                     *_world_tet_terms(c), s.trial_rotation, s.rotations_at_x, s.cofactor, work.von_mises, s.tet_r,
-                     s.tet_twist, s.hessian.node_blocks, s.hessian.block_node, s.hessian.node_incidences, s.hessian.incidence,
-                     s.hessian.incidence_blocks, s.hessian.values,
+                     *_world_tet_terms(c), s.trial_rotation, s.rotations_at_x, s.cofactor, work.von_mises,
+                     s.tet_r, s.tet_twist, s.hessian.node_blocks, s.hessian.block_node, s.hessian.node_incidences,
+                     s.hessian.incidence, s.hessian.incidence_blocks, s.hessian.values,
                      m.free_axes, s.precond, s.z, s.p, s.dx, s.ap, s.rz, s.res_norm, s.node_aggregate,
                      s.node_anchor, s.coarse_lever, 1.0 / (c.h * c.h), s.coarse_sizes, s.coarse_matrix, s.coarse_rhs,
                      s.coarse_lower_inv, s.coarse_inverse, s.coarse_coef, s.coarse_guess,

@@ -167,8 +167,9 @@ def coarse_invert_serial(w: int, size: int, matrix: wp.array3d(dtype=wp.float64)
     chain of float64 multiply-adds (up to 48 long). ``grouped`` 1 computes ``SERIAL_LANES`` entries
     together: each entry keeps its order, hence its bits, while a CPU core overlaps their chains (a
     48 x 48 inverse 98 -> 41 us on a 2-core AMD EPYC: benchmarks/RESULTS.md, 2026-12-08, ninth
-    session); the solver passes ``compiled_for_cpu()``, so CUDA kernels (where this path runs only
-    in the phase kernel ``coarse_factor``) keep one entry at a time and their registers."""
+    session); the solver passes ``compiled_for_cpu()``, so CUDA kernels (where this path runs in the
+    phase kernel ``coarse_factor`` and in world blocks of one thread) keep one entry at a time and
+    their registers."""
     for j in range(size):
         fix_coarse_diagonal(w, j, matrix)
     ok = int(1)

@@ -255,8 +255,8 @@ def evaluate_tets(
     term, with the rotation just found) to ``energy[world]`` (the line search's start energy, from
     the F and R this pass computes anyway)."""
     evaluate_tet(wp.tid(), x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, world_active, tet_rotation,
-                 0, tet_rotation, residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, outputs, add_energy,
-                 energy)
+                 0, tet_rotation, residual, diag_block, elastic_force, tet_cof, von_mises, tet_r, tet_twist, outputs,
+                 add_energy, energy)
 
 
 @wp.func

@@ -107,22 +107,25 @@ def cg_world_blocks(
             edge_point_slot_product(e, p, triangles, cg_active, points_per_world, point_tri, point_bary, point_block,
                                     ap)
         block_barrier()
-        if compiled_for_cpu() == 1 and threads == 1:  # the world's sums in registers (the same bits)
+        serial = compiled_for_cpu() == 1 and threads == 1  # the world's sums in registers (the same bits)
+        if serial:
             node_products_serial(w, n0, n1, p, mass, contact_hessian, free, inv_dt2, node_blocks, block_node,
                                  hessian_values, ap, p_ap)
-            update_solutions_serial(w, n0, n1, p, ap, precond, free, node_aggregate, lever, rz, p_ap, dx, r, z,
-                                    rz_new, cg_update, coarse_rhs)
         else:
             for i in range(n0 + lane, n1, threads):
                 node_product(i, p, mass, contact_hessian, free, node_world, cg_active, inv_dt2, node_blocks,
                              block_node, hessian_values, ap, p_ap)
-            block_barrier()
+        block_barrier()
+        if serial:
+            update_solutions_serial(w, n0, n1, p, ap, precond, free, node_aggregate, lever, rz, p_ap, dx, r, z,
+                                    rz_new, cg_update, coarse_rhs)
+        else:
             for i in range(n0 + lane, n1, threads):
                 update_solution(i, p, ap, precond, free, node_world, node_aggregate, lever, cg_active, rz, p_ap, dx,
                                 r, z, rz_new, cg_update, coarse_rhs)
         block_barrier()
         size = coarse_sizes[w]
-        if compiled_for_cpu() == 1 and threads == 1:
+        if serial:
             coarse_rows_serial(w, size, coarse_inverse, coarse_rhs, coarse_coef, coarse_terms)
         else:
             for i in range(lane, size, threads):

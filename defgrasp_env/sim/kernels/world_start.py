@@ -99,6 +99,7 @@ def start_world_blocks(
     # Newton's flags (substep.begin_newton)
     newton_active: wp.array(dtype=int),
     substep_newton_it: wp.array(dtype=int),
+    rotations_at_x: wp.array(dtype=int),
 ):
     """The start of the substep from fraction ``s0`` to ``s1`` of the step for world
     ``tid // threads`` (thread ``tid % threads`` of its block): if solved, at the step's start its rows
@@ -171,3 +172,4 @@ def start_world_blocks(
     if lane == 0:  # substep.begin_newton
         newton_active[w] = solve[w]
         substep_newton_it[w] = 0
+        rotations_at_x[w] = 0  # no line search of this substep yet (world_evaluate)
