@@ -122,7 +122,7 @@ class SolverScratch:
     tet_rotation: wp.array      # [T] quat: polar rotation of each tet at the last evaluated positions (warm start)
     tet_r: wp.array             # [T] mat33: the rotation at the last Newton iterate as a matrix
     tet_twist: wp.array         # [T] float: twist factor of the fixed-corotated Hessian there
-    trial_rotation: wp.array    # [T] quat: the rotations the line search's last trial found (world blocks, CPU)
+    trial_rotation: wp.array    # [T] quat: rotations the line search's last trial found (CPU world blocks; [1] on CUDA)
     tet_start: wp.array         # [W+1] int: first tet row of each world (a world's tets are contiguous)
     tet_end: wp.array           # [W] int: one past the last tet of each world's object (``Model.tet_end``)
     # contact, lagged at the substep start
@@ -218,7 +218,8 @@ class SolverScratch:
             step_start=vec(), x_start=vec(), v_new=vec(), x_trial=vec(),
             residual=vec(), z=vec(), p=vec(), ap=vec(), dx=vec(),
             diag_block=mat(), precond=mat(), contact_hessian=mat(), cofactor=mat(t),
-            tet_rotation=quat(t), tet_r=mat(t), tet_twist=wp.zeros(t, dtype=float, device=d), trial_rotation=quat(t),
+            tet_rotation=quat(t), tet_r=mat(t), tet_twist=wp.zeros(t, dtype=float, device=d),
+            trial_rotation=quat(t if wp.get_device(d).is_cpu else 1),  # read and written by CPU kernels only
             lag_normal_force=wp.zeros(slots, dtype=float, device=d), lag_normal=vec(slots),
             pad_pos0=vec(pads), pad_rot0=quat(pads), pad_pos1=vec(pads), pad_rot1=quat(pads),
             **{k: per_world(float) for k in floats}, **{k: per_world(int) for k in ints},
