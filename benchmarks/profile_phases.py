@@ -2,6 +2,8 @@
 
     python benchmarks/profile_phases.py --device cuda:0 --object rope --youngs-modulus 1e4
     python benchmarks/profile_phases.py --device cpu --object torus --youngs-modulus 1e7 --json phases.json
+    python benchmarks/profile_phases.py --device cpu --actions benchmarks/data/operator_torus_e1e7_paced_actions.npz \
+        --window 137 142     # the phases of the operator's stiff-torus strike (bench_action_replay.py)
 
 Each world's substep runs in a few launches with a thread block per world (``kernels/world_start.py``,
 ``world_evaluate.py``, ``world_cg.py``, ``world_newton_step.py``, ``world_finish.py``); inside a
@@ -13,8 +15,9 @@ thread 0 of the block adds the ticks since its last stamp to that phase's sum an
 (on CUDA ``clock64()``, SM cycles; on the CPU, where a block is one thread and a world's phases run
 one after another, the x86 time-stamp counter, reference ticks rather than core cycles, or ARM's
 virtual counter). The native vector env (random actions, ``bench_env_step.py``'s defaults) is
-stepped ``--warmup`` times, the sums cleared, then ``--steps`` more steps. Printed per kernel: the
-world-block launches a step (those that ran to the kernel's end: a world that does not iterate
+stepped ``--warmup`` times, the sums cleared, then ``--steps`` more steps; or (``--actions``) a
+recorded sequence is replayed in a single env and the steps of ``--window`` summed. Printed per
+kernel: the world-block launches a step (those that ran to the kernel's end: a world that does not iterate
 returns at once), and per phase (named by the row functions it calls) its runs a launch and
 thousands of ticks a run (CG's phases run once an iteration). A phase's time runs from the stamp
 before it: where a branch skipped a barrier (a substep without full outputs, no pad edge points),
@@ -165,6 +168,24 @@ def instrumented_copy(dst: pathlib.Path) -> dict[str, list[str]]:
     return labels
 
 
+def _read_sums(device: str, labels: dict[str, list[str]], out: dict) -> dict:
+    """``out`` with each kernel's launches, loop passes and phases from the phase sums of ``device``."""
+    from defgrasp_env.sim.solver_launches import phase_sums
+
+    sums = phase_sums(device).numpy()
+    out["kernels"] = {}
+    for i, (_, kernel) in enumerate(KERNELS):
+        base = i * SLOTS
+        launches, iterations = float(sums[base + SLOTS - 2]), float(sums[base + SLOTS - 1])
+        phases = []
+        for k, name in enumerate(labels[kernel]):
+            runs = float(sums[base + PHASES + k])
+            phases.append({"name": name, "runs": runs, "kcycles_per_run": float(sums[base + k]) / max(runs, 1.0) / 1e3,
+                           "kcycles_per_launch": float(sums[base + k]) / max(launches, 1.0) / 1e3})
+        out["kernels"][kernel] = {"launches": launches, "iterations": iterations, "phases": phases}
+    return out
+
+
 def profile(device: str, worlds: int, obj: str, modulus: float, warmup: int, steps: int,
             labels: dict[str, list[str]]) -> dict:
     """Step the instrumented package's vector env and read its phase sums (import it first)."""
@@ -189,20 +210,46 @@ def profile(device: str, worlds: int, obj: str, modulus: float, warmup: int, ste
             newton += int(np.sum(info["newton_iterations"]))
             cg += int(np.sum(info["cg_iterations"]))
     wp.synchronize_device(device)
-    sums = phase_sums(device).numpy()
     env.close()
-    out = {"device": device, "worlds": worlds, "object": obj, "youngs_modulus": modulus, "steps": steps,
-           "reported_newton_iterations": newton, "reported_cg_iterations": cg, "kernels": {}}
-    for i, (_, kernel) in enumerate(KERNELS):
-        base = i * SLOTS
-        launches, iterations = float(sums[base + SLOTS - 2]), float(sums[base + SLOTS - 1])
-        phases = []
-        for k, name in enumerate(labels[kernel]):
-            runs = float(sums[base + PHASES + k])
-            phases.append({"name": name, "runs": runs, "kcycles_per_run": float(sums[base + k]) / max(runs, 1.0) / 1e3,
-                           "kcycles_per_launch": float(sums[base + k]) / max(launches, 1.0) / 1e3})
-        out["kernels"][kernel] = {"launches": launches, "iterations": iterations, "phases": phases}
-    return out
+    return _read_sums(device, labels, {"device": device, "worlds": worlds, "object": obj, "youngs_modulus": modulus,
+                                       "steps": steps, "reported_newton_iterations": newton,
+                                       "reported_cg_iterations": cg})
+
+
+def profile_replay(device: str, path: pathlib.Path, first: int, last: int, labels: dict[str, list[str]]) -> dict:
+    """Replay a recorded action sequence (``bench_action_replay.py``'s ``.npz``) in the instrumented
+    package's single env and read the phase sums of steps ``first`` .. ``last`` (import it first)."""
+    import gymnasium as gym
+    import numpy as np
+    import warp as wp
+
+    import defgrasp_env  # noqa: F401  (the instrumented copy: first on sys.path)
+    from defgrasp_env.sim.solver_launches import phase_sums
+
+    data = np.load(path)
+    seed, actions = int(data["seed"]), data["actions"]
+    if not 0 <= first <= last < len(actions):
+        raise ValueError(f"--window must be two steps 0 <= first <= last < {len(actions)}, got {first} {last}")
+    env = gym.make("DeformablePickup-v0", action_mode=str(data["action_mode"]), object=str(data["object"]),
+                   youngs_modulus=float(data["youngs_modulus"]), device=device)
+    env.reset(seed=seed)
+    newton = cg = 0
+    for k in range(last + 1):
+        if k == first:
+            wp.synchronize_device(device)
+            phase_sums(device).zero_()
+        _, _, terminated, truncated, info = env.step(np.asarray(actions[k], dtype=np.float32))
+        if k >= first:
+            newton += int(info["newton_iterations"])
+            cg += int(info["cg_iterations"])
+        if terminated or truncated:
+            env.reset(seed=seed)
+    wp.synchronize_device(device)
+    env.close()
+    return _read_sums(device, labels, {"device": device, "worlds": 1, "object": f"{data['object']} ({path.name}, "
+                                       f"steps {first}-{last})", "youngs_modulus": float(data["youngs_modulus"]),
+                                       "steps": last - first + 1, "reported_newton_iterations": newton,
+                                       "reported_cg_iterations": cg})
 
 
 def report(result: dict) -> str:
@@ -224,6 +271,10 @@ def report(result: dict) -> str:
 def main(argv=None) -> int:
     ap = env_profile_arguments(__doc__.split("\n")[0], "cuda:0", steps=30)
     ap.add_argument("--json", default=None, help="also write the numbers to this file")
+    ap.add_argument("--actions", default=None, help="replay this recorded sequence (bench_action_replay.py's .npz) "
+                                                    "in a single env instead of random actions")
+    ap.add_argument("--window", type=int, nargs=2, default=None, metavar=("FIRST", "LAST"),
+                    help="with --actions: the steps whose phases are summed (default: all)")
     args = ap.parse_args(argv)
     if args.worlds < 1 or args.steps < 1 or args.warmup < 0:
         ap.error(f"--worlds and --steps must be >= 1 and --warmup >= 0, got {args.worlds}, {args.steps}, {args.warmup}")
@@ -232,7 +283,15 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="defgrasp-phases-") as tmp:
         labels = instrumented_copy(pathlib.Path(tmp))
         sys.path.insert(0, tmp)
-        result = profile(args.device, args.worlds, args.object, args.youngs_modulus, args.warmup, args.steps, labels)
+        if args.actions:
+            import numpy as np
+
+            path = pathlib.Path(args.actions)
+            first, last = args.window or (0, len(np.load(path)["actions"]) - 1)
+            result = profile_replay(args.device, path, first, last, labels)
+        else:
+            result = profile(args.device, args.worlds, args.object, args.youngs_modulus, args.warmup, args.steps,
+                             labels)
     print(report(result))
     if args.json:
         pathlib.Path(args.json).write_text(json.dumps(result, indent=1))

@@ -55,3 +55,18 @@ def test_a_kernel_the_script_does_not_know_is_refused():
     source = "def other_world_blocks(\n    threads: int,\n):\n    tid = wp.tid()\n    lane = tid - w * threads\n"
     with pytest.raises(RuntimeError, match="other_world_blocks has 0 block barriers; expected 1 to 13"):
         _instrument_kernel(source, "other_world_blocks", 0)
+
+
+def test_a_recorded_sequence_can_be_profiled(tmp_path):
+    """``--actions`` replays a recorded sequence (``bench_action_replay.py``'s) in a single env and
+    sums the phases of ``--window``: each Newton iteration one evaluation launch, as the report says."""
+    out = tmp_path / "phases.json"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    run = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "profile_phases.py"), "--device", "cpu",
+                          "--actions", str(ROOT / "benchmarks" / "data" / "operator_torus_e1e7_paced_actions.npz"),
+                          "--window", "1", "2", "--json", str(out)], env=env, cwd=tmp_path, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    r = json.loads(out.read_text())
+    assert r["steps"] == 2 and r["object"].startswith("torus")
+    assert r["kernels"]["evaluate_world_blocks"]["launches"] == r["reported_newton_iterations"] > 0
