@@ -38,7 +38,9 @@ def recorded_here(evaluation: dict) -> bool:
     EPYCs with different feature flags, 2026-12-08: 6 of the 6 recorded steps differed)."""
     import sys
 
-    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    benchmarks = str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks")
+    if benchmarks not in sys.path:
+        sys.path.insert(0, benchmarks)
     from machine import numeric_host
 
     return evaluation.get("host") == numeric_host()

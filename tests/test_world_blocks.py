@@ -138,10 +138,11 @@ def test_world_blocks_with_several_threads_a_world_agree_on_the_cpu(threads, mon
     """The barriers at work without a GPU: with ``wp.config.enable_cpu_blocks`` a CPU block runs 8 or
     128 (a GPU's block at W > 2048: more threads than coarse unknowns) cooperative threads per world
     (Warp's fibers; ``block_sync`` is their sync), which sum in another order than one thread, and
-    assemble and invert the coarse matrix in the block memory. Against the phase launches over 14 steps of the FEM batch: positions
-    within 1e-5 m (as CUDA against the phase launches; ~1e-6 measured) and the CG iterations within
-    10 %. (Checked by hand: without the barrier before ``end_iteration`` in ``world_cg`` the positions
-    are 0.12 m off at the first step and worlds diverge.)"""
+    assemble and invert the coarse matrix in the block memory. Against the phase launches over 14
+    steps of the FEM batch: positions within 1e-5 m (as CUDA against the phase launches; ~1e-6
+    measured) and the CG iterations within 10 %. (Checked by hand: without the barrier before
+    ``end_iteration`` in ``world_cg`` the positions are 0.12 m off at the first step and worlds
+    diverge.)"""
     import warp as wp
 
     monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)

@@ -24,14 +24,11 @@ import warp as wp
 
 from .block_memory import MAX_COARSE, shared_get, shared_set
 from .block_sync import block_barrier, compiled_for_cpu
-from .coarse_space import coarse_coefficient, coarse_coefficients
+from .coarse_space import SERIAL_LANES, coarse_coefficient, coarse_coefficients, serial_lanes
 
 # forward only: nothing differentiates these kernels, and their adjoints multiply the compile time
 wp.set_module_options({"enable_backward": False})
 
-#: entries of the one-thread factor computed together (independent dependency chains)
-SERIAL_LANES = 4
-serial_lanes = wp.types.vector(length=SERIAL_LANES, dtype=wp.float64)
 
 @wp.func
 def cholesky_pivot(w: int, j: int, matrix: wp.array3d(dtype=wp.float64)):
@@ -222,7 +219,8 @@ def coarse_invert_in_block(
 ):
     """E^-1 of world ``w`` (``size`` unknowns; E's lower triangle in the block memory, row-major with
     row stride ``size``) into ``inverse`` by Gauss-Jordan in the block memory (thread ``lane`` of
-    ``threads``; every thread must call it), symmetrized; all zero where a pivot is not positive (relative to E's diagonal, as ``cholesky_pivot``)."""
+    ``threads``; every thread must call it), symmetrized; all zero where a pivot is not positive
+    (relative to E's diagonal, as ``cholesky_pivot``)."""
     col = MAX_COARSE * MAX_COARSE  # the pivot column's slots, then the diagonal's
     diag = col + MAX_COARSE
     for e in range(lane, size * size, threads):  # the upper triangle from the lower one; the diagonal fixed

@@ -103,28 +103,29 @@ def coarse_row(w: int, i: int, size: int, inverse: wp.array3d(dtype=wp.float64),
     terms[w, i] = s * wp.float64(rhs[w, i])
 
 
-#: rows of the coarse product one thread computes together (``coarse_rows_serial``)
-SERIAL_ROWS = 4
-serial_rows = wp.types.vector(length=SERIAL_ROWS, dtype=wp.float64)
+#: dependent float64 sums one thread computes side by side where a world's dense coarse products run on
+#: one thread (the CPU: ``coarse_rows_serial``, ``coarse_factor.coarse_invert_serial``), each in its own order
+SERIAL_LANES = 4
+serial_lanes = wp.types.vector(length=SERIAL_LANES, dtype=wp.float64)
 
 
 @wp.func
 def coarse_rows_serial(w: int, size: int, inverse: wp.array3d(dtype=wp.float64), rhs: wp.array2d(dtype=float),
                        coef: wp.array2d(dtype=float), terms: wp.array2d(dtype=wp.float64)):
     """``coarse_row`` of every row by one thread (a world block of one thread: the CPU),
-    ``SERIAL_ROWS`` rows at a time: each row's sum in ``coarse_coefficient``'s order (the same
+    ``SERIAL_LANES`` rows at a time: each row's sum in ``coarse_coefficient``'s order (the same
     bits), the rows' dependent chains of float64 multiply-adds overlapped by the core."""
     i = int(0)
-    while i + SERIAL_ROWS <= size:
-        s = serial_rows()
+    while i + SERIAL_LANES <= size:
+        s = serial_lanes()
         for j in range(size):
             g = wp.float64(rhs[w, j])
-            for q in range(SERIAL_ROWS):
+            for q in range(SERIAL_LANES):
                 s[q] = s[q] + inverse[w, i + q, j] * g
-        for q in range(SERIAL_ROWS):
+        for q in range(SERIAL_LANES):
             coef[w, i + q] = float(s[q])
             terms[w, i + q] = s[q] * wp.float64(rhs[w, i + q])
-        i += SERIAL_ROWS
+        i += SERIAL_LANES
     while i < size:
         coarse_row(w, i, size, inverse, rhs, coef, terms)
         i += 1

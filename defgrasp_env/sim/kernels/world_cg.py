@@ -17,7 +17,7 @@ results are bit-identical to the phase-by-phase CG's; on a GPU the float atomics
 it does between any two GPU runs. The coarse part of the preconditioner (z's T E^-1 T^T r) is a
 dense product of the world's coarse inverse with T^T r (48 x 48 for 8 aggregates), computed a row per
 thread (``coarse_space.coarse_row``, then ``coarse_gain`` on thread 0), or, by a block of one
-thread (the CPU; ``block_sync.compiled_for_cpu``), ``SERIAL_ROWS`` rows at a time
+thread (the CPU; ``block_sync.compiled_for_cpu``), ``coarse_space.SERIAL_LANES`` rows at a time
 (``coarse_rows_serial``: the same bits); such a block also keeps the world's sums of its
 rows (p . Ap, r . z, the largest move) in registers (``linear_solve.node_products_serial``,
 ``update_solutions_serial``).

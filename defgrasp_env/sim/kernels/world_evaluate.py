@@ -170,8 +170,10 @@ def evaluate_world_blocks(
                             pads_per_world, points, point_pad, points_per_world, point_tri, point_bary, point_normal,
                             point_stiffness, point_allowed, point_friction, knee, pad_mu, slip_eps, triangle_first, 0,
                             residual, diag_block, point_block, contact_force, pad_normal_force, pad_force, penetration)
-    known = int(0)  # the CPU: the line search's last trial found the rotations at x (world_newton_step sets
-    if compiled_for_cpu() == 1:  # the flag, world_start clears it at the substep's start)
+    # the CPU: whether the line search's last trial found the rotations at x (set by world_newton_step,
+    # cleared by world_start at the substep's start)
+    known = int(0)
+    if compiled_for_cpu() == 1:
         known = rotations_at_x[w]
     for t in range(t0 + lane, t1, threads):
         evaluate_tet(t, x, tets, rest_inv, rest_volume, tet_mu, tet_lambda, tet_world, active, tet_rotation, known,
